@@ -1,0 +1,2 @@
+//! Library side of the `dmap` host toolkit: every subcommand's logic lives in
+//! a module here so that tests can call it without spawning the binary.
