@@ -1,2 +1,15 @@
 #![no_std]
-//! Fixed-point CVM defect scoring of deflection maps (work in progress).
+#![doc = include_str!("../README.md")]
+
+pub mod config;
+pub mod flags;
+pub mod pipeline;
+pub mod protocol;
+pub mod scorer;
+pub mod stream;
+pub mod tables;
+
+pub use config::{Config, ConfigError, Geometry, Kernels, MAX_CELLS, MAX_J, Weights};
+pub use pipeline::{Pipeline, Settings};
+pub use scorer::{FrameError, Scorer, magnitude};
+pub use stream::{Engine, Position, PositionScore, RowSummary, RowView, Totals};

@@ -1,0 +1,12 @@
+//! Per-position flag bits, shared by the engine, the line protocol and the
+//! host decoder.
+
+/// No frame arrived for this position (gap, overrun, short row).
+pub const NO_DATA: u8 = 1 << 0;
+/// The map summed to zero; it was scored as the all-zero map.
+pub const DARK: u8 = 1 << 1;
+/// A sample reached the configured full scale.
+pub const SATURATED: u8 = 1 << 2;
+/// A score hit the top of its integer range (cannot happen for the bounds
+/// the scorer proves; reported rather than hidden if it ever does).
+pub const CLIPPED: u8 = 1 << 3;

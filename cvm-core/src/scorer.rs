@@ -1,0 +1,422 @@
+//! The fixed-point scorer: normalise a raw map, embed it once, and score a
+//! pair of embedded maps in `O(J1*J2)`.
+//!
+//! # Fixed-point formats
+//!
+//! | quantity | type | format |
+//! |---|---|---|
+//! | raw sample `a` | `u16` | counts |
+//! | input map `x` | `i32` | `Q(f)`: normalised `x = floor(ã * 2^f)`, raw `x = round(a * 2^f)`; `f` per configuration, 20 for the paper's default |
+//! | factor `R_i` | `i32` | `Q(p_i)`, entries below 2^30, `p_i <= 40` per axis |
+//! | row pass `T = x R2ᵀ` | `i32` | `Q(f)` (i64 accumulator, rounded) |
+//! | embedding `E = R1 T` | `i32` | `Q(f)` (i64 accumulator, rounded), `‖E‖_F < 2^30` |
+//! | squared distance | `i64` | `Q(2f)` |
+//! | score (gradient component, magnitude) | `u32` | `Q(q)`: real value = `s / 2^q` |
+//!
+//! # Why nothing overflows
+//!
+//! [`Scorer::new`] picks the largest `f` (at most 20) for which these bounds
+//! hold and refuses the configuration if none does. With `X` the largest
+//! possible `Σ x` (`2^f` normalised, `N * 65535 * 2^f` raw) and `R̂` the
+//! dequantised factors:
+//!
+//! * `|x| <= 65535 * 2^f < 2^31`;
+//! * row pass accumulator: `|Σ x R2q| <= X * 2^30 < 2^62`; after rounding,
+//!   `|T| <= X max|R̂2| + 1/2 < 2^31`;
+//! * column pass accumulator: `|Σ R1q T| <= 2^30 Σ_l |T_lk| <= 2^30 (X max|R̂2| + J1) < 2^62`;
+//! * `‖E‖_F <= ‖R̂1‖_F ‖R̂2‖_F ‖x‖_F + √N (‖R̂1‖_∞/2 + 1/2) < 2^30`, so every
+//!   entry and every difference of two entries fits `i32`, and the squared
+//!   distance `‖E1 - E2‖²_F < 2^62` fits `i64`;
+//! * square kernels: `|SAT| <= 2X < 2^31` and `(K+1) N (2X)² < 2^62`.
+//!
+//! The score format `q` is the largest with `D_max * 2^q <= 2^31 - 1`, where
+//! `D_max = N * Σ_b w(b)` bounds the distance of normalised maps (every LCD
+//! value lies in `[0, 1]`) and `N * Σ_b w(b) * (N * 65535)²` bounds it for raw
+//! maps, so a score never exceeds `u32` and a magnitude of two scores never
+//! exceeds `u32` either.
+
+use crate::config::{Config, ConfigError, Geometry, Kernels, MAX_CELLS, MAX_J};
+use crate::flags;
+use crate::tables::{
+    axis_kernel, axis_weights, cholesky_psd, norms, pow2, quantise, sqrt, weight_sum,
+};
+
+/// Why a frame could not be scored.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum FrameError {
+    /// The frame or the state buffer does not hold `J1 * J2` values.
+    Length,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Kind {
+    Paper,
+    Square { kmax: u8 },
+}
+
+/// Tables and fixed-point formats for one configuration.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Scorer {
+    config: Config,
+    kind: Kind,
+    /// Input format `Q(f)`.
+    frac: i32,
+    r1: [[i32; MAX_J]; MAX_J],
+    r2: [[i32; MAX_J]; MAX_J],
+    p1: u32,
+    p2: u32,
+    /// Score format `Q(q)`.
+    q: i32,
+}
+
+const I31: f64 = 2147483647.0;
+const LIMIT_E: f64 = 1073741823.0; // 2^30 - 1
+const LIMIT_ACC: f64 = 4.6116860184273879e18; // 2^62
+
+impl Scorer {
+    /// Builds the tables for `cfg`. Usable in `const` context, so a firmware
+    /// configuration that cannot be scored fails to compile.
+    pub const fn new(cfg: &Config) -> Result<Scorer, ConfigError> {
+        let g = cfg.geometry;
+        if g.j1 == 0 || g.j2 == 0 || g.j1 as usize > MAX_J || g.j2 as usize > MAX_J {
+            return Err(ConfigError::Geometry);
+        }
+        let (j1, j2) = (g.j1 as usize, g.j2 as usize);
+        let n = (j1 * j2) as f64;
+
+        let (kind, bmax) = match cfg.kernels {
+            Kernels::Paper { bmax } => (Kind::Paper, bmax as usize),
+            Kernels::Square { kmax } => {
+                if kmax as usize >= MAX_J {
+                    return Err(ConfigError::KernelSize);
+                }
+                (Kind::Square { kmax }, 0)
+            }
+        };
+        let (w1, n1) = match axis_weights(&cfg.weights, 0, j1, bmax) {
+            Ok(v) => v,
+            Err(e) => return Err(e),
+        };
+        let (w2, n2) = match axis_weights(&cfg.weights, 1, j2, bmax) {
+            Ok(v) => v,
+            Err(e) => return Err(e),
+        };
+        let wsum = weight_sum(&cfg.kernels, &w1, n1, &w2, n2);
+        if !(wsum > 0.0) {
+            return Err(ConfigError::Weights);
+        }
+
+        let (r1, p1, r2, p2, rb1, rb2) = match kind {
+            Kind::Paper => {
+                let (r1, p1) = quantise(&cholesky_psd(&axis_kernel(j1, &w1, n1), j1), j1);
+                let (r2, p2) = quantise(&cholesky_psd(&axis_kernel(j2, &w2, n2), j2), j2);
+                let b1 = norms(&dequantise(&r1, p1), j1);
+                let b2 = norms(&dequantise(&r2, p2), j2);
+                (r1, p1, r2, p2, b1, b2)
+            }
+            Kind::Square { .. } => ([[0; MAX_J]; MAX_J], 0, [[0; MAX_J]; MAX_J], 0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)),
+        };
+
+        // Largest input format whose accumulators provably stay in range.
+        let mut f: i32 = 20;
+        loop {
+            if f < -16 {
+                return Err(ConfigError::Range);
+            }
+            let scale = pow2(f);
+            let cell = 65535.0 * scale + 1.0;
+            let (xsum, xfro) = if cfg.normalise {
+                (scale, scale)
+            } else {
+                (n * cell, sqrt(n) * cell)
+            };
+            let ok = cell < I31
+                && match kind {
+                    Kind::Paper => {
+                        let t = xsum * rb2.0 + 1.0;
+                        let e = rb1.1 * rb2.1 * xfro + sqrt(n) * (0.5 * rb1.2 + 0.5);
+                        xsum * 1073741824.0 < LIMIT_ACC && t < I31 && e < LIMIT_E
+                    }
+                    Kind::Square { kmax } => {
+                        let box_max = 2.0 * xsum;
+                        box_max < I31 && (kmax as f64 + 1.0) * n * box_max * box_max < LIMIT_ACC
+                    }
+                };
+            if ok {
+                break;
+            }
+            f -= 1;
+        }
+
+        // Distance bound in real units, then the largest score format for it.
+        let dmax = if cfg.normalise {
+            n * wsum
+        } else {
+            let s = n * 65535.0;
+            n * wsum * s * s
+        };
+        let mut q: i32 = 62;
+        while q > -120 && dmax * pow2(q) > I31 {
+            q -= 1;
+        }
+
+        Ok(Scorer {
+            config: *cfg,
+            kind,
+            frac: f,
+            r1,
+            r2,
+            p1,
+            p2,
+            q,
+        })
+    }
+
+    pub const fn config(&self) -> &Config {
+        &self.config
+    }
+
+    pub const fn geometry(&self) -> Geometry {
+        self.config.geometry
+    }
+
+    /// `J1 * J2`: length of a frame and of a map's state.
+    pub const fn cells(&self) -> usize {
+        self.config.geometry.cells()
+    }
+
+    /// Integer scores are real distances times `2^q`.
+    pub const fn score_frac_bits(&self) -> i32 {
+        self.q
+    }
+
+    /// Input format `Q(f)` of the normalised (or raw) map.
+    pub const fn input_frac_bits(&self) -> i32 {
+        self.frac
+    }
+
+    /// Real value of an integer score, in the units of the f64 distance.
+    pub fn score_to_units(&self, s: u32) -> f64 {
+        s as f64 * pow2(-self.q)
+    }
+
+    /// The smallest integer score at or above `t` real units (saturating).
+    pub fn threshold_from_units(&self, t: f64) -> u32 {
+        if t.is_nan() {
+            return u32::MAX;
+        }
+        let v = t * pow2(self.q);
+        if v <= 0.0 {
+            0
+        } else if v >= u32::MAX as f64 {
+            u32::MAX
+        } else {
+            let fl = v as u32;
+            if (fl as f64) < v { fl + 1 } else { fl }
+        }
+    }
+
+    /// Normalises `frame` (Eq. 5) into `x` in `Q(f)` and returns its flags
+    /// ([`flags::DARK`], [`flags::SATURATED`]).
+    pub fn normalise(&self, frame: &[u16], x: &mut [i32]) -> Result<u8, FrameError> {
+        let n = self.cells();
+        let (Some(frame), Some(x)) = (frame.get(..n), x.get_mut(..n)) else {
+            return Err(FrameError::Length);
+        };
+        if frame.len() != n {
+            return Err(FrameError::Length);
+        }
+        let mut fl = 0;
+        let mut sum: u32 = 0;
+        for &a in frame {
+            // At most 256 * 65535 < 2^24: no overflow.
+            sum += a as u32;
+            if a >= self.config.full_scale {
+                fl |= flags::SATURATED;
+            }
+        }
+        if sum == 0 {
+            fl |= flags::DARK;
+        }
+        if self.config.normalise {
+            if sum == 0 {
+                x.fill(0);
+            } else {
+                // x = floor(a * 2^(32+f) / S / 2^32): one division per map.
+                // a <= S, so a * recip <= 2^(32+f) <= 2^52.
+                let recip = (1u64 << (32 + self.frac as u32)) / sum as u64;
+                for (xv, &a) in x.iter_mut().zip(frame) {
+                    *xv = ((a as u64 * recip) >> 32) as i32;
+                }
+            }
+        } else if self.frac >= 0 {
+            let s = self.frac as u32;
+            for (xv, &a) in x.iter_mut().zip(frame) {
+                *xv = (a as i32) << s;
+            }
+        } else {
+            let s = (-self.frac) as u32;
+            let half = 1i32 << (s - 1);
+            for (xv, &a) in x.iter_mut().zip(frame) {
+                *xv = (a as i32 + half) >> s;
+            }
+        }
+        Ok(fl)
+    }
+
+    /// Normalises and embeds one raw frame into `state` (`J1 * J2` words):
+    /// the per-map work, done once per beam. Returns the map's flags.
+    pub fn prepare(&self, frame: &[u16], state: &mut [i32]) -> Result<u8, FrameError> {
+        let n = self.cells();
+        let Some(state) = state.get_mut(..n) else {
+            return Err(FrameError::Length);
+        };
+        match self.kind {
+            Kind::Square { .. } => self.normalise(frame, state),
+            Kind::Paper => {
+                let mut x = [0i32; MAX_CELLS];
+                let fl = self.normalise(frame, &mut x)?;
+                self.embed(&x, state);
+                Ok(fl)
+            }
+        }
+    }
+
+    /// `E = R1 x R2ᵀ`, exploiting that both factors are upper triangular.
+    fn embed(&self, x: &[i32], e: &mut [i32]) {
+        let j2 = self.config.geometry.j2 as usize;
+        let j1 = self.config.geometry.j1 as usize;
+        let mut t = [0i32; MAX_CELLS];
+        // Row pass: T[i][k] = Σ_{l>=k} x[i][l] R2[k][l].
+        for (xrow, trow) in x.chunks_exact(j2).zip(t.chunks_exact_mut(j2)).take(j1) {
+            for (k, (tv, r2row)) in trow.iter_mut().zip(self.r2.iter()).enumerate() {
+                let mut acc: i64 = 0;
+                for (&xv, &rv) in xrow.iter().zip(r2row.iter()).skip(k) {
+                    acc += xv as i64 * rv as i64;
+                }
+                *tv = round_shift(acc, self.p2) as i32;
+            }
+        }
+        // Column pass: E[i][k] = Σ_{l>=i} R1[i][l] T[l][k], accumulated row-wise.
+        for (i, (erow, r1row)) in e.chunks_exact_mut(j2).zip(self.r1.iter()).take(j1).enumerate() {
+            let mut acc = [0i64; MAX_J];
+            for (&c, trow) in r1row.iter().zip(t.chunks_exact(j2)).take(j1).skip(i) {
+                for (a, &tv) in acc.iter_mut().zip(trow) {
+                    *a += c as i64 * tv as i64;
+                }
+            }
+            for (ev, &a) in erow.iter_mut().zip(acc.iter()) {
+                *ev = round_shift(a, self.p1) as i32;
+            }
+        }
+    }
+
+    /// Score of the distance between two prepared maps, `Q(q)`, saturating.
+    pub fn distance(&self, a: &[i32], b: &[i32]) -> u32 {
+        let n = self.cells();
+        let (Some(a), Some(b)) = (a.get(..n), b.get(..n)) else {
+            return u32::MAX;
+        };
+        let acc = match self.kind {
+            Kind::Paper => {
+                let mut acc: i64 = 0;
+                for (&x, &y) in a.iter().zip(b) {
+                    // |x|, |y| < 2^30: the difference fits i32.
+                    let d = x.wrapping_sub(y) as i64;
+                    acc += d * d;
+                }
+                acc
+            }
+            Kind::Square { kmax } => self.square_distance(a, b, kmax as usize),
+        };
+        self.to_score(acc)
+    }
+
+    /// Σ_k Σ_j (box sum of D = a - b)² through a summed-area table of `D`.
+    fn square_distance(&self, a: &[i32], b: &[i32], kmax: usize) -> i64 {
+        let j1 = self.config.geometry.j1 as usize;
+        let j2 = self.config.geometry.j2 as usize;
+        let w = j2 + 1;
+        // sat[(i+1)*w + (k+1)] = Σ_{i'<=i, k'<=k} D[i'][k'].
+        let mut sat = [0i32; (MAX_J + 1) * (MAX_J + 1)];
+        for i in 0..j1 {
+            let mut row = 0i32;
+            for k in 0..j2 {
+                let idx = i * j2 + k;
+                let d = match (a.get(idx), b.get(idx)) {
+                    (Some(&x), Some(&y)) => x - y,
+                    _ => 0,
+                };
+                row += d;
+                let above = sat.get(i * w + k + 1).copied().unwrap_or(0);
+                if let Some(s) = sat.get_mut((i + 1) * w + k + 1) {
+                    *s = above + row;
+                }
+            }
+        }
+        let at = |i: usize, k: usize| sat.get(i * w + k).copied().unwrap_or(0) as i64;
+        let mut acc: i64 = 0;
+        for h in 0..=kmax {
+            for i in 0..j1 {
+                let (ilo, ihi) = crate::tables::box_range(i, h, j1);
+                for k in 0..j2 {
+                    let (klo, khi) = crate::tables::box_range(k, h, j2);
+                    let s = at(ihi + 1, khi + 1) - at(ilo, khi + 1) - at(ihi + 1, klo) + at(ilo, klo);
+                    acc += s * s;
+                }
+            }
+        }
+        acc
+    }
+
+    /// `Q(2f)` squared distance to a `Q(q)` score, rounded, saturating.
+    fn to_score(&self, acc: i64) -> u32 {
+        let acc = if acc < 0 { 0 } else { acc as u64 };
+        let shift = 2 * self.frac - self.q;
+        let v = if shift > 0 {
+            let s = shift as u32;
+            if s >= 64 { 0 } else { (acc >> s) + ((acc >> (s - 1)) & 1) }
+        } else {
+            let s = (-shift) as u32;
+            if s >= 64 || acc.leading_zeros() < s {
+                if acc == 0 { 0 } else { u64::MAX }
+            } else {
+                acc << s
+            }
+        };
+        if v > u32::MAX as u64 { u32::MAX } else { v as u32 }
+    }
+}
+
+/// `round(acc / 2^p)`, half up, for `p >= 1` (p = 0 is the identity).
+#[inline(always)]
+fn round_shift(acc: i64, p: u32) -> i64 {
+    if p == 0 {
+        acc
+    } else {
+        (acc + (1i64 << (p - 1))) >> p
+    }
+}
+
+const fn dequantise(r: &[[i32; MAX_J]; MAX_J], p: u32) -> crate::tables::Mat {
+    let mut m = [[0.0; MAX_J]; MAX_J];
+    let s = pow2(-(p as i32));
+    let mut i = 0;
+    while i < MAX_J {
+        let mut l = 0;
+        while l < MAX_J {
+            m[i][l] = r[i][l] as f64 * s;
+            l += 1;
+        }
+        i += 1;
+    }
+    m
+}
+
+/// Gradient magnitude `floor(sqrt(g0² + g1²))` of two scores, same format.
+pub fn magnitude(g0: u32, g1: u32) -> u32 {
+    let s = (g0 as u64 * g0 as u64).saturating_add(g1 as u64 * g1 as u64);
+    let m = s.isqrt();
+    if m > u32::MAX as u64 { u32::MAX } else { m as u32 }
+}

@@ -1,0 +1,453 @@
+//! The streaming engine: beams arrive one map at a time in raster order and
+//! each position's gradient (Eq. 1) is emitted as soon as it is final.
+//!
+//! # Window
+//!
+//! The gradient of row `r` needs rows `r-1` and `r+1`. The engine keeps the
+//! prepared state (embedding) of two rows in two buffers, row `r` in buffer
+//! `r % 2`. When beam `(r+1, c)` arrives, slot `c` of its buffer still holds
+//! `(r-1, c)`: the vertical component of `(r, c)` is computed from the two
+//! and only then is the slot overwritten. The horizontal component of
+//! `(r+1, c-1)` is computed at the same time from slots `c-2` and `c`. So the
+//! window is two rows of state plus one map in flight, and row `r` is final
+//! (and emitted) when row `r+1` is complete.
+//!
+//! # Gaps
+//!
+//! Frames carry their position. A position that receives no frame (a gap in
+//! a row, a short row, a skipped row, an explicit [`Engine::mark_missing`])
+//! is reported with [`flags::NO_DATA`] and counted; its neighbours treat it
+//! like the scan border: the missing neighbour is replaced by the map itself
+//! (design.md §3). A frame for a position already passed (repeat, out of
+//! order) is rejected and counted, one beyond the last column is counted as
+//! extra; neither shifts any later position.
+
+use crate::config::MAX_CELLS;
+use crate::flags;
+use crate::scorer::{Scorer, magnitude};
+
+/// Scan position of a beam: `row = m2 - 1`, `col = m1 - 1`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Position {
+    pub row: u32,
+    pub col: u32,
+}
+
+/// The result of one position, in the scorer's `Q(q)` score format.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct PositionScore {
+    /// Horizontal component `d(a(m1-1), a(m1+1))`.
+    pub g0: u32,
+    /// Vertical component `d(a(m2-1), a(m2+1))`.
+    pub g1: u32,
+    /// `floor(sqrt(g0² + g1²))`.
+    pub mag: u32,
+    /// [`flags`] bits.
+    pub flags: u8,
+}
+
+/// Decisions for one finished row.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RowSummary {
+    pub row: u32,
+    /// Largest magnitude among positions with data (0 if none).
+    pub max: u32,
+    /// Column of the first position reaching `max` (None if no data).
+    pub argmax: Option<u32>,
+    /// Positions whose magnitude reaches the threshold.
+    pub defects: u32,
+    pub no_data: u32,
+    pub dark: u32,
+    pub saturated: u32,
+}
+
+/// A finished row: its summary and every position's score.
+pub struct RowView<'s> {
+    pub summary: RowSummary,
+    pub scores: &'s [PositionScore],
+    pub threshold: u32,
+}
+
+/// Counters of one scan, reported in the end-of-scan line.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Totals {
+    /// Rows emitted.
+    pub rows: u32,
+    /// Frames scored.
+    pub frames: u32,
+    /// Positions without data.
+    pub missing: u32,
+    pub dark: u32,
+    pub saturated: u32,
+    pub defects: u32,
+    /// Frames for a position already passed (repeat, out of order) or too
+    /// far ahead to be plausible.
+    pub rejected: u32,
+    /// Frames beyond the last column.
+    pub extra: u32,
+    /// Frames of the wrong length.
+    pub bad: u32,
+    /// Scores that hit the top of their range.
+    pub clipped: u32,
+}
+
+/// Why an engine could not be set up.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum EngineError {
+    /// `cols` is 0 or above the engine's compile-time capacity.
+    Columns,
+    /// A row buffer is shorter than [`row_words`].
+    Buffer,
+}
+
+/// What happened to a pushed frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum PushOutcome {
+    Scored,
+    /// Already passed, or implausibly far ahead: counted, not scored.
+    Rejected,
+    /// Beyond the last column: counted, not scored.
+    Extra,
+    /// Wrong length: its position is reported without data.
+    Bad,
+}
+
+/// A frame more than this many rows ahead of the current one is rejected
+/// rather than turning the gap into that many empty rows.
+pub const MAX_ROW_JUMP: u32 = 1024;
+
+/// `i32` words of one row buffer.
+pub const fn row_words(cols: usize, j1: usize, j2: usize) -> usize {
+    cols * j1 * j2
+}
+
+/// Bytes of engine state for `cols` columns: the two row buffers plus the
+/// per-column flags and two rows of results.
+pub const fn window_bytes(cols: usize, j1: usize, j2: usize) -> usize {
+    2 * row_words(cols, j1, j2) * 4
+        + cols * (2 + 2 * core::mem::size_of::<PositionScore>())
+}
+
+/// The streaming engine, for at most `MAX_COLS` columns.
+pub struct Engine<'a, const MAX_COLS: usize> {
+    scorer: &'a Scorer,
+    cells: usize,
+    cols: usize,
+    threshold: u32,
+    bufs: [&'a mut [i32]; 2],
+    /// Flags of each slot of each buffer; `NO_DATA` where no state is held.
+    meta: [[u8; MAX_COLS]; 2],
+    /// Row being received (`g0` filled as beams arrive).
+    cur: [PositionScore; MAX_COLS],
+    /// Previous row (`g0` final, `g1` filled as the current row arrives).
+    prev: [PositionScore; MAX_COLS],
+    current: Option<u32>,
+    next_col: usize,
+    pending: Option<u32>,
+    totals: Totals,
+}
+
+impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
+    pub fn new(
+        scorer: &'a Scorer,
+        cols: u32,
+        threshold: u32,
+        row_a: &'a mut [i32],
+        row_b: &'a mut [i32],
+    ) -> Result<Self, EngineError> {
+        let cols = cols as usize;
+        if cols == 0 || cols > MAX_COLS {
+            return Err(EngineError::Columns);
+        }
+        let cells = scorer.cells();
+        let words = row_words(cols, cells, 1);
+        if row_a.len() < words || row_b.len() < words {
+            return Err(EngineError::Buffer);
+        }
+        Ok(Engine {
+            scorer,
+            cells,
+            cols,
+            threshold,
+            bufs: [row_a, row_b],
+            meta: [[flags::NO_DATA; MAX_COLS]; 2],
+            cur: [PositionScore::default(); MAX_COLS],
+            prev: [PositionScore::default(); MAX_COLS],
+            current: None,
+            next_col: 0,
+            pending: None,
+            totals: Totals::default(),
+        })
+    }
+
+    pub fn cols(&self) -> u32 {
+        self.cols as u32
+    }
+
+    pub fn threshold(&self) -> u32 {
+        self.threshold
+    }
+
+    pub fn scorer(&self) -> &Scorer {
+        self.scorer
+    }
+
+    pub fn totals(&self) -> &Totals {
+        &self.totals
+    }
+
+    /// Scores the frame of `pos`; finished rows go to `out`.
+    pub fn push(&mut self, pos: Position, frame: &[u16], out: &mut impl FnMut(&RowView)) -> PushOutcome {
+        self.place(pos, Some(frame), out)
+    }
+
+    /// Records that `pos` will receive no frame (e.g. a detector overrun).
+    pub fn mark_missing(&mut self, pos: Position, out: &mut impl FnMut(&RowView)) -> PushOutcome {
+        self.place(pos, None, out)
+    }
+
+    /// Ends the scan: the row in flight is completed (its remaining
+    /// positions without data), the last row is emitted with the border
+    /// rule, and the engine is ready for the next scan. Returns the totals.
+    pub fn finish(&mut self, out: &mut impl FnMut(&RowView)) -> Totals {
+        if self.current.is_some() {
+            self.complete_row(out);
+        }
+        if let Some(p) = self.pending {
+            // Last row: the missing lower neighbour is the map itself.
+            let pb = (p % 2) as usize;
+            for c in 0..self.cols {
+                let own = self.meta[pb][c];
+                if own & flags::NO_DATA != 0 {
+                    continue;
+                }
+                let above = self.meta[1 - pb][c];
+                let g1 = if above & flags::NO_DATA == 0 {
+                    let (a, b) = (self.slot(1 - pb, c), self.slot(pb, c));
+                    self.scorer.distance(a, b)
+                } else {
+                    0
+                };
+                if let Some(s) = self.prev.get_mut(c) {
+                    s.g1 = g1;
+                }
+            }
+            self.emit_prev(p, out);
+        }
+        let totals = self.totals;
+        self.reset();
+        totals
+    }
+
+    /// Forgets the scan in progress without emitting anything.
+    pub fn reset(&mut self) {
+        self.meta = [[flags::NO_DATA; MAX_COLS]; 2];
+        self.current = None;
+        self.next_col = 0;
+        self.pending = None;
+        self.totals = Totals::default();
+    }
+
+    fn place(&mut self, pos: Position, frame: Option<&[u16]>, out: &mut impl FnMut(&RowView)) -> PushOutcome {
+        let col = pos.col as usize;
+        if col >= self.cols {
+            self.totals.extra += 1;
+            return PushOutcome::Extra;
+        }
+        // The row the next beam belongs to if nothing is skipped.
+        let expected = match (self.current, self.pending) {
+            (Some(r), _) => r,
+            (None, Some(p)) => p + 1,
+            (None, None) => 0,
+        };
+        let behind = pos.row < expected || (Some(pos.row) == self.current && col < self.next_col);
+        if behind || pos.row - expected > MAX_ROW_JUMP {
+            self.totals.rejected += 1;
+            return PushOutcome::Rejected;
+        }
+        while self.current != Some(pos.row) {
+            match self.current {
+                Some(_) => self.complete_row(out),
+                None => {
+                    let r = self.pending.map_or(0, |p| p + 1);
+                    self.current = Some(r);
+                    self.next_col = 0;
+                }
+            }
+        }
+        while self.next_col < col {
+            self.resolve(None);
+        }
+        let outcome = match frame {
+            Some(f) if f.len() != self.cells => {
+                self.totals.bad += 1;
+                self.resolve(None);
+                PushOutcome::Bad
+            }
+            f => {
+                self.resolve(f);
+                PushOutcome::Scored
+            }
+        };
+        if self.next_col == self.cols {
+            self.complete_row(out);
+        }
+        outcome
+    }
+
+    fn slot(&self, buf: usize, col: usize) -> &[i32] {
+        let start = col * self.cells;
+        self.bufs
+            .get(buf)
+            .and_then(|b| b.get(start..start + self.cells))
+            .unwrap_or(&[])
+    }
+
+    /// Settles position `(current, next_col)`: with a frame it is prepared
+    /// and becomes the lower neighbour of the row above; then the left
+    /// neighbour's horizontal component is final.
+    fn resolve(&mut self, frame: Option<&[u16]>) {
+        let Some(r) = self.current else { return };
+        let c = self.next_col;
+        let b = (r % 2) as usize;
+        let mut state = [0i32; MAX_CELLS];
+        let own = match frame.map(|f| self.scorer.prepare(f, &mut state)) {
+            Some(Ok(fl)) => {
+                self.totals.frames += 1;
+                if fl & flags::DARK != 0 {
+                    self.totals.dark += 1;
+                }
+                if fl & flags::SATURATED != 0 {
+                    self.totals.saturated += 1;
+                }
+                fl
+            }
+            Some(Err(_)) | None => {
+                self.totals.missing += 1;
+                flags::NO_DATA
+            }
+        };
+        let state = state.get(..self.cells).unwrap_or(&[]);
+
+        // Vertical component of (r-1, c): slot c still holds (r-2, c).
+        if self.pending.is_some() {
+            let mid = self.meta[1 - b].get(c).copied().unwrap_or(flags::NO_DATA);
+            if mid & flags::NO_DATA == 0 {
+                let up_ok = self.meta[b].get(c).is_some_and(|m| m & flags::NO_DATA == 0);
+                let down_ok = own & flags::NO_DATA == 0;
+                let g1 = match (up_ok, down_ok) {
+                    (true, true) => self.scorer.distance(self.slot(b, c), state),
+                    (true, false) => self.scorer.distance(self.slot(b, c), self.slot(1 - b, c)),
+                    (false, true) => self.scorer.distance(self.slot(1 - b, c), state),
+                    (false, false) => 0,
+                };
+                if let Some(s) = self.prev.get_mut(c) {
+                    s.g1 = g1;
+                }
+            }
+        }
+
+        // Overwrite slot c with (r, c).
+        if own & flags::NO_DATA == 0 {
+            let start = c * self.cells;
+            if let Some(dst) = self.bufs[b].get_mut(start..start + self.cells) {
+                dst.copy_from_slice(state);
+            }
+        }
+        if let Some(m) = self.meta[b].get_mut(c) {
+            *m = own;
+        }
+        if let Some(s) = self.cur.get_mut(c) {
+            *s = PositionScore { flags: own, ..PositionScore::default() };
+        }
+
+        // Horizontal component of (r, c-1), now that its right neighbour is settled.
+        if c >= 1 {
+            self.horizontal(b, c - 1, Some(c));
+        }
+        self.next_col = c + 1;
+    }
+
+    /// `g0` of `(current, c)` from its left neighbour `c-1` and the given
+    /// right neighbour, each replaced by the map itself where absent.
+    fn horizontal(&mut self, b: usize, c: usize, right: Option<usize>) {
+        let ok = |m: &[u8; MAX_COLS], i: usize| m.get(i).is_some_and(|f| f & flags::NO_DATA == 0);
+        if !ok(&self.meta[b], c) {
+            return;
+        }
+        let left = if c >= 1 && ok(&self.meta[b], c - 1) { c - 1 } else { c };
+        let right = match right {
+            Some(rc) if ok(&self.meta[b], rc) => rc,
+            _ => c,
+        };
+        let g0 = if left == right {
+            0
+        } else {
+            self.scorer.distance(self.slot(b, left), self.slot(b, right))
+        };
+        if let Some(s) = self.cur.get_mut(c) {
+            s.g0 = g0;
+        }
+    }
+
+    /// The current row ends: remaining positions have no data, the last
+    /// position's horizontal component is final, the previous row is
+    /// emitted and the current one becomes pending.
+    fn complete_row(&mut self, out: &mut impl FnMut(&RowView)) {
+        let Some(r) = self.current else { return };
+        while self.next_col < self.cols {
+            self.resolve(None);
+        }
+        let b = (r % 2) as usize;
+        self.horizontal(b, self.cols - 1, None);
+        if let Some(p) = self.pending {
+            self.emit_prev(p, out);
+        }
+        self.prev = self.cur;
+        self.pending = Some(r);
+        self.current = None;
+        self.next_col = 0;
+    }
+
+    /// Finalises magnitudes and decisions of the previous row and emits it.
+    fn emit_prev(&mut self, row: u32, out: &mut impl FnMut(&RowView)) {
+        let mut sum = RowSummary { row, ..RowSummary::default() };
+        for (c, s) in self.prev.iter_mut().take(self.cols).enumerate() {
+            if s.flags & flags::NO_DATA != 0 {
+                *s = PositionScore { flags: s.flags, ..PositionScore::default() };
+                sum.no_data += 1;
+                continue;
+            }
+            s.mag = magnitude(s.g0, s.g1);
+            if s.g0 == u32::MAX || s.g1 == u32::MAX || s.mag == u32::MAX {
+                s.flags |= flags::CLIPPED;
+                self.totals.clipped += 1;
+            }
+            if s.flags & flags::DARK != 0 {
+                sum.dark += 1;
+            }
+            if s.flags & flags::SATURATED != 0 {
+                sum.saturated += 1;
+            }
+            if s.mag >= self.threshold {
+                sum.defects += 1;
+            }
+            if sum.argmax.is_none() || s.mag > sum.max {
+                sum.max = s.mag;
+                sum.argmax = Some(c as u32);
+            }
+        }
+        self.totals.defects += sum.defects;
+        self.totals.rows += 1;
+        let view = RowView {
+            summary: sum,
+            scores: self.prev.get(..self.cols).unwrap_or(&[]),
+            threshold: self.threshold,
+        };
+        out(&view);
+    }
+}
