@@ -6,28 +6,28 @@
 //! | quantity | type | format |
 //! |---|---|---|
 //! | raw sample `a` | `u16` | counts |
-//! | input map `x` | `i32` | `Q(f)`: normalised `x = floor(ã * 2^f)`, raw `x = round(a * 2^f)`; `f` per configuration, 20 for the paper's default |
+//! | input map `x` | `i32` | `Q(f)`: normalised `x = round(ã * 2^f)`, raw `x = round(a * 2^f)`; `f` per configuration (at most 24; 22 for the paper's default at 15x15) |
 //! | factor `R_i` | `i32` | `Q(p_i)`, entries below 2^30, `p_i <= 40` per axis |
 //! | row pass `T = x R2ᵀ` | `i32` | `Q(f)` (i64 accumulator, rounded) |
-//! | embedding `E = R1 T` | `i32` | `Q(f)` (i64 accumulator, rounded), `‖E‖_F < 2^30` |
-//! | squared distance | `i64` | `Q(2f)` |
+//! | embedding `E = R1 T` | `i32` | `Q(f - s)` (i64 accumulator, rounded), `‖E‖_F < 2^30`, `s >= 0` per configuration |
+//! | squared distance | `i64` | `Q(2(f - s))` (square kernels: `s = 0`) |
 //! | score (gradient component, magnitude) | `u32` | `Q(q)`: real value = `s / 2^q` |
 //!
 //! # Why nothing overflows
 //!
-//! [`Scorer::new`] picks the largest `f` (at most 20) for which these bounds
+//! [`Scorer::new`] picks the largest `f` (at most 24) for which these bounds
 //! hold and refuses the configuration if none does. With `X` the largest
-//! possible `Σ x` (`2^f` normalised, `N * 65535 * 2^f` raw) and `R̂` the
+//! possible `Σ x` (`2^f + N/2` normalised, bounded by `2^f + N`, `N * 65535 * 2^f` raw) and `R̂` the
 //! dequantised factors:
 //!
-//! * `|x| <= 65535 * 2^f < 2^31`;
+//! * `|x| <= 2^f` (normalised) or `65535 * 2^f` (raw), below 2^31;
 //! * row pass accumulator: `|Σ x R2q| <= X * 2^30 < 2^62`; after rounding,
 //!   `|T| <= X max|R̂2| + 1/2 < 2^31`;
 //! * column pass accumulator: `|Σ R1q T| <= 2^30 Σ_l |T_lk| <= 2^30 (X max|R̂2| + J1) < 2^62`;
-//! * `‖E‖_F <= ‖R̂1‖_F ‖R̂2‖_F ‖x‖_F + √N (‖R̂1‖_∞/2 + 1/2) < 2^30`, so every
+//! * `‖E‖_F <= (‖R̂1‖_F ‖R̂2‖_F ‖x‖_F + √N ‖R̂1‖_∞/2) / 2^s + √N/2 < 2^30`, so every
 //!   entry and every difference of two entries fits `i32`, and the squared
 //!   distance `‖E1 - E2‖²_F < 2^62` fits `i64`;
-//! * square kernels: `|SAT| <= 2X < 2^31` and `(K+1) N (2X)² < 2^62`.
+//! * square kernels: `|SAT| <= 2X < 2^31` and `(K+1) N (2X)² < 2^63` (`u64` accumulator).
 //!
 //! The score format `q` is the largest with `D_max * 2^q <= 2^31 - 1`, where
 //! `D_max = N * Σ_b w(b)` bounds the distance of normalised maps (every LCD
@@ -66,13 +66,18 @@ pub struct Scorer {
     r2: [[i32; MAX_J]; MAX_J],
     p1: u32,
     p2: u32,
+    /// Extra right shift of the embedding: `E` is in `Q(f - e_shift)`.
+    e_shift: u32,
     /// Score format `Q(q)`.
     q: i32,
 }
 
+/// Finest input format tried; `2^(32+f)` must fit the reciprocal's `u64`.
+const MAX_FRAC: i32 = 24;
 const I31: f64 = 2147483647.0;
 const LIMIT_E: f64 = 1073741823.0; // 2^30 - 1
 const LIMIT_ACC: f64 = 4.6116860184273879e18; // 2^62
+const LIMIT_SQUARE: f64 = 9.2233720368547758e18; // 2^63, for the u64 accumulator
 
 impl Scorer {
     /// Builds the tables for `cfg`. Usable in `const` context, so a firmware
@@ -119,7 +124,7 @@ impl Scorer {
         };
 
         // Largest input format whose accumulators provably stay in range.
-        let mut f: i32 = 20;
+        let mut f: i32 = MAX_FRAC;
         loop {
             if f < -16 {
                 return Err(ConfigError::Range);
@@ -127,26 +132,45 @@ impl Scorer {
             let scale = pow2(f);
             let cell = 65535.0 * scale + 1.0;
             let (xsum, xfro) = if cfg.normalise {
-                (scale, scale)
+                (scale + n, scale + n)
             } else {
                 (n * cell, sqrt(n) * cell)
             };
-            let ok = cell < I31
+            let xmax = if cfg.normalise { scale } else { cell };
+            let ok = xmax < I31
                 && match kind {
                     Kind::Paper => {
                         let t = xsum * rb2.0 + 1.0;
-                        let e = rb1.1 * rb2.1 * xfro + sqrt(n) * (0.5 * rb1.2 + 0.5);
-                        xsum * 1073741824.0 < LIMIT_ACC && t < I31 && e < LIMIT_E
+                        xsum * 1073741824.0 < LIMIT_ACC && t < I31
                     }
                     Kind::Square { kmax } => {
                         let box_max = 2.0 * xsum;
-                        box_max < I31 && (kmax as f64 + 1.0) * n * box_max * box_max < LIMIT_ACC
+                        box_max < I31 && (kmax as f64 + 1.0) * n * box_max * box_max < LIMIT_SQUARE
                     }
                 };
             if ok {
                 break;
             }
             f -= 1;
+        }
+
+        // The embedding keeps `Q(f - s)`: the smallest extra shift `s` that
+        // keeps ‖E‖_F below 2^30, so that a large kernel (unit weights) costs
+        // precision of E relative to its own size, not of the input map.
+        let mut e_shift: u32 = 0;
+        if let Kind::Paper = kind {
+            let scale = pow2(f);
+            let xfro = if cfg.normalise { scale + n } else { sqrt(n) * (65535.0 * scale + 1.0) };
+            loop {
+                let e = (rb1.1 * rb2.1 * xfro + sqrt(n) * 0.5 * rb1.2) * pow2(-(e_shift as i32)) + sqrt(n) * 0.5;
+                if e < LIMIT_E {
+                    break;
+                }
+                e_shift += 1;
+                if e_shift > 60 {
+                    return Err(ConfigError::Range);
+                }
+            }
         }
 
         // Distance bound in real units, then the largest score format for it.
@@ -169,6 +193,7 @@ impl Scorer {
             r2,
             p1,
             p2,
+            e_shift,
             q,
         })
     }
@@ -243,11 +268,13 @@ impl Scorer {
             if sum == 0 {
                 x.fill(0);
             } else {
-                // x = floor(a * 2^(32+f) / S / 2^32): one division per map.
-                // a <= S, so a * recip <= 2^(32+f) <= 2^52.
+                // x = round(a * 2^f / S) through one reciprocal per map;
+                // a <= S, so a * recip + 2^31 <= 2^(32+f) + 2^31 < 2^57.
+                // Rounding (not truncating) keeps Σx within N/2 of 2^f
+                // instead of biasing every map's mass low.
                 let recip = (1u64 << (32 + self.frac as u32)) / sum as u64;
                 for (xv, &a) in x.iter_mut().zip(frame) {
-                    *xv = ((a as u64 * recip) >> 32) as i32;
+                    *xv = ((a as u64 * recip + (1 << 31)) >> 32) as i32;
                 }
             }
         } else if self.frac >= 0 {
@@ -307,7 +334,7 @@ impl Scorer {
                 }
             }
             for (ev, &a) in erow.iter_mut().zip(acc.iter()) {
-                *ev = round_shift(a, self.p1) as i32;
+                *ev = round_shift(a, self.p1 + self.e_shift) as i32;
             }
         }
     }
@@ -326,7 +353,7 @@ impl Scorer {
                     let d = x.wrapping_sub(y) as i64;
                     acc += d * d;
                 }
-                acc
+                acc as u64
             }
             Kind::Square { kmax } => self.square_distance(a, b, kmax as usize),
         };
@@ -334,7 +361,7 @@ impl Scorer {
     }
 
     /// Σ_k Σ_j (box sum of D = a - b)² through a summed-area table of `D`.
-    fn square_distance(&self, a: &[i32], b: &[i32], kmax: usize) -> i64 {
+    fn square_distance(&self, a: &[i32], b: &[i32], kmax: usize) -> u64 {
         let j1 = self.config.geometry.j1 as usize;
         let j2 = self.config.geometry.j2 as usize;
         let w = j2 + 1;
@@ -356,14 +383,14 @@ impl Scorer {
             }
         }
         let at = |i: usize, k: usize| sat.get(i * w + k).copied().unwrap_or(0) as i64;
-        let mut acc: i64 = 0;
+        let mut acc: u64 = 0;
         for h in 0..=kmax {
             for i in 0..j1 {
                 let (ilo, ihi) = crate::tables::box_range(i, h, j1);
                 for k in 0..j2 {
                     let (klo, khi) = crate::tables::box_range(k, h, j2);
                     let s = at(ihi + 1, khi + 1) - at(ilo, khi + 1) - at(ihi + 1, klo) + at(ilo, klo);
-                    acc += s * s;
+                    acc += (s * s) as u64;
                 }
             }
         }
@@ -371,9 +398,9 @@ impl Scorer {
     }
 
     /// `Q(2f)` squared distance to a `Q(q)` score, rounded, saturating.
-    fn to_score(&self, acc: i64) -> u32 {
-        let acc = if acc < 0 { 0 } else { acc as u64 };
-        let shift = 2 * self.frac - self.q;
+    fn to_score(&self, acc: u64) -> u32 {
+        // Squared distances are in Q(2(f - e_shift)).
+        let shift = 2 * (self.frac - self.e_shift as i32) - self.q;
         let v = if shift > 0 {
             let s = shift as u32;
             if s >= 64 { 0 } else { (acc >> s) + ((acc >> (s - 1)) & 1) }
