@@ -1,2 +1,4 @@
 //! Library side of the `dmap` host toolkit: every subcommand's logic lives in
 //! a module here so that tests can call it without spawning the binary.
+
+pub mod npy;

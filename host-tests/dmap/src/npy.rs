@@ -1,0 +1,368 @@
+//! NumPy `.npy` files in the layouts of design.md §2: scans
+//! `scan[row, col, j1, j2]`, gradient images `(rows, cols, 3)` float64 and
+//! boolean masks `(rows, cols)`.
+//!
+//! Every error is one line naming the file and the problem, because users
+//! meet them in a terminal or a CI log.
+
+use anyhow::{Context, Result, anyhow, bail};
+use cvm_reference::Geometry;
+use npyz::{DType, NpyFile, Order, TypeChar, WriterBuilder};
+use std::io::{BufWriter, Write};
+use std::path::Path;
+
+/// Element type a scan was stored with.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ScanDtype {
+    /// `uint8`
+    U8,
+    /// `uint16` (raw ADC counts, the native format)
+    U16,
+    /// `uint32`
+    U32,
+    /// `float32`
+    F32,
+    /// `float64`
+    F64,
+}
+
+impl ScanDtype {
+    fn name(self) -> &'static str {
+        match self {
+            Self::U8 => "uint8",
+            Self::U16 => "uint16",
+            Self::U32 => "uint32",
+            Self::F32 => "float32",
+            Self::F64 => "float64",
+        }
+    }
+}
+
+/// A scan: `rows x cols` beam positions, each a `J1 x J2` deflection map,
+/// held as `f64` in C order (`data[((row * cols + col) * J1 + j1) * J2 + j2]`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Scan {
+    /// Positions along the slow axis (`m2`).
+    pub rows: usize,
+    /// Positions along the fast axis (`m1`).
+    pub cols: usize,
+    /// Detector geometry.
+    pub geometry: Geometry,
+    /// The samples, finite and non-negative.
+    pub data: Vec<f64>,
+    /// The dtype the file stored.
+    pub dtype: ScanDtype,
+}
+
+impl Scan {
+    /// The deflection map at `(row, col)`.
+    ///
+    /// # Panics
+    /// If the position is outside the scan.
+    pub fn map(&self, row: usize, col: usize) -> &[f64] {
+        let n = self.geometry.cells();
+        let at = (row * self.cols + col) * n;
+        &self.data[at..at + n]
+    }
+
+    /// The samples as `u16` counts, the firmware's input. Fails if any value
+    /// is not an integer in `0..=65535` (a float scan of counts converts; a
+    /// `uint32` scan converts if it stays in range).
+    pub fn to_u16(&self) -> Result<Vec<u16>> {
+        self.data
+            .iter()
+            .enumerate()
+            .map(|(i, &x)| {
+                if x.fract() == 0.0 && (0.0..=65535.0).contains(&x) {
+                    Ok(x as u16)
+                } else {
+                    let (pos, cell) = self.locate(i);
+                    Err(anyhow!(
+                        "{} scan value {x} at {pos:?} cell {cell:?} is not a u16 count (integer 0..=65535)",
+                        self.dtype.name()
+                    ))
+                }
+            })
+            .collect()
+    }
+
+    /// `(row, col)` and `(j1, j2)` of flat index `i`.
+    fn locate(&self, i: usize) -> ((usize, usize), (usize, usize)) {
+        let n = self.geometry.cells();
+        let p = i / n;
+        ((p / self.cols, p % self.cols), self.geometry.cell(i % n))
+    }
+
+    /// Read a scan file (see [`read_scan`]).
+    pub fn read(path: &Path) -> Result<Self> {
+        read_scan(path)
+    }
+}
+
+fn read_bytes(path: &Path) -> Result<Vec<u8>> {
+    std::fs::read(path).map_err(|e| anyhow!("{}: cannot read: {e}", path.display()))
+}
+
+/// The header of an in-memory `.npy` file, checked for what every reader
+/// here needs: C order, no pickled objects, and exactly as many data bytes
+/// as the shape and dtype say.
+fn open_npy<'a>(path: &Path, bytes: &'a [u8]) -> Result<NpyFile<&'a [u8]>> {
+    let p = path.display();
+    if !bytes.starts_with(b"\x93NUMPY") {
+        bail!("{p}: not a .npy file (no NumPy magic bytes)");
+    }
+    let npy = NpyFile::new(bytes)
+        .map_err(|e| anyhow!("{p}: not a valid .npy file: {}", one_line(&e.to_string())))?;
+    if npy.order() == Order::Fortran {
+        bail!(
+            "{p}: Fortran-order arrays are not supported; save it in C order (np.ascontiguousarray)"
+        );
+    }
+    if npy.uses_pickled_array() {
+        bail!("{p}: object arrays are not supported");
+    }
+    let item = npy
+        .dtype()
+        .num_bytes()
+        .ok_or_else(|| anyhow!("{p}: unsupported dtype {}", npy.dtype().descr()))?;
+    let want = npy
+        .shape()
+        .iter()
+        .try_fold(item as u64, |acc, &d| acc.checked_mul(d))
+        .ok_or_else(|| anyhow!("{p}: shape {:?} is too large", npy.shape()))?;
+    let have = npy.header().clone();
+    let data_len = {
+        // NpyFile consumed the header from the slice; what remains is data.
+        let rest: &[u8] = NpyFile::new(bytes).map(|f| f.into_inner()).unwrap_or(&[]);
+        rest.len() as u64
+    };
+    if data_len != want {
+        bail!(
+            "{p}: holds {data_len} data bytes but shape {:?} of {} needs {want} (truncated or corrupt file)",
+            have.shape(),
+            npy.dtype().descr()
+        );
+    }
+    Ok(npy)
+}
+
+fn one_line(s: &str) -> String {
+    s.split_whitespace().collect::<Vec<_>>().join(" ")
+}
+
+fn plain(dtype: &DType) -> Option<(TypeChar, u64)> {
+    match dtype {
+        DType::Plain(ts) => Some((ts.type_char(), ts.size_field())),
+        _ => None,
+    }
+}
+
+fn decode<T: npyz::Deserialize>(path: &Path, npy: NpyFile<&[u8]>) -> Result<Vec<T>> {
+    npy.into_vec::<T>().map_err(|e| {
+        anyhow!(
+            "{}: cannot decode data: {}",
+            path.display(),
+            one_line(&e.to_string())
+        )
+    })
+}
+
+/// Read a scan `scan[row, col, j1, j2]` (C order; dtype uint8, uint16,
+/// uint32, float32 or float64, either byte order).
+///
+/// Rejected, each with a one-line error naming the file: anything that is
+/// not a `.npy` file, Fortran order, a rank other than 4, another dtype, a
+/// detector axis of 0 or over 16 cells, an empty scan (no rows or columns),
+/// a file shorter or longer than its header says, and NaN, infinite or
+/// negative samples.
+pub fn read_scan(path: &Path) -> Result<Scan> {
+    let bytes = read_bytes(path)?;
+    let npy = open_npy(path, &bytes)?;
+    let p = path.display();
+    let shape: Vec<u64> = npy.shape().to_vec();
+    if shape.len() != 4 {
+        bail!(
+            "{p}: a scan must have rank 4 (rows, cols, J1, J2), got shape {shape:?} (rank {})",
+            shape.len()
+        );
+    }
+    let dim = |i: usize| {
+        usize::try_from(shape[i]).map_err(|_| anyhow!("{p}: shape {shape:?} is too large"))
+    };
+    let (rows, cols, j1, j2) = (dim(0)?, dim(1)?, dim(2)?, dim(3)?);
+    let geometry = Geometry::new(j1, j2).map_err(|e| anyhow!("{p}: {e}"))?;
+    if rows == 0 || cols == 0 {
+        bail!("{p}: empty scan (shape {shape:?} has no beam positions)");
+    }
+    let dtype = npy.dtype();
+    let (data, kind) = match plain(&dtype) {
+        Some((TypeChar::Uint, 1)) => (to_f64(decode::<u8>(path, npy)?), ScanDtype::U8),
+        Some((TypeChar::Uint, 2)) => (to_f64(decode::<u16>(path, npy)?), ScanDtype::U16),
+        Some((TypeChar::Uint, 4)) => (to_f64(decode::<u32>(path, npy)?), ScanDtype::U32),
+        Some((TypeChar::Float, 4)) => (to_f64(decode::<f32>(path, npy)?), ScanDtype::F32),
+        Some((TypeChar::Float, 8)) => (decode::<f64>(path, npy)?, ScanDtype::F64),
+        _ => bail!(
+            "{p}: unsupported dtype {} (scans must be uint8, uint16, uint32, float32 or float64)",
+            dtype.descr()
+        ),
+    };
+    let scan = Scan {
+        rows,
+        cols,
+        geometry,
+        data,
+        dtype: kind,
+    };
+    if let Some(i) = scan.data.iter().position(|x| !(x.is_finite() && *x >= 0.0)) {
+        let (pos, cell) = scan.locate(i);
+        bail!(
+            "{p}: sample {} at position {pos:?} cell {cell:?} is not a finite non-negative intensity",
+            scan.data[i]
+        );
+    }
+    Ok(scan)
+}
+
+fn to_f64<T: Into<f64>>(v: Vec<T>) -> Vec<f64> {
+    v.into_iter().map(Into::into).collect()
+}
+
+fn write_npy<T: npyz::AutoSerialize + Copy>(path: &Path, shape: &[u64], data: &[T]) -> Result<()> {
+    let p = path.display();
+    let file = std::fs::File::create(path).map_err(|e| anyhow!("{p}: cannot create: {e}"))?;
+    let mut out = BufWriter::new(file);
+    {
+        let mut w = npyz::WriteOptions::new()
+            .default_dtype()
+            .shape(shape)
+            .writer(&mut out)
+            .begin_nd()
+            .map_err(|e| anyhow!("{p}: cannot write: {e}"))?;
+        w.extend(data.iter().copied())
+            .map_err(|e| anyhow!("{p}: cannot write: {e}"))?;
+        w.finish().map_err(|e| anyhow!("{p}: cannot write: {e}"))?;
+    }
+    out.flush().map_err(|e| anyhow!("{p}: cannot write: {e}"))
+}
+
+/// Write a scan of `u16` counts, shape `(rows, cols, J1, J2)`.
+pub fn write_scan_u16(
+    path: &Path,
+    rows: usize,
+    cols: usize,
+    geometry: Geometry,
+    data: &[u16],
+) -> Result<()> {
+    check_len(path, data.len(), rows * cols * geometry.cells())?;
+    let shape = [rows, cols, geometry.j1(), geometry.j2()].map(|d| d as u64);
+    write_npy(path, &shape, data)
+}
+
+/// Write a scan as float64, shape `(rows, cols, J1, J2)`.
+pub fn write_scan_f64(
+    path: &Path,
+    rows: usize,
+    cols: usize,
+    geometry: Geometry,
+    data: &[f64],
+) -> Result<()> {
+    check_len(path, data.len(), rows * cols * geometry.cells())?;
+    let shape = [rows, cols, geometry.j1(), geometry.j2()].map(|d| d as u64);
+    write_npy(path, &shape, data)
+}
+
+fn check_len(path: &Path, got: usize, want: usize) -> Result<()> {
+    if got == want {
+        Ok(())
+    } else {
+        bail!(
+            "{}: {got} values do not fill the {want} of the shape",
+            path.display()
+        )
+    }
+}
+
+/// Write a gradient image: float64, shape `(rows, cols, 3)` with
+/// `[g0, g1, magnitude]` per position (design.md §2).
+pub fn write_gradient(path: &Path, rows: usize, cols: usize, data: &[f64]) -> Result<()> {
+    check_len(path, data.len(), rows * cols * 3)?;
+    write_npy(path, &[rows as u64, cols as u64, 3], data)
+}
+
+/// A gradient image as written by [`write_gradient`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct GradientImage {
+    /// Rows of positions.
+    pub rows: usize,
+    /// Columns of positions.
+    pub cols: usize,
+    /// `rows * cols * 3` values `[g0, g1, magnitude]`, row-major.
+    pub data: Vec<f64>,
+}
+
+/// Read a gradient image: float64 (or float32), shape `(rows, cols, 3)`.
+pub fn read_gradient(path: &Path) -> Result<GradientImage> {
+    let bytes = read_bytes(path)?;
+    let npy = open_npy(path, &bytes)?;
+    let p = path.display();
+    let shape = npy.shape().to_vec();
+    if shape.len() != 3 || shape[2] != 3 {
+        bail!("{p}: a gradient image must have shape (rows, cols, 3), got {shape:?}");
+    }
+    let dtype = npy.dtype();
+    let data = match plain(&dtype) {
+        Some((TypeChar::Float, 8)) => decode::<f64>(path, npy)?,
+        Some((TypeChar::Float, 4)) => to_f64(decode::<f32>(path, npy)?),
+        _ => bail!(
+            "{p}: unsupported dtype {} for a gradient image (float64 expected)",
+            dtype.descr()
+        ),
+    };
+    Ok(GradientImage {
+        rows: shape[0] as usize,
+        cols: shape[1] as usize,
+        data,
+    })
+}
+
+/// A boolean mask over the scan positions (true on defects).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Mask {
+    /// Rows of positions.
+    pub rows: usize,
+    /// Columns of positions.
+    pub cols: usize,
+    /// `rows * cols` flags, row-major.
+    pub data: Vec<bool>,
+}
+
+/// Read a mask: dtype bool, shape `(rows, cols)`.
+pub fn read_mask(path: &Path) -> Result<Mask> {
+    let bytes = read_bytes(path)?;
+    let npy = open_npy(path, &bytes)?;
+    let p = path.display();
+    let shape = npy.shape().to_vec();
+    if shape.len() != 2 {
+        bail!("{p}: a mask must have shape (rows, cols), got {shape:?}");
+    }
+    let dtype = npy.dtype();
+    if plain(&dtype) != Some((TypeChar::Bool, 1)) {
+        bail!(
+            "{p}: unsupported dtype {} for a mask (bool expected)",
+            dtype.descr()
+        );
+    }
+    let data = decode::<bool>(path, npy)?;
+    Ok(Mask {
+        rows: shape[0] as usize,
+        cols: shape[1] as usize,
+        data,
+    })
+}
+
+/// Write a mask: dtype bool, shape `(rows, cols)`.
+pub fn write_mask(path: &Path, mask: &Mask) -> Result<()> {
+    check_len(path, mask.data.len(), mask.rows * mask.cols)?;
+    write_npy(path, &[mask.rows as u64, mask.cols as u64], &mask.data)
+        .with_context(|| format!("writing mask {}", path.display()))
+}
