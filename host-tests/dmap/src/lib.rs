@@ -2,3 +2,6 @@
 //! a module here so that tests can call it without spawning the binary.
 
 pub mod npy;
+
+pub mod fixed;
+pub mod options;
