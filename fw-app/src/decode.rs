@@ -1,0 +1,36 @@
+//! Frames as they come off the SPI bus.
+//!
+//! The detector clocks out `J1*J2` 16-bit samples, most significant byte
+//! first, row-major `(j1, j2)` (design.md §5). The SPI peripheral runs with
+//! 8-bit words so that the DMA writes bytes in bus order whatever the MCU's
+//! endianness; this module turns those bytes into samples.
+
+/// The byte buffer does not hold exactly two bytes per sample.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct FrameSizeError {
+    pub bytes: usize,
+    pub samples: usize,
+}
+
+/// Bytes that one frame of `cells` samples occupies on the bus.
+pub const fn frame_bytes(cells: usize) -> usize {
+    2 * cells
+}
+
+/// Decodes big-endian samples from `bytes` into `out` (sample `k` is
+/// detector cell `(k / J2, k % J2)`).
+pub fn decode_frame(bytes: &[u8], out: &mut [u16]) -> Result<(), FrameSizeError> {
+    if bytes.len() != frame_bytes(out.len()) {
+        return Err(FrameSizeError {
+            bytes: bytes.len(),
+            samples: out.len(),
+        });
+    }
+    for (sample, pair) in out.iter_mut().zip(bytes.chunks_exact(2)) {
+        if let &[hi, lo] = pair {
+            *sample = u16::from_be_bytes([hi, lo]);
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,181 @@
+//! The scoring side's loop body: beam records in, engine calls out.
+//!
+//! [`ScanDriver`] ties the [`Sequencer`] to the core's `Pipeline` (the very
+//! type `dmap stream` uses, which is what keeps the boards' output
+//! byte-identical to the host's). It consumes one beam per [`ScanDriver::step`]
+//! so that the board can check the output queue's room between beams, even
+//! inside a long run of lost beams.
+
+use cvm_core::pipeline::Pipeline;
+use cvm_core::protocol::LineSink;
+use cvm_core::stream::Totals;
+
+use crate::acquire::BeamRecord;
+use crate::sequence::{Action, Payload, SequenceCounts, Sequencer};
+
+/// Where the frames behind beam records live (buffer indices on a board).
+pub trait FrameStore {
+    /// The decoded samples of buffer `buf`, or `None` if it cannot be read
+    /// (its position is then reported missing).
+    fn frame(&mut self, buf: usize) -> Option<&[u16]>;
+    /// The buffer may be reused.
+    fn release(&mut self, buf: usize);
+}
+
+/// A line sink that knows how many lines it had to drop.
+pub trait CountingSink: LineSink {
+    fn dropped(&self) -> u32;
+}
+
+/// A beam record being expanded into beams.
+#[derive(Clone, Copy, Debug)]
+struct Pending {
+    rec: BeamRecord,
+    /// Beams of a lost run still to hand out (1 for a frame).
+    left: u32,
+}
+
+/// Sequencer and pipeline of the scoring side.
+pub struct ScanDriver<'a, const MAX_COLS: usize> {
+    pipeline: Pipeline<'a, MAX_COLS>,
+    seq: Sequencer<usize>,
+    pending: Option<Pending>,
+    /// The sink's drop count when the current scan began.
+    dropped_at_begin: u32,
+    /// Totals and dropped lines of the last finished scan.
+    last: Option<(Totals, u32)>,
+}
+
+impl<'a, const MAX_COLS: usize> ScanDriver<'a, MAX_COLS> {
+    pub fn new(pipeline: Pipeline<'a, MAX_COLS>, cols: u32, rows: u32) -> Self {
+        ScanDriver {
+            pipeline,
+            seq: Sequencer::new(cols, rows),
+            pending: None,
+            dropped_at_begin: 0,
+            last: None,
+        }
+    }
+
+    pub fn pipeline(&self) -> &Pipeline<'a, MAX_COLS> {
+        &self.pipeline
+    }
+
+    /// Totals and dropped lines of the last finished scan.
+    pub fn last_scan(&self) -> Option<(Totals, u32)> {
+        self.last
+    }
+
+    pub fn sequence_counts(&self) -> &SequenceCounts {
+        self.seq.counts()
+    }
+
+    /// True when a record is still being expanded (call [`Self::step`] with
+    /// `None` until this is false before taking the next one).
+    pub fn busy(&self) -> bool {
+        self.pending.is_some()
+    }
+
+    /// Hands one beam to the sequencer: the next beam of the record being
+    /// expanded, else of `rec`. Returns true when a scan finished.
+    pub fn step<F: FrameStore, S: CountingSink>(
+        &mut self,
+        rec: Option<BeamRecord>,
+        frames: &mut F,
+        sink: &mut S,
+    ) -> bool {
+        if self.pending.is_none() {
+            self.pending = rec.map(|rec| Pending {
+                rec,
+                left: match rec {
+                    BeamRecord::Frame { .. } => 1,
+                    BeamRecord::Lost { run, .. } => run,
+                },
+            });
+        }
+        let Some(mut p) = self.pending else {
+            return false;
+        };
+        let (sync, payload) = match p.rec {
+            BeamRecord::Frame { sync, buf } => (sync, Payload::Frame(buf)),
+            BeamRecord::Lost { sync, run, .. } => (sync && p.left == run, Payload::Lost),
+        };
+        p.left = p.left.saturating_sub(1);
+        self.pending = if p.left > 0 { Some(p) } else { None };
+        if let BeamRecord::Lost { run: 0, .. } = p.rec {
+            return false;
+        }
+        let mut finished = false;
+        let Self {
+            pipeline,
+            seq,
+            dropped_at_begin,
+            last,
+            ..
+        } = self;
+        seq.beam(sync, payload, &mut |a| {
+            finished |= apply(pipeline, dropped_at_begin, last, a, frames, sink);
+        });
+        finished
+    }
+
+    /// The data stopped: brings the open scan to its end, a bounded amount
+    /// of output per call (see [`Sequencer::end_of_data`]). Call again while
+    /// it returns true. Returns (more to do, a scan finished).
+    pub fn end_of_data<F: FrameStore, S: CountingSink>(
+        &mut self,
+        frames: &mut F,
+        sink: &mut S,
+    ) -> (bool, bool) {
+        if self.pending.is_some() {
+            let finished = self.step(None, frames, sink);
+            return (true, finished);
+        }
+        let mut finished = false;
+        let Self {
+            pipeline,
+            seq,
+            dropped_at_begin,
+            last,
+            ..
+        } = self;
+        let more = seq.end_of_data(&mut |a| {
+            finished |= apply(pipeline, dropped_at_begin, last, a, frames, sink);
+        });
+        (more, finished)
+    }
+}
+
+fn apply<const MAX_COLS: usize, F: FrameStore, S: CountingSink>(
+    pipeline: &mut Pipeline<'_, MAX_COLS>,
+    dropped_at_begin: &mut u32,
+    last: &mut Option<(Totals, u32)>,
+    action: Action<usize>,
+    frames: &mut F,
+    sink: &mut S,
+) -> bool {
+    match action {
+        Action::Begin => {
+            *dropped_at_begin = sink.dropped();
+            pipeline.begin(sink);
+        }
+        Action::Place(pos, buf) => {
+            // Rejected, extra and bad frames are counted in the totals.
+            let _ = match frames.frame(buf) {
+                Some(frame) => pipeline.push(pos, frame, sink),
+                None => pipeline.mark_missing(pos, sink),
+            };
+            frames.release(buf);
+        }
+        Action::Missing(pos) => {
+            let _ = pipeline.mark_missing(pos, sink);
+        }
+        Action::Discard(buf) => frames.release(buf),
+        Action::Finish => {
+            let dropped = sink.dropped().wrapping_sub(*dropped_at_begin);
+            *last = Some((pipeline.finish(dropped, sink), dropped));
+            return true;
+        }
+    }
+    false
+}

@@ -1,0 +1,131 @@
+//! Every setting of the firmware, in one place.
+//!
+//! The H743 board's scan configuration is a compile-time constant: its
+//! scoring tables are built by the compiler (a configuration the core
+//! refuses fails the build), and its buffers are sized from it, so a
+//! configuration whose buffers do not fit the RAM banks fails the link
+//! ("region ... overflowed"). The emulated board reads its scan
+//! configuration from the scan file's header instead (see
+//! `cvm_fw_app::emufile`) and only uses the board-independent part here.
+
+use cvm_core::protocol::MAX_LINE;
+use cvm_fw_app::queue::LineQueue;
+
+/// Announced in the header line (printable ASCII without `,` or `*`).
+pub const FIRMWARE_VERSION: &str = concat!("cvm-fw-", env!("CARGO_PKG_VERSION"));
+
+/// Defect (`D`) lines listed per row at most; the row line carries the
+/// full count.
+pub const MAX_DEFECT_LINES_PER_ROW: u16 = 16;
+
+/// Frame buffers: the SPI fills one while the other is scored.
+pub const FRAME_BUFFERS: usize = 2;
+
+/// Beam records between acquisition and scoring (see
+/// `cvm_fw_app::acquire`).
+pub const BEAM_LOG: usize = 64;
+
+/// Queue bytes kept free for keep lines: the most one scoring step can
+/// produce is a scan's end (two rows and the end line), the next scan's
+/// header, and two more rows (a held beam placed with its successor); a
+/// row is one `R` line and at most [`MAX_DEFECT_LINES_PER_ROW`] `D` lines.
+pub const KEEP_RESERVE: usize =
+    (4 * (1 + MAX_DEFECT_LINES_PER_ROW as usize) + 2) * LineQueue::<1>::cost(MAX_LINE);
+
+/// A queue must leave room for score lines besides the keep reserve.
+const fn queue_fits(bytes: usize) -> bool {
+    bytes > 2 * KEEP_RESERVE
+}
+
+#[cfg(feature = "emulated")]
+pub mod emulated {
+    /// Columns the emulated board's row buffers hold (16x16 maps).
+    pub const MAX_COLS: usize = 1024;
+    /// Output queue of the emulated board: a whole row of score lines of
+    /// the widest scan fits besides the keep reserve, so with the board's
+    /// back-pressure nothing is ever dropped.
+    pub const QUEUE_BYTES: usize = 96 * 1024;
+    const _: () = assert!(super::queue_fits(QUEUE_BYTES));
+}
+
+#[cfg(feature = "h743")]
+pub mod h743 {
+    use cvm_core::{Config, Geometry, Kernels, Weights};
+
+    /// Detector geometry `J1 x J2`.
+    pub const J1: u8 = 15;
+    pub const J2: u8 = 15;
+    /// Beams per row, and the columns the row buffers are sized for.
+    pub const COLS: usize = 300;
+    pub const MAX_COLS: usize = COLS;
+    /// Rows per scan: after this many rows the end line goes out.
+    pub const ROWS: u32 = 200;
+
+    /// Bytes of the output queue (about half a second of lines at 921600 baud).
+    pub const QUEUE_BYTES: usize = 48 * 1024;
+    const _: () = assert!(super::queue_fits(QUEUE_BYTES));
+
+    pub const GEOMETRY: Geometry = match Geometry::new(J1, J2) {
+        Ok(g) => g,
+        Err(_) => panic!("J1 and J2 must be 1..=16"),
+    };
+
+    /// Kernels, weights and normalisation (design.md §3).
+    pub const CORE: Config = Config {
+        geometry: GEOMETRY,
+        kernels: Kernels::Paper { bmax: 0 },
+        weights: Weights::Uniform,
+        normalise: true,
+        full_scale: u16::MAX,
+    };
+
+    /// Defect threshold on the gradient magnitude, in `dmap` units.
+    pub const THRESHOLD_UNITS: f64 = 0.05;
+    /// Emit per-position score lines (dropped first when the UART lags).
+    pub const SCORES: bool = true;
+
+    /// Core clock (PLL1 P) and the SPI kernel clock (PLL1 Q).
+    pub const SYSCLK_HZ: u32 = 400_000_000;
+    pub const SPI_KERNEL_HZ: u32 = 200_000_000;
+    /// SPI clock to the detector (the kernel clock divided by a power of two).
+    pub const SPI_HZ: u32 = 50_000_000;
+    const _: () = assert!(
+        SPI_KERNEL_HZ % SPI_HZ == 0
+            && (SPI_KERNEL_HZ / SPI_HZ).is_power_of_two()
+            && SPI_KERNEL_HZ / SPI_HZ >= 2,
+        "the SPI clock must be the kernel clock divided by a power of two (2..=256)"
+    );
+    /// USART3 (ST-LINK virtual COM port).
+    pub const BAUD: u32 = 921_600;
+
+    /// A scan with no beam for this long is ended (rest reported missing).
+    pub const IDLE_END_MS: u64 = 500;
+    /// Independent watchdog timeout; the scoring loop feeds it at least
+    /// every [`IDLE_END_MS`] / 5.
+    pub const WATCHDOG_US: u32 = 1_000_000;
+    pub const FEED_MS: u64 = 100;
+
+    /// Pins (NUCLEO-H743ZI2 Zio connector names in the README's table).
+    /// Changing one means changing its peripheral type in `pins!` too.
+    #[macro_export]
+    macro_rules! pins {
+        ($p:ident) => {
+            $crate::h743::Pins {
+                spi: $p.SPI1,
+                sck: $p.PA5,  // D13
+                miso: $p.PA6, // D12
+                mosi: $p.PB5, // D11
+                cs: $p.PD14,  // D10
+                spi_tx_dma: $p.DMA1_CH0,
+                spi_rx_dma: $p.DMA1_CH1,
+                drdy: $p.PE9, // D6, EXTI9 (EXTI9_5 interrupt)
+                drdy_exti: $p.EXTI9,
+                line_sync: $p.PE11, // D5
+                uart: $p.USART3,
+                uart_tx: $p.PD8, // ST-LINK VCP (PD9, its RX, is unused)
+                uart_tx_dma: $p.DMA1_CH2,
+                iwdg: $p.IWDG1,
+            }
+        };
+    }
+}

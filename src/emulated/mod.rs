@@ -1,0 +1,302 @@
+//! The emulated board: QEMU `mps2-an386` (Cortex-M4F).
+//!
+//! Stands in for the H743 board where no hardware is at hand. Beams come
+//! from a scan file on the host (semihosting; format in
+//! `cvm_fw_app::emufile`), LINE_SYNC is synthesised on every `cols`-th beam,
+//! result lines leave through CMSDK UART0, and the run ends with a
+//! semihosting exit whose status says whether it succeeded. Between those,
+//! the path is the H743's: `Acquisition` bookkeeping, `ScanDriver`,
+//! `cvm_core::Pipeline`, the prioritised `LineQueue` drained by a UART task.
+//!
+//! The file has no deadline, so the board waits for the UART before each
+//! beam and never drops a line: its bytes are the host's, exactly.
+//! Instructions spent scoring are counted with SysTick and reported on the
+//! host's stderr, off the UART stream.
+
+mod cycles;
+mod semihosting;
+mod uart;
+
+use core::cell::RefCell;
+use core::fmt::Write as _;
+
+use cortex_m_rt::entry;
+use cvm_core::pipeline::{Pipeline, Settings};
+use cvm_core::protocol::{LineSink, MAX_LINE, Priority};
+use cvm_core::stream::row_words;
+use cvm_core::{MAX_J, Scorer};
+use cvm_fw_app::acquire::Acquisition;
+use cvm_fw_app::decode::frame_bytes;
+use cvm_fw_app::driver::{CountingSink, ScanDriver};
+use cvm_fw_app::emufile::{HEADER_LEN, ScanHeader};
+use cvm_fw_app::queue::LineQueue;
+use embassy_executor::{Executor, Spawner};
+use embassy_sync::blocking_mutex::Mutex;
+use embassy_sync::blocking_mutex::raw::ThreadModeRawMutex;
+use embassy_sync::signal::Signal;
+use static_cell::{ConstStaticCell, StaticCell};
+
+use crate::config::emulated::{MAX_COLS, QUEUE_BYTES};
+use crate::config::{BEAM_LOG, FIRMWARE_VERSION, FRAME_BUFFERS, KEEP_RESERVE};
+use crate::frames::{Decoder, FrameBuffers};
+use cycles::Stopwatch;
+use semihosting::{File, Stderr, exit};
+
+const ROW_WORDS: usize = row_words(MAX_COLS, MAX_J, MAX_J);
+
+/// Exit statuses (QEMU's own exit status is the firmware's).
+const EXIT_OK: u32 = 0;
+const EXIT_INPUT: u32 = 2;
+const EXIT_INTERNAL: u32 = 3;
+
+type Queue = LineQueue<QUEUE_BYTES>;
+
+static EXECUTOR: StaticCell<Executor> = StaticCell::new();
+static QUEUE: Mutex<ThreadModeRawMutex, RefCell<Queue>> =
+    Mutex::new(RefCell::new(Queue::new(KEEP_RESERVE)));
+/// Lines were queued (scoring -> UART task).
+static KICK: Signal<ThreadModeRawMutex, ()> = Signal::new();
+/// The queue ran empty (UART task -> scoring).
+static DRAINED: Signal<ThreadModeRawMutex, ()> = Signal::new();
+static FRAMES: FrameBuffers<FRAME_BUFFERS> = FrameBuffers::new();
+static ROW_A: ConstStaticCell<[i32; ROW_WORDS]> = ConstStaticCell::new([0; ROW_WORDS]);
+static ROW_B: ConstStaticCell<[i32; ROW_WORDS]> = ConstStaticCell::new([0; ROW_WORDS]);
+static SCORER: StaticCell<Scorer> = StaticCell::new();
+static VERSION: StaticCell<[u8; cvm_core::protocol::MAX_FW]> = StaticCell::new();
+
+/// Fails the run with a one-line message on the host's stderr.
+fn fail(status: u32, what: &str) -> ! {
+    let _ = writeln!(Stderr::new(), "cvm-fw (emulated): error: {what}");
+    exit(status)
+}
+
+#[entry]
+fn main() -> ! {
+    let Some(core) = cortex_m::Peripherals::take() else {
+        fail(EXIT_INTERNAL, "core peripherals taken twice")
+    };
+    let executor = EXECUTOR.init(Executor::new());
+    executor.run(|spawner| start(spawner, core.SYST))
+}
+
+fn start(spawner: Spawner, syst: cortex_m::peripheral::SYST) {
+    match (uart_task(uart::Uart0::take()), scan_task(syst)) {
+        (Ok(u), Ok(s)) => {
+            spawner.spawn(u);
+            spawner.spawn(s);
+        }
+        _ => fail(EXIT_INTERNAL, "task pool exhausted"),
+    }
+}
+
+/// Sends queued lines, one at a time, copied out under the queue's lock.
+#[embassy_executor::task]
+async fn uart_task(mut uart: uart::Uart0) {
+    let mut line = [0u8; MAX_LINE];
+    loop {
+        match QUEUE.lock(|q| q.borrow_mut().pop_into(&mut line)) {
+            Some(n) => uart.write(&line[..n]),
+            None => {
+                DRAINED.signal(());
+                KICK.wait().await;
+            }
+        }
+    }
+}
+
+/// The queue as the pipeline's line sink.
+struct QueueSink;
+
+impl LineSink for QueueSink {
+    fn line(&mut self, line: &[u8], priority: Priority) {
+        QUEUE.lock(|q| q.borrow_mut().push(line, priority));
+    }
+}
+
+impl CountingSink for QueueSink {
+    fn dropped(&self) -> u32 {
+        QUEUE.lock(|q| q.borrow().dropped())
+    }
+}
+
+/// Waits until the UART task has sent everything queued.
+async fn drain() {
+    while !QUEUE.lock(|q| q.borrow().is_empty()) {
+        DRAINED.reset();
+        KICK.signal(());
+        DRAINED.wait().await;
+    }
+}
+
+/// The scan file named by the last word of the semihosting command line.
+fn open_scan() -> File {
+    let mut cmd = [0u8; 512];
+    let Some(len) = semihosting::command_line(&mut cmd) else {
+        fail(
+            EXIT_INPUT,
+            "no semihosting command line (run with -semihosting-config ...,arg=SCAN)",
+        )
+    };
+    let text = &cmd[..len];
+    let text = text.split(|&b| b == 0).next().unwrap_or(&[]);
+    let Some(path) = text.split(|&b| b == b' ').rfind(|w| !w.is_empty()) else {
+        fail(EXIT_INPUT, "no scan file on the command line")
+    };
+    let mut name = [0u8; 512];
+    if path.len() >= name.len() {
+        fail(EXIT_INPUT, "scan file path too long");
+    }
+    name[..path.len()].copy_from_slice(path);
+    match File::open_read(&name[..=path.len()]) {
+        Some(f) => f,
+        None => fail(EXIT_INPUT, "cannot open the scan file"),
+    }
+}
+
+#[embassy_executor::task]
+async fn scan_task(syst: cortex_m::peripheral::SYST) {
+    let file = open_scan();
+    let mut head = [0u8; HEADER_LEN];
+    if file.read(&mut head) != Some(HEADER_LEN) {
+        fail(EXIT_INPUT, "scan file shorter than its header");
+    }
+    let header = match ScanHeader::parse(&head) {
+        Ok(h) => h,
+        Err(e) => fail(EXIT_INPUT, e.message()),
+    };
+    if header.cols as usize > MAX_COLS {
+        fail(
+            EXIT_INPUT,
+            "more columns than the emulated board holds (1024)",
+        );
+    }
+    let scorer: &'static Scorer = match Scorer::new(&header.config) {
+        Ok(s) => SCORER.init(s),
+        Err(_) => fail(EXIT_INPUT, "the core refused the scoring configuration"),
+    };
+    let firmware_version: &'static str = match header.version() {
+        Some(v) => {
+            let buf = VERSION.init([0; cvm_core::protocol::MAX_FW]);
+            buf[..v.len()].copy_from_slice(v.as_bytes());
+            core::str::from_utf8(&buf[..v.len()]).unwrap_or(FIRMWARE_VERSION)
+        }
+        None => FIRMWARE_VERSION,
+    };
+    let settings = Settings {
+        cols: header.cols,
+        threshold: scorer.threshold_from_units(header.threshold_units),
+        scores: header.scores,
+        max_defect_lines_per_row: header.max_defect_lines_per_row,
+        firmware_version,
+    };
+    let words = row_words(
+        header.cols as usize,
+        scorer.geometry().j1 as usize,
+        scorer.geometry().j2 as usize,
+    );
+    let (row_a, row_b) = (&mut ROW_A.take()[..words], &mut ROW_B.take()[..words]);
+    let pipeline = match Pipeline::<MAX_COLS>::new(scorer, settings, row_a, row_b) {
+        Ok(p) => p,
+        Err(_) => fail(EXIT_INTERNAL, "pipeline refused its buffers"),
+    };
+    let mut driver = ScanDriver::new(pipeline, header.cols, header.rows);
+
+    let cells = scorer.cells();
+    let n = frame_bytes(cells);
+    let mut acq: Acquisition<FRAME_BUFFERS, BEAM_LOG> = Acquisition::new();
+    let mut released = [false; FRAME_BUFFERS];
+    let mut stopwatch = Stopwatch::new(syst);
+    let mut beam: u64 = 0;
+    let mut sink = QueueSink;
+
+    let Some(file_len) = file.len() else {
+        fail(EXIT_INPUT, "cannot size the scan file")
+    };
+    let data = file_len.saturating_sub(HEADER_LEN);
+    if data % n != 0 {
+        fail(EXIT_INPUT, "scan file ends inside a frame");
+    }
+    let beams = (data / n) as u64;
+
+    while beam < beams {
+        // The "DRDY" of the next beam: LINE_SYNC on each row's first beam.
+        let sync = beam % u64::from(header.cols) == 0;
+        let Some(buf) = acq.drdy(sync) else {
+            fail(
+                EXIT_INTERNAL,
+                "no free frame buffer although scoring keeps up",
+            );
+        };
+        // SAFETY: `buf` is Filling: the acquisition side owns it.
+        let bytes = unsafe { FRAMES.buffer(buf) };
+        if file.read(&mut bytes[..n]) != Some(n) {
+            fail(EXIT_INPUT, "reading the scan file failed");
+        }
+        acq.read_done(buf, true);
+        beam += 1;
+        while let Some(rec) = acq.next() {
+            drain().await;
+            let mut frames = Decoder {
+                bufs: &FRAMES,
+                cells,
+                samples: [0; cvm_core::MAX_CELLS],
+                release: |b: usize| released[b % FRAME_BUFFERS] = true,
+            };
+            let mut step = Some(rec);
+            loop {
+                stopwatch.time(|| driver.step(step.take(), &mut frames, &mut sink));
+                if !driver.busy() {
+                    break;
+                }
+                drain().await;
+            }
+            for (b, r) in released.iter_mut().enumerate() {
+                if core::mem::take(r) {
+                    acq.release(b);
+                }
+            }
+        }
+    }
+
+    loop {
+        drain().await;
+        let mut frames = Decoder {
+            bufs: &FRAMES,
+            cells,
+            samples: [0; cvm_core::MAX_CELLS],
+            release: |_b: usize| {},
+        };
+        let (more, _) = stopwatch.time(|| driver.end_of_data(&mut frames, &mut sink));
+        if !more {
+            break;
+        }
+    }
+    drain().await;
+
+    let seq = *driver.sequence_counts();
+    let q = QUEUE.lock(|q| *q.borrow().counts());
+    let instr = stopwatch.instructions();
+    let per_beam = if beam == 0 { 0 } else { instr / beam };
+    let mut err = Stderr::new();
+    let _ = writeln!(
+        err,
+        "cvm-fw (emulated): beams={beam} scans={} placed={} lost={} extra={} sync_missing={} short_rows={} \
+         lines={} dropped={} scoring_instructions={instr} instructions_per_beam={per_beam}",
+        seq.scans_finished,
+        seq.placed,
+        seq.lost,
+        seq.extra,
+        seq.sync_missing,
+        seq.short_rows,
+        q.accepted,
+        q.dropped_scores + q.dropped_keep,
+    );
+    let ok = q.dropped_keep == 0 && q.dropped_scores == 0 && acq.counts().spi_errors == 0;
+    exit(if ok { EXIT_OK } else { EXIT_INTERNAL })
+}
+
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    let _ = writeln!(Stderr::new(), "cvm-fw (emulated): panic: {info}");
+    exit(101)
+}

@@ -1,0 +1,436 @@
+//! The NUCLEO-H743ZI2 board.
+//!
+//! Three priority levels:
+//!
+//! - **DRDY interrupt** (EXTI9_5, highest): samples LINE_SYNC, records the
+//!   beam in the `Acquisition` log and, when a frame buffer is free and the
+//!   SPI idle, tells the acquisition task which buffer to fill. Every edge is
+//!   counted here, even while the SPI or the scoring side is busy.
+//! - **Acquisition task** (interrupt executor on the otherwise unused UART4
+//!   vector): CS low, SPI1 read with DMA into the buffer, CS high, result
+//!   (or SPI/DMA error) into the log.
+//! - **Thread mode**: the scoring task (sequencing, `cvm_core::Pipeline`,
+//!   lines into the bounded queue, watchdog feeding, idle end of scan) and
+//!   the UART task (USART3 TX with DMA from the queue).
+//!
+//! D-cache: left disabled (only the I-cache is enabled), so DMA buffers in
+//! AXI SRAM need no cache maintenance. DMA only touches statics in AXI SRAM
+//! (frame buffers, the UART line buffer), never the DTCM stack.
+
+use core::cell::RefCell;
+
+use cortex_m_rt::entry;
+use cvm_core::pipeline::{Pipeline, Settings};
+use cvm_core::protocol::{LineSink, MAX_LINE, Priority};
+use cvm_core::stream::row_words;
+use cvm_core::{MAX_CELLS, Scorer};
+use cvm_fw_app::acquire::Acquisition;
+use cvm_fw_app::decode::frame_bytes;
+use cvm_fw_app::driver::{CountingSink, ScanDriver};
+use cvm_fw_app::queue::LineQueue;
+use defmt::{error, info, warn};
+use embassy_executor::{Executor, InterruptExecutor};
+use embassy_stm32::exti::blocking::ExtiGroupMask;
+use embassy_stm32::exti::{ExtiInput, TriggerEdge};
+use embassy_stm32::gpio::{Input, Level, Output, Pull, Speed};
+use embassy_stm32::interrupt::{InterruptExt, Priority as IrqPriority};
+use embassy_stm32::mode::{Async, Blocking};
+use embassy_stm32::peripherals::{self, IWDG1};
+use embassy_stm32::time::Hertz;
+use embassy_stm32::usart::UartTx;
+use embassy_stm32::wdg::IndependentWatchdog;
+use embassy_stm32::{Peri, bind_interrupts, dma, interrupt, spi, usart};
+use embassy_sync::blocking_mutex::Mutex;
+use embassy_sync::blocking_mutex::raw::{CriticalSectionRawMutex, ThreadModeRawMutex};
+use embassy_sync::signal::Signal;
+use embassy_time::{Duration, Instant, with_timeout};
+use static_cell::StaticCell;
+use {defmt_rtt as _, panic_probe as _};
+
+use crate::config::h743::{
+    BAUD, COLS, CORE, FEED_MS, IDLE_END_MS, J1, J2, MAX_COLS, QUEUE_BYTES, ROWS, SCORES, SPI_HZ,
+    SYSCLK_HZ, THRESHOLD_UNITS, WATCHDOG_US,
+};
+use crate::config::{
+    BEAM_LOG, FIRMWARE_VERSION, FRAME_BUFFERS, KEEP_RESERVE, MAX_DEFECT_LINES_PER_ROW,
+};
+use crate::frames::{Decoder, FrameBuffers};
+
+bind_interrupts!(struct Irqs {
+    DMA1_STREAM0 => dma::InterruptHandler<peripherals::DMA1_CH0>;
+    DMA1_STREAM1 => dma::InterruptHandler<peripherals::DMA1_CH1>;
+    DMA1_STREAM2 => dma::InterruptHandler<peripherals::DMA1_CH2>;
+});
+
+/// The peripherals the board uses; `crate::pins!` (config.rs) fills it.
+pub struct Pins {
+    pub spi: Peri<'static, peripherals::SPI1>,
+    pub sck: Peri<'static, peripherals::PA5>,
+    pub miso: Peri<'static, peripherals::PA6>,
+    pub mosi: Peri<'static, peripherals::PB5>,
+    pub cs: Peri<'static, peripherals::PD14>,
+    pub spi_tx_dma: Peri<'static, peripherals::DMA1_CH0>,
+    pub spi_rx_dma: Peri<'static, peripherals::DMA1_CH1>,
+    pub drdy: Peri<'static, peripherals::PE9>,
+    pub drdy_exti: Peri<'static, peripherals::EXTI9>,
+    pub line_sync: Peri<'static, peripherals::PE11>,
+    pub uart: Peri<'static, peripherals::USART3>,
+    pub uart_tx: Peri<'static, peripherals::PD8>,
+    pub uart_tx_dma: Peri<'static, peripherals::DMA1_CH2>,
+    pub iwdg: Peri<'static, IWDG1>,
+}
+
+const CELLS: usize = CORE.geometry.cells();
+const FRAME_LEN: usize = frame_bytes(CELLS);
+const ROW_WORDS: usize = row_words(MAX_COLS, J1 as usize, J2 as usize);
+
+/// Scoring tables, built by the compiler.
+static SCORER: Scorer = match Scorer::new(&CORE) {
+    Ok(s) => s,
+    Err(_) => panic!("cvm-core refuses the configuration in config.rs"),
+};
+
+/// Row buffer A in AXI SRAM (.bss), row buffer B in SRAM1..3: at 300
+/// columns of 15x15 maps each is 270 KB, too much for one bank together.
+struct RowBuffer(core::cell::UnsafeCell<[i32; ROW_WORDS]>);
+// SAFETY: handed out once, by `take_rows`, before any task runs.
+unsafe impl Sync for RowBuffer {}
+static ROW_A: RowBuffer = RowBuffer(core::cell::UnsafeCell::new([0; ROW_WORDS]));
+#[unsafe(link_section = ".sram123")]
+static ROW_B: RowBuffer = RowBuffer(core::cell::UnsafeCell::new([0; ROW_WORDS]));
+
+type Acq = Acquisition<FRAME_BUFFERS, BEAM_LOG>;
+type Queue = LineQueue<QUEUE_BYTES>;
+
+static ACQ: Mutex<CriticalSectionRawMutex, RefCell<Acq>> = Mutex::new(RefCell::new(Acq::new()));
+static FRAMES: FrameBuffers<FRAME_BUFFERS> = FrameBuffers::new();
+static QUEUE: Mutex<ThreadModeRawMutex, RefCell<Queue>> =
+    Mutex::new(RefCell::new(Queue::new(KEEP_RESERVE)));
+/// The DMA source of the line being sent (AXI SRAM, not the DTCM stack).
+struct TxLine(core::cell::UnsafeCell<[u8; MAX_LINE]>);
+// SAFETY: only the UART task touches it.
+unsafe impl Sync for TxLine {}
+static TX_LINE: TxLine = TxLine(core::cell::UnsafeCell::new([0; MAX_LINE]));
+
+/// The DRDY line's EXTI mask and the LINE_SYNC input, for the interrupt.
+struct DrdyIo {
+    _drdy: ExtiInput<'static, Blocking>,
+    mask: ExtiGroupMask,
+    line_sync: Input<'static>,
+}
+static DRDY_IO: Mutex<CriticalSectionRawMutex, RefCell<Option<DrdyIo>>> =
+    Mutex::new(RefCell::new(None));
+
+/// DRDY interrupt -> acquisition task: the buffer to fill.
+static START: Signal<CriticalSectionRawMutex, usize> = Signal::new();
+/// Acquisition -> scoring: beam records are waiting.
+static BEAMS: Signal<CriticalSectionRawMutex, ()> = Signal::new();
+/// Scoring -> UART: lines are waiting. UART -> scoring: room was made.
+static KICK: Signal<ThreadModeRawMutex, ()> = Signal::new();
+static ROOM: Signal<ThreadModeRawMutex, ()> = Signal::new();
+
+static EXECUTOR_ACQ: InterruptExecutor = InterruptExecutor::new();
+static EXECUTOR: StaticCell<Executor> = StaticCell::new();
+
+#[interrupt]
+fn EXTI9_5() {
+    DRDY_IO.lock(|io| {
+        let io = io.borrow();
+        let Some(io) = io.as_ref() else { return };
+        io.mask.clear();
+        let sync = io.line_sync.is_high();
+        if let Some(buf) = ACQ.lock(|a| a.borrow_mut().drdy(sync)) {
+            START.signal(buf);
+        }
+    });
+}
+
+#[interrupt]
+unsafe fn UART4() {
+    // SAFETY: UART4 is used as this executor's software interrupt only.
+    unsafe { EXECUTOR_ACQ.on_interrupt() }
+}
+
+fn clocks() -> embassy_stm32::Config {
+    use embassy_stm32::rcc::*;
+    let mut config = embassy_stm32::Config::default();
+    // HSI 64 MHz / 4 * 50 = 800 MHz VCO; P / 2 = 400 MHz core; Q / 4 = 200 MHz
+    // SPI1 kernel clock (50 MHz SCK = Q / 4).
+    config.rcc.hsi = Some(HSIPrescaler::DIV1);
+    config.rcc.csi = true;
+    config.rcc.pll1 = Some(Pll {
+        source: PllSource::HSI,
+        prediv: PllPreDiv::DIV4,
+        mul: PllMul::MUL50,
+        fracn: None,
+        divp: Some(PllDiv::DIV2),
+        divq: Some(PllDiv::DIV4),
+        divr: None,
+    });
+    config.rcc.sys = Sysclk::PLL1_P;
+    config.rcc.ahb_pre = AHBPrescaler::DIV2;
+    config.rcc.apb1_pre = APBPrescaler::DIV2;
+    config.rcc.apb2_pre = APBPrescaler::DIV2;
+    config.rcc.apb3_pre = APBPrescaler::DIV2;
+    config.rcc.apb4_pre = APBPrescaler::DIV2;
+    config.rcc.voltage_scale = VoltageScale::Scale1;
+    config
+}
+
+#[entry]
+fn main() -> ! {
+    let mut core = cortex_m::Peripherals::take()
+        .unwrap_or_else(|| defmt::panic!("core peripherals taken twice"));
+    core.SCB.enable_icache();
+    let p = embassy_stm32::init(clocks());
+    // SRAM1..3 hold row buffer B; their clocks are off after reset.
+    embassy_stm32::pac::RCC.ahb2enr().modify(|w| {
+        w.set_sram1en(true);
+        w.set_sram2en(true);
+        w.set_sram3en(true);
+    });
+    let pins = crate::pins!(p);
+
+    info!(
+        "{} start: {}x{} maps, {} cols x {} rows, kernels {}, threshold {} units, scores {}, SPI {} Hz, UART {} baud, core {} Hz",
+        FIRMWARE_VERSION,
+        J1,
+        J2,
+        COLS,
+        ROWS,
+        match CORE.kernels {
+            cvm_core::Kernels::Paper { .. } => "paper",
+            cvm_core::Kernels::Square { .. } => "square",
+        },
+        THRESHOLD_UNITS,
+        SCORES,
+        SPI_HZ,
+        BAUD,
+        SYSCLK_HZ
+    );
+
+    let mut spi_cfg = spi::Config::default();
+    spi_cfg.frequency = Hertz(SPI_HZ);
+    let spi = spi::Spi::new(
+        pins.spi,
+        pins.sck,
+        pins.mosi,
+        pins.miso,
+        pins.spi_tx_dma,
+        pins.spi_rx_dma,
+        Irqs,
+        spi_cfg,
+    );
+    let cs = Output::new(pins.cs, Level::High, Speed::VeryHigh);
+
+    let mut uart_cfg = usart::Config::default();
+    uart_cfg.baudrate = BAUD;
+    let uart = match UartTx::new(pins.uart, pins.uart_tx, pins.uart_tx_dma, Irqs, uart_cfg) {
+        Ok(u) => u,
+        Err(_) => defmt::panic!("USART3 refuses {} baud", BAUD),
+    };
+
+    let mut wdg = IndependentWatchdog::new(pins.iwdg, WATCHDOG_US);
+    wdg.unleash();
+
+    // SAFETY: the row buffers are handed out here, once, before any task runs.
+    let (row_a, row_b) = unsafe { (&mut *ROW_A.0.get(), &mut *ROW_B.0.get()) };
+    // SRAM1..3 is NOLOAD: start from a known state.
+    row_b.fill(0);
+    let settings = Settings {
+        cols: COLS as u32,
+        threshold: SCORER.threshold_from_units(THRESHOLD_UNITS),
+        scores: SCORES,
+        max_defect_lines_per_row: MAX_DEFECT_LINES_PER_ROW,
+        firmware_version: FIRMWARE_VERSION,
+    };
+    let pipeline = match Pipeline::<MAX_COLS>::new(&SCORER, settings, row_a, row_b) {
+        Ok(p) => p,
+        Err(e) => defmt::panic!("pipeline refused its buffers: {}", e),
+    };
+    let driver = ScanDriver::new(pipeline, COLS as u32, ROWS);
+
+    let drdy = ExtiInput::new_blocking(pins.drdy, pins.drdy_exti, Pull::Down, TriggerEdge::Rising);
+    let mask = ExtiGroupMask::new(&[&drdy]);
+    let line_sync = Input::new(pins.line_sync, Pull::Down);
+    DRDY_IO.lock(|io| {
+        io.replace(Some(DrdyIo {
+            _drdy: drdy,
+            mask,
+            line_sync,
+        }))
+    });
+
+    interrupt::UART4.set_priority(IrqPriority::P6);
+    let acq_spawner = EXECUTOR_ACQ.start(interrupt::UART4);
+    match acquire_task(spi, cs) {
+        Ok(t) => acq_spawner.spawn(t),
+        Err(_) => defmt::panic!("acquisition task already running"),
+    }
+    interrupt::EXTI9_5.set_priority(IrqPriority::P5);
+    // SAFETY: the handler only touches the mutex-protected statics above.
+    unsafe { interrupt::EXTI9_5.enable() };
+
+    let executor = EXECUTOR.init(Executor::new());
+    executor.run(|spawner| match (uart_task(uart), score_task(driver, wdg)) {
+        (Ok(u), Ok(s)) => {
+            spawner.spawn(u);
+            spawner.spawn(s);
+        }
+        _ => defmt::panic!("thread tasks already running"),
+    })
+}
+
+/// Reads one frame per START into the buffer it names.
+#[embassy_executor::task]
+async fn acquire_task(
+    mut spi: spi::Spi<'static, Async, spi::mode::Master>,
+    mut cs: Output<'static>,
+) {
+    loop {
+        let buf = START.wait().await;
+        // SAFETY: `buf` is Filling: this task owns it until `read_done`.
+        let bytes = unsafe { FRAMES.buffer(buf) };
+        cs.set_low();
+        let ok = spi.read(&mut bytes[..FRAME_LEN]).await.is_ok();
+        cs.set_high();
+        ACQ.lock(|a| a.borrow_mut().read_done(buf, ok));
+        BEAMS.signal(());
+    }
+}
+
+/// Sends queued lines with DMA.
+#[embassy_executor::task]
+async fn uart_task(mut uart: UartTx<'static, Async>) {
+    let mut errors: u32 = 0;
+    // SAFETY: this task is TX_LINE's only user, and it is spawned once.
+    let line = unsafe { &mut *TX_LINE.0.get() };
+    loop {
+        let n = QUEUE.lock(|q| q.borrow_mut().pop_into(line));
+        let Some(n) = n else {
+            KICK.wait().await;
+            continue;
+        };
+        ROOM.signal(());
+        if uart.write(&line[..n]).await.is_err() {
+            errors = errors.wrapping_add(1);
+            warn!(
+                "USART3 TX error ({} so far): a result line was lost",
+                errors
+            );
+        }
+    }
+}
+
+struct QueueSink;
+
+impl LineSink for QueueSink {
+    fn line(&mut self, line: &[u8], priority: Priority) {
+        QUEUE.lock(|q| q.borrow_mut().push(line, priority));
+    }
+}
+
+impl CountingSink for QueueSink {
+    fn dropped(&self) -> u32 {
+        QUEUE.lock(|q| q.borrow().dropped())
+    }
+}
+
+#[embassy_executor::task]
+async fn score_task(
+    mut driver: ScanDriver<'static, MAX_COLS>,
+    mut wdg: IndependentWatchdog<'static, IWDG1>,
+) {
+    let mut frames = Decoder {
+        bufs: &FRAMES,
+        cells: CELLS,
+        samples: [0; MAX_CELLS],
+        release: |b: usize| ACQ.lock(|a| a.borrow_mut().release(b)),
+    };
+    let mut sink = QueueSink;
+    let mut last_beam = Instant::now();
+    let mut idle_ended = true;
+    let mut reported = ACQ.lock(|a| *a.borrow().counts());
+
+    loop {
+        let _ = with_timeout(Duration::from_millis(FEED_MS), BEAMS.wait()).await;
+        wdg.pet();
+
+        loop {
+            if !QUEUE.lock(|q| q.borrow().keep_room()) {
+                // Scoring waits for the UART; acquisition keeps counting.
+                KICK.signal(());
+                let _ = with_timeout(Duration::from_millis(FEED_MS), ROOM.wait()).await;
+                wdg.pet();
+                continue;
+            }
+            let rec = if driver.busy() {
+                None
+            } else {
+                ACQ.lock(|a| a.borrow_mut().next())
+            };
+            if rec.is_none() && !driver.busy() {
+                break;
+            }
+            last_beam = Instant::now();
+            idle_ended = false;
+            if driver.step(rec, &mut frames, &mut sink) {
+                report_scan(&driver);
+            }
+            KICK.signal(());
+        }
+
+        if !idle_ended && last_beam.elapsed() >= Duration::from_millis(IDLE_END_MS) {
+            loop {
+                if !QUEUE.lock(|q| q.borrow().keep_room()) {
+                    KICK.signal(());
+                    let _ = with_timeout(Duration::from_millis(FEED_MS), ROOM.wait()).await;
+                    wdg.pet();
+                    continue;
+                }
+                let (more, finished) = driver.end_of_data(&mut frames, &mut sink);
+                KICK.signal(());
+                if finished {
+                    warn!("no beam for {} ms: scan ended early", IDLE_END_MS);
+                    report_scan(&driver);
+                }
+                if !more {
+                    break;
+                }
+            }
+            idle_ended = true;
+        }
+
+        let now = ACQ.lock(|a| *a.borrow().counts());
+        if now.overruns != reported.overruns || now.spi_errors != reported.spi_errors {
+            warn!(
+                "acquisition: {} overruns, {} SPI/DMA errors so far",
+                now.overruns, now.spi_errors
+            );
+        }
+        reported = now;
+    }
+}
+
+fn report_scan(driver: &ScanDriver<'static, MAX_COLS>) {
+    let Some((t, dropped)) = driver.last_scan() else {
+        return;
+    };
+    let s = driver.sequence_counts();
+    let a = ACQ.lock(|a| *a.borrow().counts());
+    let q = QUEUE.lock(|q| *q.borrow().counts());
+    info!(
+        "scan done: rows {} frames {} missing {} defects {} dark {} sat {} rejected {} extra {} dropped lines {}",
+        t.rows, t.frames, t.missing, t.defects, t.dark, t.saturated, t.rejected, t.extra, dropped
+    );
+    info!(
+        "since start: beams {} overruns {} spi errors {} short rows {} sync missing {} extra beams {} queue high water {} B",
+        a.drdy, a.overruns, a.spi_errors, s.short_rows, s.sync_missing, s.extra, q.high_water
+    );
+    if q.dropped_keep > 0 {
+        error!(
+            "{} keep lines dropped: the queue reserve is too small",
+            q.dropped_keep
+        );
+    }
+}
