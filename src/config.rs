@@ -8,7 +8,7 @@
 //! configuration from the scan file's header instead (see
 //! `cvm_fw_app::emufile`) and only uses the board-independent part here.
 
-use cvm_core::protocol::MAX_LINE;
+use cvm_core::protocol::{MAX_LINE, SCORES_PER_LINE};
 use cvm_fw_app::queue::LineQueue;
 
 /// Announced in the header line (printable ASCII without `,` or `*`).
@@ -25,16 +25,21 @@ pub const FRAME_BUFFERS: usize = 2;
 /// `cvm_fw_app::acquire`).
 pub const BEAM_LOG: usize = 64;
 
-/// Queue bytes kept free for keep lines: the most one scoring step can
-/// produce is a scan's end (two rows and the end line), the next scan's
-/// header, and two more rows (a held beam placed with its successor); a
-/// row is one `R` line and at most [`MAX_DEFECT_LINES_PER_ROW`] `D` lines.
-pub const KEEP_RESERVE: usize =
-    (4 * (1 + MAX_DEFECT_LINES_PER_ROW as usize) + 2) * LineQueue::<1>::cost(MAX_LINE);
+/// Queue bytes kept free for keep lines, for scans of up to `max_cols`
+/// columns: the most one scoring step can produce is a scan's end (two
+/// rows, their score lines promoted to keep lines, and the end line), the
+/// next scan's header, and two more rows (a held beam placed with its
+/// successor); a row is one `R` line and at most
+/// [`MAX_DEFECT_LINES_PER_ROW`] `D` lines.
+pub const fn keep_reserve(max_cols: usize) -> usize {
+    let row = 1 + MAX_DEFECT_LINES_PER_ROW as usize;
+    let score_lines = max_cols.div_ceil(SCORES_PER_LINE);
+    (4 * row + 2 * score_lines + 2) * LineQueue::<1>::cost(MAX_LINE)
+}
 
 /// A queue must leave room for score lines besides the keep reserve.
-const fn queue_fits(bytes: usize) -> bool {
-    bytes > 2 * KEEP_RESERVE
+const fn queue_fits(bytes: usize, max_cols: usize) -> bool {
+    bytes > 2 * keep_reserve(max_cols)
 }
 
 #[cfg(feature = "emulated")]
@@ -45,7 +50,8 @@ pub mod emulated {
     /// the widest scan fits besides the keep reserve, so with the board's
     /// back-pressure nothing is ever dropped.
     pub const QUEUE_BYTES: usize = 96 * 1024;
-    const _: () = assert!(super::queue_fits(QUEUE_BYTES));
+    pub const KEEP_RESERVE: usize = super::keep_reserve(MAX_COLS);
+    const _: () = assert!(super::queue_fits(QUEUE_BYTES, MAX_COLS));
 }
 
 #[cfg(feature = "h743")]
@@ -63,7 +69,8 @@ pub mod h743 {
 
     /// Bytes of the output queue (about half a second of lines at 921600 baud).
     pub const QUEUE_BYTES: usize = 48 * 1024;
-    const _: () = assert!(super::queue_fits(QUEUE_BYTES));
+    pub const KEEP_RESERVE: usize = super::keep_reserve(MAX_COLS);
+    const _: () = assert!(super::queue_fits(QUEUE_BYTES, MAX_COLS));
 
     pub const GEOMETRY: Geometry = match Geometry::new(J1, J2) {
         Ok(g) => g,

@@ -7,7 +7,7 @@
 //! inside a long run of lost beams.
 
 use cvm_core::pipeline::Pipeline;
-use cvm_core::protocol::LineSink;
+use cvm_core::protocol::{LineSink, Priority};
 use cvm_core::stream::Totals;
 
 use crate::acquire::BeamRecord;
@@ -146,6 +146,15 @@ impl<'a, const MAX_COLS: usize> ScanDriver<'a, MAX_COLS> {
     }
 }
 
+/// Forwards every line as [`Priority::Keep`].
+struct Promote<'s, S>(&'s mut S);
+
+impl<S: LineSink> LineSink for Promote<'_, S> {
+    fn line(&mut self, line: &[u8], _priority: Priority) {
+        self.0.line(line, Priority::Keep);
+    }
+}
+
 fn apply<const MAX_COLS: usize, F: FrameStore, S: CountingSink>(
     pipeline: &mut Pipeline<'_, MAX_COLS>,
     dropped_at_begin: &mut u32,
@@ -173,7 +182,9 @@ fn apply<const MAX_COLS: usize, F: FrameStore, S: CountingSink>(
         Action::Discard(buf) => frames.release(buf),
         Action::Finish => {
             let dropped = sink.dropped().wrapping_sub(*dropped_at_begin);
-            *last = Some((pipeline.finish(dropped, sink), dropped));
+            // The last rows' score lines go out as keep lines, so that no
+            // line can be dropped after `dropped` was fixed for the end line.
+            *last = Some((pipeline.finish(dropped, &mut Promote(sink)), dropped));
             return true;
         }
     }

@@ -18,6 +18,10 @@
 //!   full queue. Waiting there stalls only scoring; the acquisition side
 //!   keeps counting beams, and any frame it cannot buffer meanwhile is an
 //!   overrun reported as a missing position.
+//! - At the end of a scan the engine flushes its last two rows; their score
+//!   lines are queued as keep lines (`ScanDriver` promotes them), because
+//!   the end line's drop count is fixed before they are encoded and must
+//!   be exact. `reserve` therefore also covers two rows of score lines.
 //! - Should a keep line still not fit (a `reserve` too small for the
 //!   configuration), it is dropped and counted separately, never silently.
 //!

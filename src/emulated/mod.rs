@@ -36,8 +36,8 @@ use embassy_sync::blocking_mutex::raw::ThreadModeRawMutex;
 use embassy_sync::signal::Signal;
 use static_cell::{ConstStaticCell, StaticCell};
 
-use crate::config::emulated::{MAX_COLS, QUEUE_BYTES};
-use crate::config::{BEAM_LOG, FIRMWARE_VERSION, FRAME_BUFFERS, KEEP_RESERVE};
+use crate::config::emulated::{KEEP_RESERVE, MAX_COLS, QUEUE_BYTES};
+use crate::config::{BEAM_LOG, FIRMWARE_VERSION, FRAME_BUFFERS};
 use crate::frames::{Decoder, FrameBuffers};
 use cycles::Stopwatch;
 use semihosting::{File, Stderr, exit};

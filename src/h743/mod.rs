@@ -48,12 +48,10 @@ use static_cell::StaticCell;
 use {defmt_rtt as _, panic_probe as _};
 
 use crate::config::h743::{
-    BAUD, COLS, CORE, FEED_MS, IDLE_END_MS, J1, J2, MAX_COLS, QUEUE_BYTES, ROWS, SCORES, SPI_HZ,
-    SYSCLK_HZ, THRESHOLD_UNITS, WATCHDOG_US,
+    BAUD, COLS, CORE, FEED_MS, IDLE_END_MS, J1, J2, KEEP_RESERVE, MAX_COLS, QUEUE_BYTES, ROWS,
+    SCORES, SPI_HZ, SYSCLK_HZ, THRESHOLD_UNITS, WATCHDOG_US,
 };
-use crate::config::{
-    BEAM_LOG, FIRMWARE_VERSION, FRAME_BUFFERS, KEEP_RESERVE, MAX_DEFECT_LINES_PER_ROW,
-};
+use crate::config::{BEAM_LOG, FIRMWARE_VERSION, FRAME_BUFFERS, MAX_DEFECT_LINES_PER_ROW};
 use crate::frames::{Decoder, FrameBuffers};
 
 bind_interrupts!(struct Irqs {

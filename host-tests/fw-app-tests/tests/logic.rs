@@ -1,0 +1,426 @@
+//! The firmware's acquisition and output logic against the core pipeline
+//! fed the clean scan directly.
+
+use cvm_core::protocol::Priority;
+use cvm_core::stream::Position;
+use cvm_fw_app::acquire::{Acquisition, BeamRecord, LostCause};
+use cvm_fw_app::decode::{FrameSizeError, decode_frame};
+use cvm_fw_app::emufile::{HeaderError, ScanHeader};
+use cvm_fw_app::queue::LineQueue;
+use cvm_fw_app::sequence::{Action, Payload, Sequencer};
+use cvm_fw_app_tests::{Board, Scan, reference};
+
+const BIG: usize = 1 << 16;
+
+fn end_field(lines: &[String], key: &str) -> u32 {
+    let e = lines
+        .iter()
+        .find(|l| l.starts_with("E,"))
+        .expect("end line");
+    let body = e.split('*').next().unwrap();
+    body.split(',')
+        .find_map(|kv| kv.strip_prefix(&format!("{key}=")))
+        .unwrap_or_else(|| panic!("no {key} in {e}"))
+        .parse()
+        .unwrap()
+}
+
+/// Lines of rows `>= from` (R, D and S lines carry the row as first field).
+fn rows_from(lines: &[String], from: u32) -> Vec<String> {
+    lines
+        .iter()
+        .filter(|l| {
+            let mut f = l.split(',');
+            let t = f.next().unwrap();
+            matches!(t, "R" | "D" | "S") && f.next().unwrap().parse::<u32>().unwrap() >= from
+        })
+        .cloned()
+        .collect()
+}
+
+#[test]
+fn decode_is_big_endian_row_major() {
+    let bytes = [0x12, 0x34, 0x00, 0xFF, 0xAB, 0x00];
+    let mut out = [0u16; 3];
+    decode_frame(&bytes, &mut out).unwrap();
+    assert_eq!(out, [0x1234, 0x00FF, 0xAB00]);
+    assert_eq!(
+        decode_frame(&bytes[..5], &mut out),
+        Err(FrameSizeError {
+            bytes: 5,
+            samples: 3
+        })
+    );
+}
+
+#[test]
+fn clean_scan_through_the_board_equals_the_pipeline() {
+    let scan = Scan::generate(5, 5, 12, 6, 1, (3, 4));
+    let scorer = scan.scorer();
+    let (mut a, mut b) = scan.row_buffers();
+    let mut board = Board::<BIG>::new(&scan, &scorer, true, (&mut a, &mut b), 4096);
+    for beam in 0..scan.frames.len() {
+        assert!(board.drdy(scan.pos(beam).col == 0, scan.frame(beam), true));
+        board.score(usize::MAX);
+        board.uart.send(usize::MAX);
+    }
+    board.end();
+    let want = reference(&scan, true, &[], 0);
+    // The gradient peaks next to the planted blob at (3, 4).
+    assert!(
+        want.iter().any(|l| l.starts_with("D,2,4,")),
+        "the planted defect is found"
+    );
+    assert!(
+        want.iter().all(|l| !l.starts_with("D,0,")),
+        "no defect far from it"
+    );
+    assert_eq!(board.uart.sent, want);
+    assert_eq!(board.driver.sequence_counts().scans_finished, 1);
+}
+
+#[test]
+fn drdy_storm_overruns_are_counted_and_reported_missing_in_place() {
+    let scan = Scan::generate(4, 4, 10, 8, 2, (6, 2));
+    let scorer = scan.scorer();
+    let (mut a, mut b) = scan.row_buffers();
+    let mut board = Board::<BIG>::new(&scan, &scorer, true, (&mut a, &mut b), 4096);
+    let mut lost = vec![];
+    for beam in 0..scan.frames.len() {
+        let storm = (25..37).contains(&beam);
+        if !board.drdy(scan.pos(beam).col == 0, scan.frame(beam), true) {
+            lost.push(scan.pos(beam));
+        }
+        // During the storm scoring falls behind: it takes one beam every
+        // third edge, so both buffers fill and further frames overrun.
+        if !storm || beam % 3 == 0 {
+            board.score(1);
+        }
+        board.uart.send(usize::MAX);
+    }
+    board.end();
+    assert!(lost.len() >= 5, "the storm must overrun ({lost:?})");
+    assert_eq!(board.acq.counts().overruns as usize, lost.len());
+    assert_eq!(board.driver.sequence_counts().lost as usize, lost.len());
+    let want = reference(&scan, true, &lost, 0);
+    assert_eq!(board.uart.sent, want);
+    assert_eq!(end_field(&board.uart.sent, "missing") as usize, lost.len());
+    // Rows two below the last loss are untouched by it.
+    let last = lost.iter().map(|p| p.row).max().unwrap();
+    assert_eq!(
+        rows_from(&board.uart.sent, last + 2),
+        rows_from(&reference(&scan, true, &[], 0), last + 2)
+    );
+}
+
+#[test]
+fn missing_line_sync_keeps_every_position() {
+    let scan = Scan::generate(3, 4, 7, 6, 3, (4, 3));
+    let scorer = scan.scorer();
+    let (mut a, mut b) = scan.row_buffers();
+    let mut board = Board::<BIG>::new(&scan, &scorer, true, (&mut a, &mut b), 4096);
+    for beam in 0..scan.frames.len() {
+        let pos = scan.pos(beam);
+        // LINE_SYNC lost on the first beam of rows 2 and 3.
+        let sync = pos.col == 0 && pos.row != 2 && pos.row != 3;
+        board.drdy(sync, scan.frame(beam), true);
+        board.score(usize::MAX);
+    }
+    board.end();
+    assert_eq!(board.uart.sent, reference(&scan, true, &[], 0));
+    assert_eq!(board.driver.sequence_counts().sync_missing, 2);
+    assert_eq!(board.driver.sequence_counts().extra, 0);
+}
+
+#[test]
+fn extra_frame_after_a_row_is_discarded_and_counted() {
+    let scan = Scan::generate(3, 3, 6, 5, 4, (2, 2));
+    let scorer = scan.scorer();
+    let (mut a, mut b) = scan.row_buffers();
+    let mut board = Board::<BIG>::new(&scan, &scorer, true, (&mut a, &mut b), 4096);
+    for beam in 0..scan.frames.len() {
+        let pos = scan.pos(beam);
+        board.drdy(pos.col == 0, scan.frame(beam), true);
+        if pos == (Position { row: 1, col: 5 }) {
+            // A spurious DRDY with garbage data after row 1.
+            board.drdy(false, &[60000; 9], true);
+        }
+        board.score(usize::MAX);
+    }
+    board.end();
+    assert_eq!(board.uart.sent, reference(&scan, true, &[], 0));
+    assert_eq!(board.driver.sequence_counts().extra, 1);
+}
+
+#[test]
+fn short_row_is_reanchored_by_line_sync() {
+    let scan = Scan::generate(4, 3, 8, 6, 5, (4, 6));
+    let scorer = scan.scorer();
+    let (mut a, mut b) = scan.row_buffers();
+    let mut board = Board::<BIG>::new(&scan, &scorer, true, (&mut a, &mut b), 4096);
+    let gone = [Position { row: 1, col: 6 }, Position { row: 1, col: 7 }];
+    for beam in 0..scan.frames.len() {
+        let pos = scan.pos(beam);
+        if gone.contains(&pos) {
+            continue; // no DRDY at all for these beams
+        }
+        board.drdy(pos.col == 0, scan.frame(beam), true);
+        board.score(usize::MAX);
+    }
+    board.end();
+    assert_eq!(board.uart.sent, reference(&scan, true, &gone, 0));
+    let c = board.driver.sequence_counts();
+    assert_eq!((c.short_rows, c.short_positions), (1, 2));
+    assert_eq!(end_field(&board.uart.sent, "missing"), 2);
+}
+
+#[test]
+fn spi_errors_become_missing_positions() {
+    let scan = Scan::generate(5, 5, 9, 5, 6, (1, 1));
+    let scorer = scan.scorer();
+    let (mut a, mut b) = scan.row_buffers();
+    let mut board = Board::<BIG>::new(&scan, &scorer, false, (&mut a, &mut b), 4096);
+    let bad = [Position { row: 2, col: 0 }, Position { row: 3, col: 5 }];
+    for beam in 0..scan.frames.len() {
+        let pos = scan.pos(beam);
+        board.drdy(pos.col == 0, scan.frame(beam), !bad.contains(&pos));
+        board.score(usize::MAX);
+    }
+    board.end();
+    assert_eq!(board.acq.counts().spi_errors, 2);
+    assert_eq!(board.uart.sent, reference(&scan, false, &bad, 0));
+}
+
+#[test]
+fn stalled_uart_drops_only_score_lines_and_loses_no_position_silently() {
+    let scan = Scan::generate(4, 4, 40, 12, 7, (9, 20));
+    let scorer = scan.scorer();
+    let (mut a, mut b) = scan.row_buffers();
+    // Room for a few rows of score lines; the reserve holds a row's keep lines.
+    const CAP: usize = 3000;
+    let reserve = 2700;
+    let mut board = Board::<CAP>::new(&scan, &scorer, true, (&mut a, &mut b), reserve);
+    let mut lost = vec![];
+    for beam in 0..scan.frames.len() {
+        if !board.drdy(scan.pos(beam).col == 0, scan.frame(beam), true) {
+            lost.push(scan.pos(beam));
+        }
+        board.score(usize::MAX);
+        // The UART is stalled for rows 2..9, then sends 4 lines per beam.
+        let row = scan.pos(beam).row;
+        if !(2..9).contains(&row) {
+            board.uart.send(4);
+        }
+    }
+    board.end();
+    let q = *board.uart.queue.counts();
+    assert!(q.dropped_scores > 0, "the stall must drop score lines");
+    assert_eq!(q.dropped_keep, 0);
+    assert!(
+        !lost.is_empty(),
+        "scoring waits for keep room, so the stall overruns"
+    );
+    assert_eq!(board.acq.counts().overruns as usize, lost.len());
+    let sent = &board.uart.sent;
+    let want = reference(&scan, true, &lost, q.dropped_scores);
+    let keep = |v: &[String]| {
+        v.iter()
+            .filter(|l| !l.starts_with("S,"))
+            .cloned()
+            .collect::<Vec<_>>()
+    };
+    // Every keep line arrives, in order, with the faults in place.
+    assert_eq!(keep(sent), keep(&want));
+    assert_eq!(end_field(sent, "dropped"), q.dropped_scores);
+    assert_eq!(end_field(sent, "missing") as usize, lost.len());
+    // Score lines that did arrive are the right ones, in order.
+    let scores: Vec<&String> = sent.iter().filter(|l| l.starts_with("S,")).collect();
+    let mut it = want.iter().filter(|l| l.starts_with("S,"));
+    for s in &scores {
+        assert!(it.any(|w| w == *s), "score line {s} out of place");
+    }
+    assert_eq!(
+        scores.len() + q.dropped_scores as usize,
+        want.iter().filter(|l| l.starts_with("S,")).count()
+    );
+}
+
+#[test]
+fn queue_keeps_its_reserve_for_keep_lines_and_order() {
+    let mut q: LineQueue<100> = LineQueue::new(40);
+    // 20-byte lines cost 22: two droppables fit under the 60 usable bytes.
+    assert!(q.push(&[b'a'; 20], Priority::Droppable));
+    assert!(q.push(&[b'b'; 20], Priority::Droppable));
+    assert!(!q.push(&[b'c'; 20], Priority::Droppable));
+    assert!(q.push(&[b'K'; 30], Priority::Keep));
+    assert!(!q.keep_room());
+    assert!(
+        !q.push(&[b'L'; 30], Priority::Keep),
+        "beyond the capacity even keep lines cannot go"
+    );
+    assert_eq!(
+        (
+            q.counts().dropped_scores,
+            q.counts().dropped_keep,
+            q.dropped()
+        ),
+        (1, 1, 2)
+    );
+    let mut out = [0u8; 64];
+    assert_eq!(q.pop_into(&mut out), Some(20));
+    assert_eq!(out[0], b'a');
+    assert_eq!(q.pop_into(&mut out), Some(20));
+    assert_eq!(out[0], b'b');
+    assert_eq!(q.pop_into(&mut out), Some(30));
+    assert_eq!(out[0], b'K');
+    assert_eq!(q.pop_into(&mut out), None);
+    // Wrap-around keeps bytes intact.
+    for k in 0..50u8 {
+        let line = [k; 17];
+        assert!(q.push(&line, Priority::Keep));
+        assert_eq!(q.pop_into(&mut out), Some(17));
+        assert_eq!(&out[..17], &line);
+    }
+}
+
+#[test]
+fn full_beam_log_folds_lost_beams_into_a_run() {
+    let mut acq: Acquisition<2, 4> = Acquisition::new();
+    let b0 = acq.drdy(true).unwrap();
+    acq.read_done(b0, true);
+    let b1 = acq.drdy(false).unwrap();
+    acq.read_done(b1, true);
+    // Both buffers busy: 5 more edges, log of 4 has 2 slots left.
+    for k in 0..5 {
+        assert_eq!(acq.drdy(k == 3), None);
+    }
+    assert_eq!(acq.counts().overruns, 5);
+    assert_eq!(acq.counts().sync_folded, 1);
+    assert_eq!(
+        acq.next(),
+        Some(BeamRecord::Frame {
+            sync: true,
+            buf: b0
+        })
+    );
+    assert_eq!(
+        acq.next(),
+        Some(BeamRecord::Frame {
+            sync: false,
+            buf: b1
+        })
+    );
+    assert_eq!(
+        acq.next(),
+        Some(BeamRecord::Lost {
+            sync: false,
+            cause: LostCause::Overrun,
+            run: 1
+        })
+    );
+    assert_eq!(
+        acq.next(),
+        Some(BeamRecord::Lost {
+            sync: false,
+            cause: LostCause::Overrun,
+            run: 4
+        })
+    );
+    assert_eq!(acq.next(), None);
+}
+
+fn run(seq: &mut Sequencer<u32>, beams: &[(bool, Payload<u32>)]) -> Vec<Action<u32>> {
+    let mut acts = vec![];
+    for &(sync, p) in beams {
+        seq.beam(sync, p, &mut |a| acts.push(a));
+    }
+    acts
+}
+
+#[test]
+fn sequencer_ends_scans_after_the_configured_rows() {
+    let mut seq = Sequencer::new(2, 2);
+    let f = |k| Payload::Frame(k);
+    let acts = run(
+        &mut seq,
+        &[
+            (true, f(0)),
+            (false, f(1)),
+            (true, f(2)),
+            (false, Payload::Lost),
+            (true, f(4)),
+        ],
+    );
+    let p = |row, col| Position { row, col };
+    assert_eq!(
+        acts,
+        vec![
+            Action::Begin,
+            Action::Place(p(0, 0), 0),
+            Action::Place(p(0, 1), 1),
+            Action::Place(p(1, 0), 2),
+            Action::Missing(p(1, 1)),
+            Action::Finish,
+            Action::Begin,
+            Action::Place(p(0, 0), 4),
+        ]
+    );
+    let mut tail = vec![];
+    while seq.end_of_data(&mut |a| tail.push(a)) {}
+    assert_eq!(
+        tail,
+        vec![
+            Action::Missing(p(0, 1)),
+            Action::Missing(p(1, 1)),
+            Action::Finish
+        ]
+    );
+    assert_eq!(seq.counts().unfinished_positions, 3);
+}
+
+#[test]
+fn sequencer_lone_beam_between_scans_is_extra() {
+    let mut seq = Sequencer::new(3, 1);
+    let acts = run(
+        &mut seq,
+        &[(false, Payload::Frame(9)), (true, Payload::Frame(1))],
+    );
+    assert_eq!(acts[0], Action::Discard(9));
+    assert_eq!(acts[1], Action::Begin);
+    assert_eq!(seq.counts().extra, 1);
+}
+
+#[test]
+fn scan_file_header_round_trips_and_rejects_garbage() {
+    let scan = Scan::generate(9, 7, 5, 5, 8, (0, 0));
+    let h = ScanHeader {
+        config: cvm_core::Config {
+            kernels: cvm_core::Kernels::Square { kmax: 4 },
+            weights: cvm_core::Weights::Separable {
+                w1: [0.5; 16],
+                w2: [0.25; 16],
+            },
+            ..cvm_core::Config::paper(cvm_core::Geometry::new(scan.j1, scan.j2).unwrap())
+        },
+        cols: 300,
+        rows: 17,
+        threshold_units: 0.125,
+        scores: true,
+        max_defect_lines_per_row: 16,
+        version_len: 4,
+        version: *b"host\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0",
+    };
+    let bytes = h.encode();
+    assert_eq!(ScanHeader::parse(&bytes), Ok(h));
+    assert_eq!(ScanHeader::parse(&bytes).unwrap().version(), Some("host"));
+    let mut bad = bytes;
+    bad[0] = b'X';
+    assert_eq!(ScanHeader::parse(&bad), Err(HeaderError::Magic));
+    let mut bad = bytes;
+    bad[10] = 17;
+    assert_eq!(ScanHeader::parse(&bad), Err(HeaderError::Geometry));
+    let mut bad = bytes;
+    bad[20..24].copy_from_slice(&0u32.to_le_bytes());
+    assert_eq!(ScanHeader::parse(&bad), Err(HeaderError::Columns));
+    assert_eq!(ScanHeader::parse(&bytes[..100]), Err(HeaderError::Short));
+}
