@@ -131,11 +131,7 @@ impl Scorer {
             }
             let scale = pow2(f);
             let cell = 65535.0 * scale + 1.0;
-            let (xsum, xfro) = if cfg.normalise {
-                (scale + n, scale + n)
-            } else {
-                (n * cell, sqrt(n) * cell)
-            };
+            let xsum = if cfg.normalise { scale + n } else { n * cell };
             let xmax = if cfg.normalise { scale } else { cell };
             let ok = xmax < I31
                 && match kind {

@@ -67,3 +67,51 @@ pub fn perturb(rng: &mut impl Rng, a: &[u16]) -> Vec<u16> {
 pub fn to_f64(a: &[u16]) -> Vec<f64> {
     a.iter().map(|&v| v as f64).collect()
 }
+
+use cvm_core::{Engine, PositionScore, RowSummary, Scorer, Totals};
+
+/// Runs the engine over `frames` (position, optional frame; `None` means
+/// "mark missing") and returns every emitted row and the totals.
+pub fn run_engine(
+    scorer: &Scorer,
+    cols: usize,
+    threshold: u32,
+    frames: &[(cvm_core::Position, Option<Vec<u16>>)],
+) -> (Vec<(RowSummary, Vec<PositionScore>)>, Totals) {
+    let words = cvm_core::stream::row_words(cols, scorer.cells(), 1);
+    let (mut a, mut b) = (vec![0i32; words], vec![0i32; words]);
+    let mut engine = Box::new(Engine::<256>::new(scorer, cols as u32, threshold, &mut a, &mut b).unwrap());
+    let mut rows = Vec::new();
+    let mut out = |v: &cvm_core::RowView| rows.push((v.summary, v.scores.to_vec()));
+    for (pos, f) in frames {
+        match f {
+            Some(f) => engine.push(*pos, f, &mut out),
+            None => engine.mark_missing(*pos, &mut out),
+        };
+    }
+    let totals = engine.finish(&mut out);
+    (rows, totals)
+}
+
+/// A random scan: rows x cols maps of `j1 x j2`, neighbours similar, with
+/// occasional dark and saturated maps.
+pub fn random_scan(rng: &mut impl Rng, rows: usize, cols: usize, j1: usize, j2: usize) -> Vec<u16> {
+    let n = j1 * j2;
+    let mut data = Vec::with_capacity(rows * cols * n);
+    let mut prev = random_map(rng, n, j2);
+    for _ in 0..rows * cols {
+        let m = match rng.random_range(0..20) {
+            0 => vec![0; n],
+            1 => {
+                let mut m = prev.clone();
+                m[rng.random_range(0..n)] = u16::MAX;
+                m
+            }
+            2 | 3 => random_map(rng, n, j2),
+            _ => perturb(rng, &prev),
+        };
+        data.extend_from_slice(&m);
+        prev = m;
+    }
+    data
+}

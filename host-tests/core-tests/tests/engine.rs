@@ -1,0 +1,212 @@
+//! The streaming engine against batch scoring of the whole scan
+//! (`dmap score --distance cvm-fixed`), and its handling of damaged input.
+
+use cvm_core::{Position, PositionScore, Scorer, flags};
+use cvm_core_tests::{random_scan, rng, run_engine, variants};
+use dmap::fixed::score_scan;
+use proptest::prelude::*;
+
+fn clean_frames(rows: usize, cols: usize, n: usize, data: &[u16]) -> Vec<(Position, Option<Vec<u16>>)> {
+    (0..rows * cols)
+        .map(|i| {
+            let pos = Position { row: (i / cols) as u32, col: (i % cols) as u32 };
+            (pos, Some(data[i * n..(i + 1) * n].to_vec()))
+        })
+        .collect()
+}
+
+fn flatten(rows: &[(cvm_core::RowSummary, Vec<PositionScore>)]) -> Vec<PositionScore> {
+    rows.iter().flat_map(|(_, s)| s.iter().copied()).collect()
+}
+
+/// Batch scoring with positions missing: a missing neighbour is replaced by
+/// the map itself (the border rule), written directly from Eq. 1.
+fn batch_with_gaps(scorer: &Scorer, rows: usize, cols: usize, data: &[u16], present: &[bool]) -> Vec<PositionScore> {
+    let n = scorer.cells();
+    let mut st = vec![0i32; rows * cols * n];
+    let mut fl = vec![0u8; rows * cols];
+    for i in 0..rows * cols {
+        fl[i] = scorer.prepare(&data[i * n..(i + 1) * n], &mut st[i * n..(i + 1) * n]).unwrap();
+    }
+    let s = |i: usize| &st[i * n..(i + 1) * n];
+    let at = |r: isize, c: isize| -> Option<usize> {
+        if r < 0 || c < 0 || r >= rows as isize || c >= cols as isize {
+            return None;
+        }
+        let i = r as usize * cols + c as usize;
+        present[i].then_some(i)
+    };
+    (0..rows * cols)
+        .map(|i| {
+            if !present[i] {
+                return PositionScore { flags: flags::NO_DATA, ..Default::default() };
+            }
+            let (r, c) = ((i / cols) as isize, (i % cols) as isize);
+            let l = at(r, c - 1).unwrap_or(i);
+            let rr = at(r, c + 1).unwrap_or(i);
+            let u = at(r - 1, c).unwrap_or(i);
+            let d = at(r + 1, c).unwrap_or(i);
+            let g0 = if l == rr { 0 } else { scorer.distance(s(l), s(rr)) };
+            let g1 = if u == d { 0 } else { scorer.distance(s(u), s(d)) };
+            PositionScore { g0, g1, mag: cvm_core::magnitude(g0, g1), flags: fl[i] }
+        })
+        .collect()
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(48))]
+
+    /// Bit-identical to batch scoring for complete scans, including 1x1,
+    /// 1xN, Nx1 and 2x2 scans, for every scoring variant.
+    #[test]
+    fn engine_equals_batch(rows in 1usize..7, cols in 1usize..9, g in 0usize..5, seed in any::<u64>()) {
+        let (j1, j2) = [(1, 1), (2, 2), (3, 5), (9, 9), (15, 15)][g];
+        let n = j1 * j2;
+        let mut r = rng(seed);
+        let data = random_scan(&mut r, rows, cols, j1, j2);
+        for args in variants(j1, j2) {
+            let scorer = args.scorer(j1, j2).unwrap();
+            let batch = score_scan(&scorer, rows, cols, &data);
+            let thr = batch.iter().map(|s| s.mag).max().unwrap_or(0) / 2 + 1;
+            let (out, totals) = run_engine(&scorer, cols, thr, &clean_frames(rows, cols, n, &data));
+            prop_assert_eq!(out.len(), rows);
+            for (k, (sum, _)) in out.iter().enumerate() {
+                prop_assert_eq!(sum.row as usize, k);
+            }
+            prop_assert_eq!(&flatten(&out), &batch);
+            prop_assert_eq!(totals.frames as usize, rows * cols);
+            prop_assert_eq!(totals.missing, 0);
+            let defects = batch.iter().filter(|s| s.mag >= thr).count();
+            prop_assert_eq!(totals.defects as usize, defects);
+            let dark = batch.iter().filter(|s| s.flags & flags::DARK != 0).count();
+            prop_assert_eq!(totals.dark as usize, dark);
+            let sat = batch.iter().filter(|s| s.flags & flags::SATURATED != 0).count();
+            prop_assert_eq!(totals.saturated as usize, sat);
+        }
+    }
+
+    /// Missing frames (gaps, short rows, whole rows, explicit overruns)
+    /// are reported as no-data positions and counted; every other position
+    /// is scored at its own place with the border rule around the gaps.
+    #[test]
+    fn gaps_do_not_shift_positions(rows in 1usize..7, cols in 1usize..9, seed in any::<u64>(), holes in prop::collection::vec(any::<bool>(), 64)) {
+        let (j1, j2) = (5, 4);
+        let n = j1 * j2;
+        let mut r = rng(seed);
+        let data = random_scan(&mut r, rows, cols, j1, j2);
+        let scorer = dmap::options::ScoringArgs::default().scorer(j1, j2).unwrap();
+        let present: Vec<bool> = (0..rows * cols).map(|i| !(holes[i % 64] && (i / 64 + seed as usize) % 2 == 0)).collect();
+        let mut frames = Vec::new();
+        for (i, f) in clean_frames(rows, cols, n, &data).into_iter().enumerate() {
+            if present[i] {
+                frames.push(f);
+            } else if i % 3 == 0 {
+                // An explicit "no frame here" (detector overrun).
+                frames.push((f.0, None));
+            }
+        }
+        let (out, totals) = run_engine(&scorer, cols, 1, &frames);
+        let want = batch_with_gaps(&scorer, rows, cols, &data, &present);
+        // Trailing missing rows are never seen by the engine: it cannot
+        // know the scan had them.
+        let last_row = (0..rows * cols).rev().find(|&i| present[i] || i % 3 == 0).map_or(0, |i| i / cols + 1);
+        prop_assert_eq!(out.len(), last_row);
+        prop_assert_eq!(&flatten(&out)[..], &want[..last_row * cols]);
+        let missing = want[..last_row * cols].iter().filter(|s| s.flags & flags::NO_DATA != 0).count();
+        prop_assert_eq!(totals.missing as usize, missing);
+        prop_assert_eq!(totals.frames as usize + missing, last_row * cols);
+    }
+}
+
+/// Repeated frames, repeated rows, frames from the past and frames beyond
+/// the last column are counted and change nothing else.
+#[test]
+fn repeats_and_extras_are_counted_not_placed() {
+    let (rows, cols, j1, j2) = (5, 6, 9, 9);
+    let n = j1 * j2;
+    let mut r = rng(11);
+    let data = random_scan(&mut r, rows, cols, j1, j2);
+    let scorer = dmap::options::ScoringArgs::default().scorer(j1, j2).unwrap();
+    let clean = clean_frames(rows, cols, n, &data);
+    let (want, _) = run_engine(&scorer, cols, 1000, &clean);
+
+    let mut damaged = Vec::new();
+    let junk = vec![123u16; n];
+    for (i, f) in clean.iter().enumerate() {
+        damaged.push(f.clone());
+        if i == 7 {
+            damaged.push(f.clone()); // the same frame twice
+        }
+        if i == 2 * cols + 2 {
+            // A stale frame from the row before, then one beyond the last column.
+            damaged.push((Position { row: 1, col: 0 }, Some(junk.clone())));
+            damaged.push((Position { row: 2, col: cols as u32 }, Some(junk.clone())));
+        }
+        if i == 4 * cols - 1 {
+            // Row 3 repeated in full after it ended.
+            for c in 0..cols {
+                damaged.push((Position { row: 3, col: c as u32 }, Some(junk.clone())));
+            }
+        }
+    }
+    let (got, totals) = run_engine(&scorer, cols, 1000, &damaged);
+    assert_eq!(flatten(&got), flatten(&want));
+    assert_eq!(totals.rejected, 1 + 1 + cols as u32);
+    assert_eq!(totals.extra, 1);
+    assert_eq!(totals.frames as usize, rows * cols);
+}
+
+/// A frame of the wrong length is counted as bad and its position reported
+/// without data; a frame implausibly far ahead is rejected.
+#[test]
+fn bad_frames_and_wild_positions() {
+    let (j1, j2) = (3, 3);
+    let scorer = dmap::options::ScoringArgs::default().scorer(j1, j2).unwrap();
+    let good = vec![10u16; 9];
+    let frames = vec![
+        (Position { row: 0, col: 0 }, Some(good.clone())),
+        (Position { row: 0, col: 1 }, Some(vec![1u16; 5])),
+        (Position { row: 0, col: 2 }, Some(good.clone())),
+        (Position { row: u32::MAX, col: 0 }, Some(good.clone())),
+    ];
+    let (out, totals) = run_engine(&scorer, 3, 1, &frames);
+    assert_eq!(out.len(), 1);
+    assert_eq!(out[0].1[1].flags, flags::NO_DATA);
+    assert_eq!(totals.bad, 1);
+    assert_eq!(totals.missing, 1);
+    assert_eq!(totals.rejected, 1);
+    assert_eq!(totals.frames, 2);
+}
+
+/// After `finish` the engine starts the next scan from row 0 with nothing
+/// carried over.
+#[test]
+fn consecutive_scans_are_independent() {
+    let (rows, cols, j1, j2) = (4, 5, 4, 4);
+    let n = j1 * j2;
+    let mut r = rng(5);
+    let d1 = random_scan(&mut r, rows, cols, j1, j2);
+    let d2 = random_scan(&mut r, rows, cols, j1, j2);
+    let scorer = dmap::options::ScoringArgs::default().scorer(j1, j2).unwrap();
+    let words = cvm_core::stream::row_words(cols, n, 1);
+    let (mut a, mut b) = (vec![0i32; words], vec![0i32; words]);
+    let mut engine = cvm_core::Engine::<8>::new(&scorer, cols as u32, 1, &mut a, &mut b).unwrap();
+    for data in [&d1, &d2] {
+        let mut rows_out = Vec::new();
+        let mut out = |v: &cvm_core::RowView| rows_out.push((v.summary, v.scores.to_vec()));
+        for (pos, f) in clean_frames(rows, cols, n, data) {
+            engine.push(pos, &f.unwrap(), &mut out);
+        }
+        let t = engine.finish(&mut out);
+        assert_eq!(flatten(&rows_out), score_scan(&scorer, rows, cols, data));
+        assert_eq!(t.frames as usize, rows * cols);
+    }
+}
+
+#[test]
+fn window_size_table() {
+    // Two rows of J1*J2 i32 words per column plus per-column bookkeeping.
+    assert_eq!(cvm_core::stream::row_words(300, 15, 15), 300 * 225);
+    let w = cvm_core::stream::window_bytes(300, 15, 15);
+    assert_eq!(w, 2 * 300 * 225 * 4 + 300 * (2 + 2 * std::mem::size_of::<PositionScore>()));
+}

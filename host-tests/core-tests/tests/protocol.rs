@@ -1,0 +1,180 @@
+//! The line protocol: CRC, encode/parse round trips, corruption detection,
+//! line length bounds.
+
+use cvm_core::protocol::{
+    self, HeaderInfo, Line, LineSink, MAX_LINE, ParseError, Priority, crc16, decode_score, encode_end,
+    encode_header, encode_row, encode_score,
+};
+use cvm_core::{PositionScore, RowSummary, RowView, Totals};
+use proptest::prelude::*;
+
+#[derive(Default)]
+struct Lines(Vec<(Vec<u8>, Priority)>);
+impl LineSink for Lines {
+    fn line(&mut self, line: &[u8], p: Priority) {
+        self.0.push((line.to_vec(), p));
+    }
+}
+
+#[test]
+fn crc_is_ccitt_false() {
+    // The catalogued check value of CRC-16/CCITT-FALSE.
+    assert_eq!(crc16(b"123456789"), 0x29B1);
+    assert_eq!(crc16(b""), 0xFFFF);
+}
+
+fn header(fw: &'static str, q: i32) -> HeaderInfo<'static> {
+    HeaderInfo {
+        version: protocol::VERSION,
+        firmware: fw,
+        j1: 15,
+        j2: 9,
+        cols: 300,
+        kernels: b'P',
+        kernel_size: 0,
+        weights: "uniform",
+        normalise: true,
+        full_scale: 65535,
+        threshold: 12345,
+        q,
+        scores: true,
+    }
+}
+
+#[test]
+fn header_round_trip() {
+    for q in [-40, 0, 23, 62] {
+        let mut s = Lines::default();
+        let h = header("0.1.0", q);
+        encode_header(&h, &mut s);
+        let (line, p) = &s.0[0];
+        assert_eq!(*p, Priority::Keep);
+        assert!(line.ends_with(b"\n"));
+        assert_eq!(protocol::parse(line), Ok(Line::Header(h)));
+    }
+}
+
+fn arb_score() -> impl Strategy<Value = PositionScore> {
+    (any::<u32>(), any::<u32>(), any::<u32>(), 0u8..16).prop_map(|(g0, g1, mag, flags)| PositionScore { g0, g1, mag, flags })
+}
+
+proptest! {
+    #[test]
+    fn score_encoding_round_trips(s in arb_score()) {
+        prop_assert_eq!(decode_score(&encode_score(&s)), Some((s.mag, s.flags)));
+    }
+
+    /// Row, defect and score lines decode to what was encoded, and only
+    /// score lines are droppable.
+    #[test]
+    fn row_lines_round_trip(row in any::<u32>(), scores in prop::collection::vec(arb_score(), 1..100), thr in any::<u32>(), max_def in 0u16..5) {
+        let defects: Vec<usize> = (0..scores.len()).filter(|&c| scores[c].flags & 1 == 0 && scores[c].mag >= thr).collect();
+        let summary = RowSummary { row, max: 77, argmax: Some(3), defects: defects.len() as u32, no_data: 1, dark: 2, saturated: 3 };
+        let view = RowView { summary, scores: &scores, threshold: thr };
+        let mut s = Lines::default();
+        encode_row(&view, max_def, true, &mut s);
+        let mut got_scores = vec![None; scores.len()];
+        let mut got_defects = Vec::new();
+        for (line, p) in &s.0 {
+            prop_assert!(line.len() <= MAX_LINE);
+            match protocol::parse(line).unwrap() {
+                Line::Row { summary: got, listed } => {
+                    prop_assert_eq!(got, summary);
+                    prop_assert_eq!(listed as usize, defects.len().min(max_def as usize));
+                    prop_assert_eq!(*p, Priority::Keep);
+                }
+                Line::Defect { row: r, col, mag, flags } => {
+                    prop_assert_eq!(r, row);
+                    prop_assert_eq!(mag, scores[col as usize].mag);
+                    prop_assert_eq!(flags, scores[col as usize].flags);
+                    got_defects.push(col as usize);
+                    prop_assert_eq!(*p, Priority::Keep);
+                }
+                Line::Scores { row: r, col0, chars } => {
+                    prop_assert_eq!(r, row);
+                    for (k, c) in chars.chunks(6).enumerate() {
+                        got_scores[col0 as usize + k] = decode_score(c);
+                    }
+                    prop_assert_eq!(*p, Priority::Droppable);
+                }
+                other => prop_assert!(false, "unexpected line {:?}", other),
+            }
+        }
+        prop_assert_eq!(&got_defects[..], &defects[..defects.len().min(max_def as usize)]);
+        let want: Vec<_> = scores.iter().map(|s| Some((s.mag, s.flags))).collect();
+        prop_assert_eq!(got_scores, want);
+    }
+
+    #[test]
+    fn end_line_round_trips(v in prop::collection::vec(any::<u32>(), 11)) {
+        let t = Totals { rows: v[0], frames: v[1], missing: v[2], dark: v[3], saturated: v[4], defects: v[5], rejected: v[6], extra: v[7], bad: v[8], clipped: v[9] };
+        let mut s = Lines::default();
+        encode_end(&t, v[10], &mut s);
+        prop_assert!(s.0[0].0.len() <= MAX_LINE);
+        prop_assert_eq!(protocol::parse(&s.0[0].0), Ok(Line::End(protocol::EndInfo { totals: t, dropped: v[10] })));
+    }
+
+    /// Changing any one byte of a line (its newline aside, which delimits
+    /// lines in the stream) is detected: CRC-16 catches every error burst
+    /// of up to 16 bits, and a damaged trailer fails its own syntax.
+    #[test]
+    fn any_single_byte_change_is_detected(row in any::<u32>(), scores in prop::collection::vec(arb_score(), 1..40), pos in any::<prop::sample::Index>(), byte in any::<u8>()) {
+        let summary = RowSummary { row, max: 1, argmax: None, defects: 0, no_data: 0, dark: 0, saturated: 0 };
+        let view = RowView { summary, scores: &scores, threshold: u32::MAX };
+        let mut s = Lines::default();
+        encode_row(&view, 0, true, &mut s);
+        for (line, _) in &s.0 {
+            let i = pos.index(line.len() - 1);
+            prop_assume!(line[i] != byte);
+            let mut bad = line.clone();
+            bad[i] = byte;
+            prop_assert!(protocol::parse(&bad).is_err(), "undetected: {:?}", String::from_utf8_lossy(&bad));
+        }
+    }
+
+    /// Truncated lines never parse.
+    #[test]
+    fn truncation_is_detected(scores in prop::collection::vec(arb_score(), 1..40), cut in any::<prop::sample::Index>()) {
+        let summary = RowSummary { row: 3, max: 1, argmax: Some(0), defects: 0, no_data: 0, dark: 0, saturated: 0 };
+        let view = RowView { summary, scores: &scores, threshold: u32::MAX };
+        let mut s = Lines::default();
+        encode_row(&view, 0, true, &mut s);
+        for (line, _) in &s.0 {
+            let body = &line[..line.len() - 1];
+            let k = cut.index(body.len());
+            prop_assert!(protocol::parse(&body[..k]).is_err());
+        }
+    }
+}
+
+/// The longest lines the encoder can write stay within MAX_LINE.
+#[test]
+fn worst_case_lines_fit() {
+    let mut s = Lines::default();
+    let mut h = header("a-very-long-firmware-version-string-that-gets-cut", -120);
+    h.cols = u32::MAX;
+    h.threshold = u32::MAX;
+    h.weights = "separable";
+    encode_header(&h, &mut s);
+    let scores = vec![PositionScore { g0: u32::MAX, g1: u32::MAX, mag: u32::MAX, flags: 15 }; 64];
+    let summary = RowSummary { row: u32::MAX, max: u32::MAX, argmax: Some(u32::MAX), defects: u32::MAX, no_data: u32::MAX, dark: u32::MAX, saturated: u32::MAX };
+    encode_row(&RowView { summary, scores: &scores, threshold: 0 }, u16::MAX, true, &mut s);
+    let t = Totals { rows: u32::MAX, frames: u32::MAX, missing: u32::MAX, dark: u32::MAX, saturated: u32::MAX, defects: u32::MAX, rejected: u32::MAX, extra: u32::MAX, bad: u32::MAX, clipped: u32::MAX };
+    encode_end(&t, u32::MAX, &mut s);
+    for (line, _) in &s.0 {
+        assert!(line.len() <= MAX_LINE, "{} bytes", line.len());
+        assert!(protocol::parse(line).is_ok(), "{}", String::from_utf8_lossy(line));
+    }
+    let longest = s.0.iter().map(|l| l.0.len()).max().unwrap();
+    println!("longest line: {longest} bytes");
+}
+
+#[test]
+fn garbage_is_rejected_with_a_reason() {
+    assert_eq!(protocol::parse(b"hello"), Err(ParseError::NoChecksum));
+    let mut s = Lines::default();
+    encode_end(&Totals::default(), 0, &mut s);
+    let mut l = s.0[0].0.clone();
+    l[0] = b'X';
+    assert_eq!(protocol::parse(&l), Err(ParseError::Checksum));
+}
