@@ -1,0 +1,22 @@
+#!/usr/bin/env bash
+# Installs what the project needs on a fresh Debian machine with rustup:
+# the Cortex-M target, rustfmt/clippy, and QEMU for the emulated board.
+# Idempotent: does nothing that is already done.
+set -euo pipefail
+
+need_sudo() { if [ "$(id -u)" -eq 0 ]; then "$@"; else sudo "$@"; fi; }
+
+if ! rustup target list --installed | grep -qx thumbv7em-none-eabihf; then
+    echo "setup: adding the thumbv7em-none-eabihf target" >&2
+    rustup target add thumbv7em-none-eabihf
+fi
+for c in rustfmt clippy; do
+    if ! rustup component list --installed | grep -q "^$c"; then
+        rustup component add "$c"
+    fi
+done
+if ! command -v qemu-system-arm >/dev/null 2>&1; then
+    echo "setup: installing qemu-system-arm" >&2
+    need_sudo apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive need_sudo apt-get install -y -qq qemu-system-arm >/dev/null
+fi
