@@ -44,19 +44,27 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
     /// Starts a scan: the header line.
     pub fn begin(&mut self, sink: &mut impl LineSink) {
         let s = &self.settings;
-        let h = HeaderInfo::new(self.engine.scorer(), s.cols, s.threshold, s.scores, s.firmware_version);
+        let h = HeaderInfo::new(
+            self.engine.scorer(),
+            s.cols,
+            s.threshold,
+            s.scores,
+            s.firmware_version,
+        );
         encode_header(&h, sink);
     }
 
     pub fn push(&mut self, pos: Position, frame: &[u16], sink: &mut impl LineSink) -> PushOutcome {
         let (md, sc) = (self.settings.max_defect_lines_per_row, self.settings.scores);
-        self.engine.push(pos, frame, &mut |row| encode_row(row, md, sc, sink))
+        self.engine
+            .push(pos, frame, &mut |row| encode_row(row, md, sc, sink))
     }
 
     /// Records that `pos` receives no frame (detector overrun, SPI error).
     pub fn mark_missing(&mut self, pos: Position, sink: &mut impl LineSink) -> PushOutcome {
         let (md, sc) = (self.settings.max_defect_lines_per_row, self.settings.scores);
-        self.engine.mark_missing(pos, &mut |row| encode_row(row, md, sc, sink))
+        self.engine
+            .mark_missing(pos, &mut |row| encode_row(row, md, sc, sink))
     }
 
     /// Ends the scan: remaining rows, then the end line with `lines_dropped`

@@ -45,7 +45,11 @@ const CRC_TABLE: [u16; 256] = {
         let mut c = (i as u16) << 8;
         let mut k = 0;
         while k < 8 {
-            c = if c & 0x8000 != 0 { (c << 1) ^ 0x1021 } else { c << 1 };
+            c = if c & 0x8000 != 0 {
+                (c << 1) ^ 0x1021
+            } else {
+                c << 1
+            };
             k += 1;
         }
         t[i] = c;
@@ -79,7 +83,11 @@ pub struct LineBuf {
 
 impl LineBuf {
     pub fn new(kind: u8) -> Self {
-        let mut l = LineBuf { buf: [0; MAX_LINE], len: 0, overflow: false };
+        let mut l = LineBuf {
+            buf: [0; MAX_LINE],
+            len: 0,
+            overflow: false,
+        };
         l.byte(kind);
         l
     }
@@ -222,7 +230,13 @@ pub struct HeaderInfo<'s> {
 }
 
 impl<'s> HeaderInfo<'s> {
-    pub fn new(scorer: &Scorer, cols: u32, threshold: u32, scores: bool, firmware: &'s str) -> Self {
+    pub fn new(
+        scorer: &Scorer,
+        cols: u32,
+        threshold: u32,
+        scores: bool,
+        firmware: &'s str,
+    ) -> Self {
         let cfg: &Config = scorer.config();
         let (kernels, kernel_size) = match cfg.kernels {
             Kernels::Paper { bmax } => (b'P', bmax),
@@ -259,7 +273,11 @@ pub fn encode_header(h: &HeaderInfo, sink: &mut impl LineSink) {
     let fw = h.firmware.as_bytes();
     // Only characters that cannot break the line's syntax.
     for &b in fw.iter().take(MAX_FW) {
-        l.byte(if b.is_ascii_graphic() && b != b',' && b != b'*' { b } else { b'?' });
+        l.byte(if b.is_ascii_graphic() && b != b',' && b != b'*' {
+            b
+        } else {
+            b'?'
+        });
     }
     l.field(b"j=");
     l.u64(h.j1 as u64);
@@ -369,10 +387,22 @@ pub struct EndInfo {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Line<'s> {
     Header(HeaderInfo<'s>),
-    Row { summary: RowSummary, listed: u32 },
-    Defect { row: u32, col: u32, mag: u32, flags: u8 },
+    Row {
+        summary: RowSummary,
+        listed: u32,
+    },
+    Defect {
+        row: u32,
+        col: u32,
+        mag: u32,
+        flags: u8,
+    },
     /// Scores of `col0..col0 + chars.len() / 6`; decode with [`decode_score`].
-    Scores { row: u32, col0: u32, chars: &'s [u8] },
+    Scores {
+        row: u32,
+        col0: u32,
+        chars: &'s [u8],
+    },
     End(EndInfo),
 }
 
@@ -425,7 +455,10 @@ fn kv<'s>(field: Option<&'s [u8]>, key: &[u8]) -> Option<&'s [u8]> {
 pub fn parse(line: &[u8]) -> Result<Line<'_>, ParseError> {
     let line = line.strip_suffix(b"\n").unwrap_or(line);
     let line = line.strip_suffix(b"\r").unwrap_or(line);
-    let star = line.iter().rposition(|&b| b == b'*').ok_or(ParseError::NoChecksum)?;
+    let star = line
+        .iter()
+        .rposition(|&b| b == b'*')
+        .ok_or(ParseError::NoChecksum)?;
     let (body, tail) = line.split_at(star);
     let hex = tail.get(1..).ok_or(ParseError::NoChecksum)?;
     if hex.len() != 4 {
@@ -454,7 +487,9 @@ pub fn parse(line: &[u8]) -> Result<Line<'_>, ParseError> {
             let x = j.iter().position(|&b| b == b'x').ok_or(f)?;
             let (a, b) = j.split_at(x);
             let j1 = parse_u32(a).and_then(|v| u8::try_from(v).ok()).ok_or(f)?;
-            let j2 = parse_u32(b.get(1..).ok_or(f)?).and_then(|v| u8::try_from(v).ok()).ok_or(f)?;
+            let j2 = parse_u32(b.get(1..).ok_or(f)?)
+                .and_then(|v| u8::try_from(v).ok())
+                .ok_or(f)?;
             let cols = parse_u32(kv(it.next(), b"cols").ok_or(f)?).ok_or(f)?;
             let kernels = match kv(it.next(), b"k").ok_or(f)? {
                 b"P" => b'P',
@@ -509,7 +544,15 @@ pub fn parse(line: &[u8]) -> Result<Line<'_>, ParseError> {
             }
             let [row, max, _, defects, listed, no_data, dark, saturated] = v;
             Ok(Line::Row {
-                summary: RowSummary { row, max, argmax, defects, no_data, dark, saturated },
+                summary: RowSummary {
+                    row,
+                    max,
+                    argmax,
+                    defects,
+                    no_data,
+                    dark,
+                    saturated,
+                },
                 listed,
             })
         }
@@ -521,7 +564,12 @@ pub fn parse(line: &[u8]) -> Result<Line<'_>, ParseError> {
             if it.next().is_some() || v[3] > 0xFF {
                 return Err(f);
             }
-            Ok(Line::Defect { row: v[0], col: v[1], mag: v[2], flags: v[3] as u8 })
+            Ok(Line::Defect {
+                row: v[0],
+                col: v[1],
+                mag: v[2],
+                flags: v[3] as u8,
+            })
         }
         b"S" => {
             let row = parse_u32(it.next().ok_or(f)?).ok_or(f)?;
@@ -543,9 +591,32 @@ pub fn parse(line: &[u8]) -> Result<Line<'_>, ParseError> {
             if it.next().is_some() {
                 return Err(f);
             }
-            let [rows, frames, missing, dark, saturated, defects, rejected, extra, bad, clipped, dropped] = vals;
+            let [
+                rows,
+                frames,
+                missing,
+                dark,
+                saturated,
+                defects,
+                rejected,
+                extra,
+                bad,
+                clipped,
+                dropped,
+            ] = vals;
             Ok(Line::End(EndInfo {
-                totals: Totals { rows, frames, missing, dark, saturated, defects, rejected, extra, bad, clipped },
+                totals: Totals {
+                    rows,
+                    frames,
+                    missing,
+                    dark,
+                    saturated,
+                    defects,
+                    rejected,
+                    extra,
+                    bad,
+                    clipped,
+                },
                 dropped,
             }))
         }

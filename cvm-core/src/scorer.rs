@@ -120,7 +120,14 @@ impl Scorer {
                 let b2 = norms(&dequantise(&r2, p2), j2);
                 (r1, p1, r2, p2, b1, b2)
             }
-            Kind::Square { .. } => ([[0; MAX_J]; MAX_J], 0, [[0; MAX_J]; MAX_J], 0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)),
+            Kind::Square { .. } => (
+                [[0; MAX_J]; MAX_J],
+                0,
+                [[0; MAX_J]; MAX_J],
+                0,
+                (0.0, 0.0, 0.0),
+                (0.0, 0.0, 0.0),
+            ),
         };
 
         // Largest input format whose accumulators provably stay in range.
@@ -156,9 +163,14 @@ impl Scorer {
         let mut e_shift: u32 = 0;
         if let Kind::Paper = kind {
             let scale = pow2(f);
-            let xfro = if cfg.normalise { scale + n } else { sqrt(n) * (65535.0 * scale + 1.0) };
+            let xfro = if cfg.normalise {
+                scale + n
+            } else {
+                sqrt(n) * (65535.0 * scale + 1.0)
+            };
             loop {
-                let e = (rb1.1 * rb2.1 * xfro + sqrt(n) * 0.5 * rb1.2) * pow2(-(e_shift as i32)) + sqrt(n) * 0.5;
+                let e = (rb1.1 * rb2.1 * xfro + sqrt(n) * 0.5 * rb1.2) * pow2(-(e_shift as i32))
+                    + sqrt(n) * 0.5;
                 if e < LIMIT_E {
                     break;
                 }
@@ -322,7 +334,12 @@ impl Scorer {
             }
         }
         // Column pass: E[i][k] = Σ_{l>=i} R1[i][l] T[l][k], accumulated row-wise.
-        for (i, (erow, r1row)) in e.chunks_exact_mut(j2).zip(self.r1.iter()).take(j1).enumerate() {
+        for (i, (erow, r1row)) in e
+            .chunks_exact_mut(j2)
+            .zip(self.r1.iter())
+            .take(j1)
+            .enumerate()
+        {
             let mut acc = [0i64; MAX_J];
             for (&c, trow) in r1row.iter().zip(t.chunks_exact(j2)).take(j1).skip(i) {
                 for (a, &tv) in acc.iter_mut().zip(trow) {
@@ -385,7 +402,8 @@ impl Scorer {
                 let (ilo, ihi) = crate::tables::box_range(i, h, j1);
                 for k in 0..j2 {
                     let (klo, khi) = crate::tables::box_range(k, h, j2);
-                    let s = at(ihi + 1, khi + 1) - at(ilo, khi + 1) - at(ihi + 1, klo) + at(ilo, klo);
+                    let s =
+                        at(ihi + 1, khi + 1) - at(ilo, khi + 1) - at(ihi + 1, klo) + at(ilo, klo);
                     acc += (s * s) as u64;
                 }
             }
@@ -399,7 +417,11 @@ impl Scorer {
         let shift = 2 * (self.frac - self.e_shift as i32) - self.q;
         let v = if shift > 0 {
             let s = shift as u32;
-            if s >= 64 { 0 } else { (acc >> s) + ((acc >> (s - 1)) & 1) }
+            if s >= 64 {
+                0
+            } else {
+                (acc >> s) + ((acc >> (s - 1)) & 1)
+            }
         } else {
             let s = (-shift) as u32;
             if s >= 64 || acc.leading_zeros() < s {
@@ -408,7 +430,11 @@ impl Scorer {
                 acc << s
             }
         };
-        if v > u32::MAX as u64 { u32::MAX } else { v as u32 }
+        if v > u32::MAX as u64 {
+            u32::MAX
+        } else {
+            v as u32
+        }
     }
 }
 
@@ -441,5 +467,9 @@ const fn dequantise(r: &[[i32; MAX_J]; MAX_J], p: u32) -> crate::tables::Mat {
 pub fn magnitude(g0: u32, g1: u32) -> u32 {
     let s = (g0 as u64 * g0 as u64).saturating_add(g1 as u64 * g1 as u64);
     let m = s.isqrt();
-    if m > u32::MAX as u64 { u32::MAX } else { m as u32 }
+    if m > u32::MAX as u64 {
+        u32::MAX
+    } else {
+        m as u32
+    }
 }

@@ -128,8 +128,7 @@ pub const fn row_words(cols: usize, j1: usize, j2: usize) -> usize {
 /// Bytes of engine state for `cols` columns: the two row buffers plus the
 /// per-column flags and two rows of results.
 pub const fn window_bytes(cols: usize, j1: usize, j2: usize) -> usize {
-    2 * row_words(cols, j1, j2) * 4
-        + cols * (2 + 2 * core::mem::size_of::<PositionScore>())
+    2 * row_words(cols, j1, j2) * 4 + cols * (2 + 2 * core::mem::size_of::<PositionScore>())
 }
 
 /// The streaming engine, for at most `MAX_COLS` columns.
@@ -201,7 +200,12 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
     }
 
     /// Scores the frame of `pos`; finished rows go to `out`.
-    pub fn push(&mut self, pos: Position, frame: &[u16], out: &mut impl FnMut(&RowView)) -> PushOutcome {
+    pub fn push(
+        &mut self,
+        pos: Position,
+        frame: &[u16],
+        out: &mut impl FnMut(&RowView),
+    ) -> PushOutcome {
         self.place(pos, Some(frame), out)
     }
 
@@ -252,7 +256,12 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
         self.totals = Totals::default();
     }
 
-    fn place(&mut self, pos: Position, frame: Option<&[u16]>, out: &mut impl FnMut(&RowView)) -> PushOutcome {
+    fn place(
+        &mut self,
+        pos: Position,
+        frame: Option<&[u16]>,
+        out: &mut impl FnMut(&RowView),
+    ) -> PushOutcome {
         let col = pos.col as usize;
         if col >= self.cols {
             self.totals.extra += 1;
@@ -362,7 +371,10 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
             *m = own;
         }
         if let Some(s) = self.cur.get_mut(c) {
-            *s = PositionScore { flags: own, ..PositionScore::default() };
+            *s = PositionScore {
+                flags: own,
+                ..PositionScore::default()
+            };
         }
 
         // Horizontal component of (r, c-1), now that its right neighbour is settled.
@@ -379,7 +391,11 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
         if !ok(&self.meta[b], c) {
             return;
         }
-        let left = if c >= 1 && ok(&self.meta[b], c - 1) { c - 1 } else { c };
+        let left = if c >= 1 && ok(&self.meta[b], c - 1) {
+            c - 1
+        } else {
+            c
+        };
         let right = match right {
             Some(rc) if ok(&self.meta[b], rc) => rc,
             _ => c,
@@ -387,7 +403,8 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
         let g0 = if left == right {
             0
         } else {
-            self.scorer.distance(self.slot(b, left), self.slot(b, right))
+            self.scorer
+                .distance(self.slot(b, left), self.slot(b, right))
         };
         if let Some(s) = self.cur.get_mut(c) {
             s.g0 = g0;
@@ -415,10 +432,16 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
 
     /// Finalises magnitudes and decisions of the previous row and emits it.
     fn emit_prev(&mut self, row: u32, out: &mut impl FnMut(&RowView)) {
-        let mut sum = RowSummary { row, ..RowSummary::default() };
+        let mut sum = RowSummary {
+            row,
+            ..RowSummary::default()
+        };
         for (c, s) in self.prev.iter_mut().take(self.cols).enumerate() {
             if s.flags & flags::NO_DATA != 0 {
-                *s = PositionScore { flags: s.flags, ..PositionScore::default() };
+                *s = PositionScore {
+                    flags: s.flags,
+                    ..PositionScore::default()
+                };
                 sum.no_data += 1;
                 continue;
             }

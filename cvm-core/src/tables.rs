@@ -212,7 +212,13 @@ pub const fn quantise(r: &Mat, n: usize) -> ([[i32; MAX_J]; MAX_J], u32) {
 }
 
 /// Sum of the kernel weights, `Σ_b w(b)`, for the score range.
-pub const fn weight_sum(kernels: &Kernels, w1: &[f64; MAX_J], n1: usize, w2: &[f64; MAX_J], n2: usize) -> f64 {
+pub const fn weight_sum(
+    kernels: &Kernels,
+    w1: &[f64; MAX_J],
+    n1: usize,
+    w2: &[f64; MAX_J],
+    n2: usize,
+) -> f64 {
     match kernels {
         Kernels::Square { kmax } => *kmax as f64 + 1.0,
         Kernels::Paper { .. } => {

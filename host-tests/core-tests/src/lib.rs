@@ -11,20 +11,51 @@ pub fn rng(seed: u64) -> ChaCha8Rng {
 }
 
 /// The geometries every property is checked on.
-pub const GEOMETRIES: &[(usize, usize)] =
-    &[(1, 1), (1, 5), (2, 2), (2, 7), (7, 2), (3, 3), (4, 6), (9, 9), (9, 15), (15, 15), (16, 16)];
+pub const GEOMETRIES: &[(usize, usize)] = &[
+    (1, 1),
+    (1, 5),
+    (2, 2),
+    (2, 7),
+    (7, 2),
+    (3, 3),
+    (4, 6),
+    (9, 9),
+    (9, 15),
+    (15, 15),
+    (16, 16),
+];
 
 /// Every scoring variant the CLI offers.
 pub fn variants(j1: usize, j2: usize) -> Vec<ScoringArgs> {
     let mut v = Vec::new();
     for raw in [false, true] {
         for w in [WeightArg::Uniform, WeightArg::Unit] {
-            v.push(ScoringArgs { kernels: KernelArg::Paper, weights: Some(w), bmax: None, raw });
+            v.push(ScoringArgs {
+                kernels: KernelArg::Paper,
+                weights: Some(w),
+                bmax: None,
+                raw,
+            });
         }
-        v.push(ScoringArgs { kernels: KernelArg::Paper, weights: None, bmax: Some(3), raw });
-        v.push(ScoringArgs { kernels: KernelArg::Square, weights: None, bmax: None, raw });
+        v.push(ScoringArgs {
+            kernels: KernelArg::Paper,
+            weights: None,
+            bmax: Some(3),
+            raw,
+        });
+        v.push(ScoringArgs {
+            kernels: KernelArg::Square,
+            weights: None,
+            bmax: None,
+            raw,
+        });
         if j1.max(j2) > 2 {
-            v.push(ScoringArgs { kernels: KernelArg::Square, weights: None, bmax: Some(1), raw });
+            v.push(ScoringArgs {
+                kernels: KernelArg::Square,
+                weights: None,
+                bmax: Some(1),
+                raw,
+            });
         }
     }
     v
@@ -36,16 +67,28 @@ pub fn random_map(rng: &mut impl Rng, cells: usize, j2: usize) -> Vec<u16> {
     let j1 = cells / j2;
     match rng.random_range(0..10) {
         0 => vec![0; cells],
-        1 => (0..cells).map(|_| if rng.random_bool(0.1) { rng.random() } else { 0 }).collect(),
+        1 => (0..cells)
+            .map(|_| {
+                if rng.random_bool(0.1) {
+                    rng.random()
+                } else {
+                    0
+                }
+            })
+            .collect(),
         2 => (0..cells).map(|_| rng.random()).collect(),
         _ => {
-            let (c1, c2) = (rng.random_range(0.0..j1 as f64), rng.random_range(0.0..j2 as f64));
+            let (c1, c2) = (
+                rng.random_range(0.0..j1 as f64),
+                rng.random_range(0.0..j2 as f64),
+            );
             let s = rng.random_range(0.3..3.0);
             let peak = rng.random_range(100.0..60000.0);
             (0..cells)
                 .map(|i| {
                     let (a, b) = ((i / j2) as f64 - c1, (i % j2) as f64 - c2);
-                    let v = peak * (-(a * a + b * b) / (2.0 * s * s)).exp() + rng.random_range(0.0..20.0);
+                    let v = peak * (-(a * a + b * b) / (2.0 * s * s)).exp()
+                        + rng.random_range(0.0..20.0);
                     v.min(65535.0) as u16
                 })
                 .collect()
@@ -80,7 +123,8 @@ pub fn run_engine(
 ) -> (Vec<(RowSummary, Vec<PositionScore>)>, Totals) {
     let words = cvm_core::stream::row_words(cols, scorer.cells(), 1);
     let (mut a, mut b) = (vec![0i32; words], vec![0i32; words]);
-    let mut engine = Box::new(Engine::<256>::new(scorer, cols as u32, threshold, &mut a, &mut b).unwrap());
+    let mut engine =
+        Box::new(Engine::<256>::new(scorer, cols as u32, threshold, &mut a, &mut b).unwrap());
     let mut rows = Vec::new();
     let mut out = |v: &cvm_core::RowView| rows.push((v.summary, v.scores.to_vec()));
     for (pos, f) in frames {

@@ -6,10 +6,18 @@ use cvm_core_tests::{random_scan, rng, run_engine, variants};
 use dmap::fixed::score_scan;
 use proptest::prelude::*;
 
-fn clean_frames(rows: usize, cols: usize, n: usize, data: &[u16]) -> Vec<(Position, Option<Vec<u16>>)> {
+fn clean_frames(
+    rows: usize,
+    cols: usize,
+    n: usize,
+    data: &[u16],
+) -> Vec<(Position, Option<Vec<u16>>)> {
     (0..rows * cols)
         .map(|i| {
-            let pos = Position { row: (i / cols) as u32, col: (i % cols) as u32 };
+            let pos = Position {
+                row: (i / cols) as u32,
+                col: (i % cols) as u32,
+            };
             (pos, Some(data[i * n..(i + 1) * n].to_vec()))
         })
         .collect()
@@ -21,12 +29,20 @@ fn flatten(rows: &[(cvm_core::RowSummary, Vec<PositionScore>)]) -> Vec<PositionS
 
 /// Batch scoring with positions missing: a missing neighbour is replaced by
 /// the map itself (the border rule), written directly from Eq. 1.
-fn batch_with_gaps(scorer: &Scorer, rows: usize, cols: usize, data: &[u16], present: &[bool]) -> Vec<PositionScore> {
+fn batch_with_gaps(
+    scorer: &Scorer,
+    rows: usize,
+    cols: usize,
+    data: &[u16],
+    present: &[bool],
+) -> Vec<PositionScore> {
     let n = scorer.cells();
     let mut st = vec![0i32; rows * cols * n];
     let mut fl = vec![0u8; rows * cols];
     for i in 0..rows * cols {
-        fl[i] = scorer.prepare(&data[i * n..(i + 1) * n], &mut st[i * n..(i + 1) * n]).unwrap();
+        fl[i] = scorer
+            .prepare(&data[i * n..(i + 1) * n], &mut st[i * n..(i + 1) * n])
+            .unwrap();
     }
     let s = |i: usize| &st[i * n..(i + 1) * n];
     let at = |r: isize, c: isize| -> Option<usize> {
@@ -39,16 +55,32 @@ fn batch_with_gaps(scorer: &Scorer, rows: usize, cols: usize, data: &[u16], pres
     (0..rows * cols)
         .map(|i| {
             if !present[i] {
-                return PositionScore { flags: flags::NO_DATA, ..Default::default() };
+                return PositionScore {
+                    flags: flags::NO_DATA,
+                    ..Default::default()
+                };
             }
             let (r, c) = ((i / cols) as isize, (i % cols) as isize);
             let l = at(r, c - 1).unwrap_or(i);
             let rr = at(r, c + 1).unwrap_or(i);
             let u = at(r - 1, c).unwrap_or(i);
             let d = at(r + 1, c).unwrap_or(i);
-            let g0 = if l == rr { 0 } else { scorer.distance(s(l), s(rr)) };
-            let g1 = if u == d { 0 } else { scorer.distance(s(u), s(d)) };
-            PositionScore { g0, g1, mag: cvm_core::magnitude(g0, g1), flags: fl[i] }
+            let g0 = if l == rr {
+                0
+            } else {
+                scorer.distance(s(l), s(rr))
+            };
+            let g1 = if u == d {
+                0
+            } else {
+                scorer.distance(s(u), s(d))
+            };
+            PositionScore {
+                g0,
+                g1,
+                mag: cvm_core::magnitude(g0, g1),
+                flags: fl[i],
+            }
         })
         .collect()
 }
@@ -126,7 +158,9 @@ fn repeats_and_extras_are_counted_not_placed() {
     let n = j1 * j2;
     let mut r = rng(11);
     let data = random_scan(&mut r, rows, cols, j1, j2);
-    let scorer = dmap::options::ScoringArgs::default().scorer(j1, j2).unwrap();
+    let scorer = dmap::options::ScoringArgs::default()
+        .scorer(j1, j2)
+        .unwrap();
     let clean = clean_frames(rows, cols, n, &data);
     let (want, _) = run_engine(&scorer, cols, 1000, &clean);
 
@@ -140,12 +174,24 @@ fn repeats_and_extras_are_counted_not_placed() {
         if i == 2 * cols + 2 {
             // A stale frame from the row before, then one beyond the last column.
             damaged.push((Position { row: 1, col: 0 }, Some(junk.clone())));
-            damaged.push((Position { row: 2, col: cols as u32 }, Some(junk.clone())));
+            damaged.push((
+                Position {
+                    row: 2,
+                    col: cols as u32,
+                },
+                Some(junk.clone()),
+            ));
         }
         if i == 4 * cols - 1 {
             // Row 3 repeated in full after it ended.
             for c in 0..cols {
-                damaged.push((Position { row: 3, col: c as u32 }, Some(junk.clone())));
+                damaged.push((
+                    Position {
+                        row: 3,
+                        col: c as u32,
+                    },
+                    Some(junk.clone()),
+                ));
             }
         }
     }
@@ -161,13 +207,21 @@ fn repeats_and_extras_are_counted_not_placed() {
 #[test]
 fn bad_frames_and_wild_positions() {
     let (j1, j2) = (3, 3);
-    let scorer = dmap::options::ScoringArgs::default().scorer(j1, j2).unwrap();
+    let scorer = dmap::options::ScoringArgs::default()
+        .scorer(j1, j2)
+        .unwrap();
     let good = vec![10u16; 9];
     let frames = vec![
         (Position { row: 0, col: 0 }, Some(good.clone())),
         (Position { row: 0, col: 1 }, Some(vec![1u16; 5])),
         (Position { row: 0, col: 2 }, Some(good.clone())),
-        (Position { row: u32::MAX, col: 0 }, Some(good.clone())),
+        (
+            Position {
+                row: u32::MAX,
+                col: 0,
+            },
+            Some(good.clone()),
+        ),
     ];
     let (out, totals) = run_engine(&scorer, 3, 1, &frames);
     assert_eq!(out.len(), 1);
@@ -187,7 +241,9 @@ fn consecutive_scans_are_independent() {
     let mut r = rng(5);
     let d1 = random_scan(&mut r, rows, cols, j1, j2);
     let d2 = random_scan(&mut r, rows, cols, j1, j2);
-    let scorer = dmap::options::ScoringArgs::default().scorer(j1, j2).unwrap();
+    let scorer = dmap::options::ScoringArgs::default()
+        .scorer(j1, j2)
+        .unwrap();
     let words = cvm_core::stream::row_words(cols, n, 1);
     let (mut a, mut b) = (vec![0i32; words], vec![0i32; words]);
     let mut engine = cvm_core::Engine::<8>::new(&scorer, cols as u32, 1, &mut a, &mut b).unwrap();
@@ -208,5 +264,8 @@ fn window_size_table() {
     // Two rows of J1*J2 i32 words per column plus per-column bookkeeping.
     assert_eq!(cvm_core::stream::row_words(300, 15, 15), 300 * 225);
     let w = cvm_core::stream::window_bytes(300, 15, 15);
-    assert_eq!(w, 2 * 300 * 225 * 4 + 300 * (2 + 2 * std::mem::size_of::<PositionScore>()));
+    assert_eq!(
+        w,
+        2 * 300 * 225 * 4 + 300 * (2 + 2 * std::mem::size_of::<PositionScore>())
+    );
 }

@@ -28,7 +28,12 @@ fn fixed(scorer: &Scorer, a: &[u16], b: &[u16]) -> (f64, u32) {
 
 /// Checks a sample of pairs against the stated bound; returns a description
 /// of the first violation.
-fn check(scorer: &Scorer, reference: &CvmConfig, raw: bool, pairs: &[(Vec<u16>, Vec<u16>)]) -> Result<(), String> {
+fn check(
+    scorer: &Scorer,
+    reference: &CvmConfig,
+    raw: bool,
+    pairs: &[(Vec<u16>, Vec<u16>)],
+) -> Result<(), String> {
     let samples: Vec<(f64, f64, u32)> = pairs
         .iter()
         .map(|(a, b)| {
@@ -45,7 +50,9 @@ fn check(scorer: &Scorer, reference: &CvmConfig, raw: bool, pairs: &[(Vec<u16>, 
             return Err(format!("score clipped: exact {e}"));
         }
         if err > 1e-5 * max + step {
-            return Err(format!("exact {e} fixed {f}: error {err:.3e} > 1e-5 * {max:.3e} + {step:.1e}"));
+            return Err(format!(
+                "exact {e} fixed {f}: error {err:.3e} > 1e-5 * {max:.3e} + {step:.1e}"
+            ));
         }
         let rel_ok = if raw {
             e < 1e-3 * max || e < 1000.0 * step || err <= 1e-3 * e
@@ -53,7 +60,10 @@ fn check(scorer: &Scorer, reference: &CvmConfig, raw: bool, pairs: &[(Vec<u16>, 
             e < 1e-3 * max || err <= 1e-4 * e
         };
         if !rel_ok {
-            return Err(format!("exact {e} fixed {f}: relative error {:.3e}", err / e));
+            return Err(format!(
+                "exact {e} fixed {f}: relative error {:.3e}",
+                err / e
+            ));
         }
     }
     Ok(())
@@ -72,7 +82,11 @@ fn fixed_point_matches_f64_on_random_maps() {
             let pairs: Vec<_> = (0..count)
                 .map(|i| {
                     let a = random_map(&mut r, n, j2);
-                    let b = if i % 2 == 0 { perturb(&mut r, &a) } else { random_map(&mut r, n, j2) };
+                    let b = if i % 2 == 0 {
+                        perturb(&mut r, &a)
+                    } else {
+                        random_map(&mut r, n, j2)
+                    };
                     (a, b)
                 })
                 .collect();
@@ -81,7 +95,11 @@ fn fixed_point_matches_f64_on_random_maps() {
             }
         }
     }
-    assert!(failures.is_empty(), "outside the stated bound:\n{}", failures.join("\n"));
+    assert!(
+        failures.is_empty(),
+        "outside the stated bound:\n{}",
+        failures.join("\n")
+    );
 }
 
 /// The largest inputs at the largest geometry: all full scale, single hot
@@ -98,9 +116,21 @@ fn extreme_inputs_at_16x16_do_not_overflow() {
         m[hot] = full;
         maps.push(m);
     }
-    maps.push((0..n).map(|i| if (i / j2 + i % j2) % 2 == 0 { full } else { 0 }).collect());
-    maps.push((0..n).map(|i| if (i / j2 + i % j2) % 2 == 1 { full } else { 0 }).collect());
-    maps.push((0..n).map(|i| if (i / j2) % 2 == 0 { full } else { 0 }).collect());
+    maps.push(
+        (0..n)
+            .map(|i| if (i / j2 + i % j2) % 2 == 0 { full } else { 0 })
+            .collect(),
+    );
+    maps.push(
+        (0..n)
+            .map(|i| if (i / j2 + i % j2) % 2 == 1 { full } else { 0 })
+            .collect(),
+    );
+    maps.push(
+        (0..n)
+            .map(|i| if (i / j2) % 2 == 0 { full } else { 0 })
+            .collect(),
+    );
     maps.push((0..n).map(|i| if i % 2 == 0 { full } else { 0 }).collect());
     maps.push((0..n).map(|i| if i < n / 2 { full } else { 0 }).collect());
     let mut pairs = Vec::new();
@@ -123,10 +153,21 @@ fn extreme_inputs_at_16x16_do_not_overflow() {
 /// Hand-computed cases (design.md §3 conventions, 1-based in the comments).
 #[test]
 fn hand_computed_distances() {
-    let uniform = ScoringArgs { weights: Some(WeightArg::Uniform), ..ScoringArgs::default() };
-    let unit = ScoringArgs { weights: Some(WeightArg::Unit), ..ScoringArgs::default() };
-    let square = ScoringArgs { kernels: KernelArg::Square, ..ScoringArgs::default() };
-    let d = |args: &ScoringArgs, j1, j2, a: &[u16], b: &[u16]| fixed(&args.scorer(j1, j2).unwrap(), a, b).0;
+    let uniform = ScoringArgs {
+        weights: Some(WeightArg::Uniform),
+        ..ScoringArgs::default()
+    };
+    let unit = ScoringArgs {
+        weights: Some(WeightArg::Unit),
+        ..ScoringArgs::default()
+    };
+    let square = ScoringArgs {
+        kernels: KernelArg::Square,
+        ..ScoringArgs::default()
+    };
+    let d = |args: &ScoringArgs, j1, j2, a: &[u16], b: &[u16]| {
+        fixed(&args.scorer(j1, j2).unwrap(), a, b).0
+    };
 
     // 1x3, ã1 = (1,0,0), ã2 = (0,0,1). Boxes of size b=1 on the 3-cell axis:
     // j=1 -> [1,2], j=2 -> [1,3], j=3 -> [2,3]: A1 = (1,1,0), A2 = (0,1,1),
@@ -154,15 +195,24 @@ fn normalised_distance_is_scale_invariant() {
     for &(j1, j2) in GEOMETRIES {
         let scorer = ScoringArgs::default().scorer(j1, j2).unwrap();
         for _ in 0..20 {
-            let a: Vec<u16> = random_map(&mut r, j1 * j2, j2).iter().map(|v| v / 4).collect();
+            let a: Vec<u16> = random_map(&mut r, j1 * j2, j2)
+                .iter()
+                .map(|v| v / 4)
+                .collect();
             let b = random_map(&mut r, j1 * j2, j2);
             let a3: Vec<u16> = a.iter().map(|v| v * 3).collect();
             let (d1, _) = fixed(&scorer, &a, &b);
             let (d3, _) = fixed(&scorer, &a3, &b);
-            assert!((d1 - d3).abs() <= 1e-6 * d1.max(1e-3), "{j1}x{j2}: {d1} vs {d3}");
+            assert!(
+                (d1 - d3).abs() <= 1e-6 * d1.max(1e-3),
+                "{j1}x{j2}: {d1} vs {d3}"
+            );
             let dark = vec![0u16; j1 * j2];
             if a.iter().any(|&v| v > 0) {
-                assert!(fixed(&scorer, &dark, &a).1 > 0, "d(dark, lit) must be positive");
+                assert!(
+                    fixed(&scorer, &dark, &a).1 > 0,
+                    "d(dark, lit) must be positive"
+                );
             }
             assert_eq!(fixed(&scorer, &dark, &dark).1, 0);
         }

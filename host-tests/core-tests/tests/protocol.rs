@@ -2,8 +2,8 @@
 //! line length bounds.
 
 use cvm_core::protocol::{
-    self, HeaderInfo, Line, LineSink, MAX_LINE, ParseError, Priority, crc16, decode_score, encode_end,
-    encode_header, encode_row, encode_score,
+    self, HeaderInfo, Line, LineSink, MAX_LINE, ParseError, Priority, crc16, decode_score,
+    encode_end, encode_header, encode_row, encode_score,
 };
 use cvm_core::{PositionScore, RowSummary, RowView, Totals};
 use proptest::prelude::*;
@@ -55,7 +55,8 @@ fn header_round_trip() {
 }
 
 fn arb_score() -> impl Strategy<Value = PositionScore> {
-    (any::<u32>(), any::<u32>(), any::<u32>(), 0u8..16).prop_map(|(g0, g1, mag, flags)| PositionScore { g0, g1, mag, flags })
+    (any::<u32>(), any::<u32>(), any::<u32>(), 0u8..16)
+        .prop_map(|(g0, g1, mag, flags)| PositionScore { g0, g1, mag, flags })
 }
 
 proptest! {
@@ -156,14 +157,54 @@ fn worst_case_lines_fit() {
     h.threshold = u32::MAX;
     h.weights = "separable";
     encode_header(&h, &mut s);
-    let scores = vec![PositionScore { g0: u32::MAX, g1: u32::MAX, mag: u32::MAX, flags: 15 }; 64];
-    let summary = RowSummary { row: u32::MAX, max: u32::MAX, argmax: Some(u32::MAX), defects: u32::MAX, no_data: u32::MAX, dark: u32::MAX, saturated: u32::MAX };
-    encode_row(&RowView { summary, scores: &scores, threshold: 0 }, u16::MAX, true, &mut s);
-    let t = Totals { rows: u32::MAX, frames: u32::MAX, missing: u32::MAX, dark: u32::MAX, saturated: u32::MAX, defects: u32::MAX, rejected: u32::MAX, extra: u32::MAX, bad: u32::MAX, clipped: u32::MAX };
+    let scores = vec![
+        PositionScore {
+            g0: u32::MAX,
+            g1: u32::MAX,
+            mag: u32::MAX,
+            flags: 15
+        };
+        64
+    ];
+    let summary = RowSummary {
+        row: u32::MAX,
+        max: u32::MAX,
+        argmax: Some(u32::MAX),
+        defects: u32::MAX,
+        no_data: u32::MAX,
+        dark: u32::MAX,
+        saturated: u32::MAX,
+    };
+    encode_row(
+        &RowView {
+            summary,
+            scores: &scores,
+            threshold: 0,
+        },
+        u16::MAX,
+        true,
+        &mut s,
+    );
+    let t = Totals {
+        rows: u32::MAX,
+        frames: u32::MAX,
+        missing: u32::MAX,
+        dark: u32::MAX,
+        saturated: u32::MAX,
+        defects: u32::MAX,
+        rejected: u32::MAX,
+        extra: u32::MAX,
+        bad: u32::MAX,
+        clipped: u32::MAX,
+    };
     encode_end(&t, u32::MAX, &mut s);
     for (line, _) in &s.0 {
         assert!(line.len() <= MAX_LINE, "{} bytes", line.len());
-        assert!(protocol::parse(line).is_ok(), "{}", String::from_utf8_lossy(line));
+        assert!(
+            protocol::parse(line).is_ok(),
+            "{}",
+            String::from_utf8_lossy(line)
+        );
     }
     let longest = s.0.iter().map(|l| l.0.len()).max().unwrap();
     println!("longest line: {longest} bytes");

@@ -9,11 +9,21 @@ use cvm_core::{PositionScore, Scorer, flags, magnitude};
 /// order, `cells` samples per map), with the border rule of design.md §3.
 pub fn score_scan(scorer: &Scorer, rows: usize, cols: usize, data: &[u16]) -> Vec<PositionScore> {
     let n = scorer.cells();
-    assert_eq!(data.len(), rows * cols * n, "scan length does not match its shape");
+    assert_eq!(
+        data.len(),
+        rows * cols * n,
+        "scan length does not match its shape"
+    );
     let mut states = vec![0i32; rows * cols * n];
     let mut fl = vec![0u8; rows * cols];
-    for (i, (frame, state)) in data.chunks_exact(n).zip(states.chunks_exact_mut(n)).enumerate() {
-        fl[i] = scorer.prepare(frame, state).expect("frame length checked above");
+    for (i, (frame, state)) in data
+        .chunks_exact(n)
+        .zip(states.chunks_exact_mut(n))
+        .enumerate()
+    {
+        fl[i] = scorer
+            .prepare(frame, state)
+            .expect("frame length checked above");
     }
     let state = |r: usize, c: usize| &states[(r * cols + c) * n..(r * cols + c + 1) * n];
     let mut out = Vec::with_capacity(rows * cols);
@@ -22,14 +32,27 @@ pub fn score_scan(scorer: &Scorer, rows: usize, cols: usize, data: &[u16]) -> Ve
             let (l, rr) = (c.saturating_sub(1), (c + 1).min(cols - 1));
             let (u, d) = (r.saturating_sub(1), (r + 1).min(rows - 1));
             // A missing neighbour at the border is the map itself; d(a, a) = 0.
-            let g0 = if l == rr { 0 } else { scorer.distance(state(r, l), state(r, rr)) };
-            let g1 = if u == d { 0 } else { scorer.distance(state(u, c), state(d, c)) };
+            let g0 = if l == rr {
+                0
+            } else {
+                scorer.distance(state(r, l), state(r, rr))
+            };
+            let g1 = if u == d {
+                0
+            } else {
+                scorer.distance(state(u, c), state(d, c))
+            };
             let mag = magnitude(g0, g1);
             let mut f = fl[r * cols + c];
             if g0 == u32::MAX || g1 == u32::MAX || mag == u32::MAX {
                 f |= flags::CLIPPED;
             }
-            out.push(PositionScore { g0, g1, mag, flags: f });
+            out.push(PositionScore {
+                g0,
+                g1,
+                mag,
+                flags: f,
+            });
         }
     }
     out
@@ -43,7 +66,11 @@ pub fn to_image(scorer: &Scorer, scores: &[PositionScore]) -> Vec<f64> {
             if s.flags & flags::NO_DATA != 0 {
                 [f64::NAN; 3]
             } else {
-                [scorer.score_to_units(s.g0), scorer.score_to_units(s.g1), scorer.score_to_units(s.mag)]
+                [
+                    scorer.score_to_units(s.g0),
+                    scorer.score_to_units(s.g1),
+                    scorer.score_to_units(s.mag),
+                ]
             }
         })
         .collect()

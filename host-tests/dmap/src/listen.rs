@@ -14,7 +14,12 @@ use std::path::{Path, PathBuf};
 #[derive(Args, Clone, Debug)]
 pub struct ListenArgs {
     /// Read lines from FILE ("-" for standard input)
-    #[arg(long, value_name = "FILE", conflicts_with = "port", required_unless_present = "port")]
+    #[arg(
+        long,
+        value_name = "FILE",
+        conflicts_with = "port",
+        required_unless_present = "port"
+    )]
     pub input: Option<String>,
     /// Read lines from a serial port (e.g. /dev/ttyACM0, the ST-LINK virtual COM port)
     #[arg(long, value_name = "DEV")]
@@ -158,11 +163,17 @@ impl Decoder {
     }
 
     fn error(&mut self, what: impl Into<String>) {
-        self.errors.push(LineError { line: self.line_no, what: what.into() });
+        self.errors.push(LineError {
+            line: self.line_no,
+            what: what.into(),
+        });
     }
 
     fn problem(&mut self, what: impl Into<String>) {
-        let e = LineError { line: self.line_no, what: what.into() };
+        let e = LineError {
+            line: self.line_no,
+            what: what.into(),
+        };
         match &mut self.current {
             Some(s) => s.problems.push(e),
             None => self.errors.push(e),
@@ -178,7 +189,10 @@ impl Decoder {
             return;
         }
         if trimmed.len() > protocol::MAX_LINE {
-            self.error(format!("line of {} bytes is longer than any valid line", trimmed.len()));
+            self.error(format!(
+                "line of {} bytes is longer than any valid line",
+                trimmed.len()
+            ));
             return;
         }
         let line = match protocol::parse(trimmed) {
@@ -215,7 +229,11 @@ impl Decoder {
                 if h.version != protocol::VERSION {
                     s.problems.push(LineError {
                         line: self.line_no,
-                        what: format!("protocol version {} (this decoder reads {})", h.version, protocol::VERSION),
+                        what: format!(
+                            "protocol version {} (this decoder reads {})",
+                            h.version,
+                            protocol::VERSION
+                        ),
                     });
                 }
                 self.current = Some(s);
@@ -230,12 +248,22 @@ impl Decoder {
                 s.unlisted_defects += (summary.defects - listed.min(summary.defects)) as u64;
                 s.rows.insert(summary.row, summary);
             }
-            Line::Defect { row, col, mag, flags } => {
+            Line::Defect {
+                row,
+                col,
+                mag,
+                flags,
+            } => {
                 let Some(s) = self.current.as_mut() else {
                     return self.error("defect line outside a scan (header lost?)");
                 };
                 let score = s.units(mag);
-                s.defects.push(Defect { row, col, score, flags });
+                s.defects.push(Defect {
+                    row,
+                    col,
+                    score,
+                    flags,
+                });
             }
             Line::Scores { row, col0, chars } => {
                 let Some(s) = self.current.as_mut() else {
@@ -244,7 +272,8 @@ impl Decoder {
                 let cols = s.cols;
                 let n = chars.len() / protocol::SCORE_CHARS;
                 if col0 as usize + n > cols {
-                    return self.problem(format!("score line for row {row} runs past column {cols}"));
+                    return self
+                        .problem(format!("score line for row {row} runs past column {cols}"));
                 }
                 let line = s.scores.entry(row).or_insert_with(|| vec![None; cols]);
                 let mut dup = false;
@@ -254,7 +283,9 @@ impl Decoder {
                     *slot = protocol::decode_score(c);
                 }
                 if dup {
-                    self.problem(format!("scores of row {row} from column {col0} received twice"));
+                    self.problem(format!(
+                        "scores of row {row} from column {col0} received twice"
+                    ));
                 }
             }
             Line::End(e) => {
@@ -276,14 +307,22 @@ impl Decoder {
         if !missing.is_empty() {
             s.problems.push(LineError {
                 line: self.line_no,
-                what: format!("no row line for {} row(s): {}", missing.len(), ranges(&missing)),
+                what: format!(
+                    "no row line for {} row(s): {}",
+                    missing.len(),
+                    ranges(&missing)
+                ),
             });
         }
-        let listed: u64 = s.rows.values().map(|r| r.defects as u64).sum::<u64>() - s.unlisted_defects;
+        let listed: u64 =
+            s.rows.values().map(|r| r.defects as u64).sum::<u64>() - s.unlisted_defects;
         if listed != s.defects.len() as u64 {
             s.problems.push(LineError {
                 line: self.line_no,
-                what: format!("row lines list {listed} defect line(s), {} arrived", s.defects.len()),
+                what: format!(
+                    "row lines list {listed} defect line(s), {} arrived",
+                    s.defects.len()
+                ),
             });
         }
         if s.scores_enabled {
@@ -305,7 +344,10 @@ impl Decoder {
     /// Ends the stream: a scan without its end line is kept and reported.
     pub fn finish(&mut self) {
         if let Some(s) = self.current.take() {
-            self.errors.push(LineError { line: self.line_no, what: "stream ended before the scan's end line".into() });
+            self.errors.push(LineError {
+                line: self.line_no,
+                what: "stream ended before the scan's end line".into(),
+            });
             self.scans.push(s);
         }
     }
@@ -320,7 +362,11 @@ fn ranges(v: &[u32]) -> String {
         while j + 1 < v.len() && v[j + 1] == v[j] + 1 {
             j += 1;
         }
-        out.push(if i == j { v[i].to_string() } else { format!("{}-{}", v[i], v[j]) });
+        out.push(if i == j {
+            v[i].to_string()
+        } else {
+            format!("{}-{}", v[i], v[j])
+        });
         i = j + 1;
     }
     out.join(", ")
@@ -356,7 +402,10 @@ fn output_path(base: &Path, k: usize) -> PathBuf {
     if k == 0 {
         return base.to_path_buf();
     }
-    let stem = base.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+    let stem = base
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
     base.with_file_name(format!("{stem}_{}.npy", k + 1))
 }
 
@@ -379,13 +428,20 @@ pub fn summary_text(dec: &Decoder) -> String {
         let total: u64 = s.rows.values().map(|r| r.defects as u64).sum();
         let _ = writeln!(o, "  defects: {total} ({} listed)", s.defects.len());
         for d in s.defects.iter().take(20) {
-            let _ = writeln!(o, "    row {:4} col {:4} score {:.6}", d.row, d.col, d.score);
+            let _ = writeln!(
+                o,
+                "    row {:4} col {:4} score {:.6}",
+                d.row, d.col, d.score
+            );
         }
         if s.defects.len() > 20 {
             let _ = writeln!(o, "    ... {} more", s.defects.len() - 20);
         }
         if s.scores_enabled {
-            let _ = writeln!(o, "  scores: {with} positions with data, {without} without data");
+            let _ = writeln!(
+                o,
+                "  scores: {with} positions with data, {without} without data"
+            );
         }
         match &s.end {
             Some(e) => {
@@ -393,7 +449,17 @@ pub fn summary_text(dec: &Decoder) -> String {
                 let _ = writeln!(
                     o,
                     "  totals: rows {} frames {} missing {} dark {} saturated {} defects {} rejected {} extra {} bad {} clipped {} dropped {}",
-                    t.rows, t.frames, t.missing, t.dark, t.saturated, t.defects, t.rejected, t.extra, t.bad, t.clipped, e.dropped
+                    t.rows,
+                    t.frames,
+                    t.missing,
+                    t.dark,
+                    t.saturated,
+                    t.defects,
+                    t.rejected,
+                    t.extra,
+                    t.bad,
+                    t.clipped,
+                    e.dropped
                 );
             }
             None => {
@@ -457,7 +523,10 @@ pub fn run(args: &ListenArgs) -> Result<()> {
     };
     if let Some(out) = &args.output {
         if dec.scans.is_empty() {
-            bail!("no scan in the stream (no header line decoded); nothing written to {}", out.display());
+            bail!(
+                "no scan in the stream (no header line decoded); nothing written to {}",
+                out.display()
+            );
         }
         for (k, s) in dec.scans.iter().enumerate() {
             write_gradient(&output_path(out, k), s.n_rows(), s.cols, &s.image())?;

@@ -39,7 +39,12 @@ pub struct ScoringArgs {
 
 impl Default for ScoringArgs {
     fn default() -> Self {
-        ScoringArgs { kernels: KernelArg::Paper, weights: None, bmax: None, raw: false }
+        ScoringArgs {
+            kernels: KernelArg::Paper,
+            weights: None,
+            bmax: None,
+            raw: false,
+        }
     }
 }
 
@@ -61,7 +66,9 @@ impl ScoringArgs {
                 let limit = j1.max(j2) - 1;
                 if let Some(k) = self.bmax {
                     if k > limit {
-                        bail!("--bmax {k} is too large for square kernels on {j1}x{j2} maps (at most {limit})");
+                        bail!(
+                            "--bmax {k} is too large for square kernels on {j1}x{j2} maps (at most {limit})"
+                        );
                     }
                 }
             }
@@ -75,7 +82,9 @@ impl ScoringArgs {
         let geometry = cvm_core::Geometry::new(j1 as u8, j2 as u8)
             .map_err(|e| anyhow::anyhow!("geometry {j1}x{j2}: {e:?}"))?;
         let kernels = match self.kernels {
-            KernelArg::Paper => cvm_core::Kernels::Paper { bmax: self.bmax.unwrap_or(0).min(16) as u8 },
+            KernelArg::Paper => cvm_core::Kernels::Paper {
+                bmax: self.bmax.unwrap_or(0).min(16) as u8,
+            },
             KernelArg::Square => match self.bmax {
                 Some(k) => cvm_core::Kernels::Square { kmax: k as u8 },
                 None => cvm_core::Kernels::square_default(geometry),
@@ -85,13 +94,20 @@ impl ScoringArgs {
             (KernelArg::Square, _) | (_, Some(WeightArg::Unit)) => cvm_core::Weights::Unit,
             _ => cvm_core::Weights::Uniform,
         };
-        Ok(cvm_core::Config { geometry, kernels, weights, normalise: !self.raw, full_scale: u16::MAX })
+        Ok(cvm_core::Config {
+            geometry,
+            kernels,
+            weights,
+            normalise: !self.raw,
+            full_scale: u16::MAX,
+        })
     }
 
     /// The fixed-point scorer, with a readable error if the core refuses it.
     pub fn scorer(&self, j1: usize, j2: usize) -> Result<cvm_core::Scorer> {
         let cfg = self.core_config(j1, j2)?;
-        cvm_core::Scorer::new(&cfg).map_err(|e| anyhow::anyhow!("fixed-point scorer refused the configuration: {e:?}"))
+        cvm_core::Scorer::new(&cfg)
+            .map_err(|e| anyhow::anyhow!("fixed-point scorer refused the configuration: {e:?}"))
     }
 
     /// The f64 reference configuration for `j1 x j2` maps.

@@ -44,14 +44,21 @@ pub struct OutputArgs {
 
 impl Default for OutputArgs {
     fn default() -> Self {
-        OutputArgs { threshold: DEFAULT_THRESHOLD, scores: false, max_defect_lines: 16 }
+        OutputArgs {
+            threshold: DEFAULT_THRESHOLD,
+            scores: false,
+            max_defect_lines: 16,
+        }
     }
 }
 
 impl OutputArgs {
     pub fn settings(&self, scorer: &Scorer, cols: usize) -> Result<Settings> {
         if !(self.threshold >= 0.0) {
-            bail!("--threshold must be a non-negative number, got {}", self.threshold);
+            bail!(
+                "--threshold must be a non-negative number, got {}",
+                self.threshold
+            );
         }
         if cols == 0 || cols > MAX_COLS {
             bail!("scan has {cols} columns; the pipeline supports 1..={MAX_COLS}");
@@ -77,11 +84,19 @@ impl LineSink for VecSink {
 }
 
 /// Runs the pipeline over a whole scan in raster order and returns its lines.
-pub fn stream_scan(scorer: &Scorer, settings: Settings, rows: usize, data: &[u16]) -> Result<Vec<u8>> {
+pub fn stream_scan(
+    scorer: &Scorer,
+    settings: Settings,
+    rows: usize,
+    data: &[u16],
+) -> Result<Vec<u8>> {
     let n = scorer.cells();
     let cols = settings.cols as usize;
     if data.len() != rows * cols * n {
-        bail!("scan data has {} samples, expected {rows}x{cols}x{n}", data.len());
+        bail!(
+            "scan data has {} samples, expected {rows}x{cols}x{n}",
+            data.len()
+        );
     }
     let words = cvm_core::stream::row_words(cols, n, 1);
     let (mut a, mut b) = (vec![0i32; words], vec![0i32; words]);
@@ -92,7 +107,10 @@ pub fn stream_scan(scorer: &Scorer, settings: Settings, rows: usize, data: &[u16
     let mut sink = VecSink::default();
     pipeline.begin(&mut sink);
     for (i, frame) in data.chunks_exact(n).enumerate() {
-        let pos = Position { row: (i / cols) as u32, col: (i % cols) as u32 };
+        let pos = Position {
+            row: (i / cols) as u32,
+            col: (i % cols) as u32,
+        };
         pipeline.push(pos, frame, &mut sink);
     }
     pipeline.finish(0, &mut sink);
@@ -104,7 +122,9 @@ pub fn run(args: &StreamArgs) -> Result<()> {
     let (j1, j2) = (scan.geometry.j1(), scan.geometry.j2());
     let scorer = args.scoring.scorer(j1, j2)?;
     let settings = args.output.settings(&scorer, scan.cols)?;
-    let data = scan.to_u16().with_context(|| format!("{}", args.scan.display()))?;
+    let data = scan
+        .to_u16()
+        .with_context(|| format!("{}", args.scan.display()))?;
     let out = stream_scan(&scorer, settings, scan.rows, &data)?;
     let mut stdout = std::io::stdout().lock();
     stdout.write_all(&out).context("writing to stdout")?;

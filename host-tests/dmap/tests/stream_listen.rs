@@ -16,7 +16,10 @@ fn scan(r: &mut impl Rng, rows: usize, cols: usize, n: usize) -> Vec<u16> {
         let m: Vec<u16> = match r.random_range(0..12) {
             0 => vec![0; n],
             1 => (0..n).map(|_| r.random()).collect(),
-            _ => prev.iter().map(|&v| (v as f64 * r.random_range(0.8..1.2)) as u16).collect(),
+            _ => prev
+                .iter()
+                .map(|&v| (v as f64 * r.random_range(0.8..1.2)) as u16)
+                .collect(),
         };
         out.extend_from_slice(&m);
         prev = m;
@@ -38,30 +41,55 @@ fn magnitudes(img: &[f64]) -> Vec<f64> {
 }
 
 fn same(a: &[f64], b: &[f64]) -> bool {
-    a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x == y || (x.is_nan() && y.is_nan()))
+    a.len() == b.len()
+        && a.iter()
+            .zip(b)
+            .all(|(x, y)| x == y || (x.is_nan() && y.is_nan()))
 }
 
 /// Every position's magnitude survives encoding and decoding exactly.
 #[test]
 fn stream_then_listen_reproduces_cvm_fixed() {
     let mut r = ChaCha8Rng::seed_from_u64(3);
-    for &(rows, cols, j1, j2) in &[(1, 1, 1, 1), (1, 40, 9, 9), (40, 1, 3, 3), (2, 2, 2, 2), (7, 33, 15, 15), (9, 70, 9, 15)] {
+    for &(rows, cols, j1, j2) in &[
+        (1, 1, 1, 1),
+        (1, 40, 9, 9),
+        (40, 1, 3, 3),
+        (2, 2, 2, 2),
+        (7, 33, 15, 15),
+        (9, 70, 9, 15),
+    ] {
         for args in [
             ScoringArgs::default(),
-            ScoringArgs { weights: Some(WeightArg::Unit), raw: true, ..ScoringArgs::default() },
-            ScoringArgs { kernels: KernelArg::Square, ..ScoringArgs::default() },
+            ScoringArgs {
+                weights: Some(WeightArg::Unit),
+                raw: true,
+                ..ScoringArgs::default()
+            },
+            ScoringArgs {
+                kernels: KernelArg::Square,
+                ..ScoringArgs::default()
+            },
         ] {
             let data = scan(&mut r, rows, cols, j1 * j2);
             let scorer = args.scorer(j1, j2).unwrap();
-            let out = OutputArgs { threshold: 0.05, scores: true, max_defect_lines: 1000 };
-            let bytes = stream_scan(&scorer, out.settings(&scorer, cols).unwrap(), rows, &data).unwrap();
+            let out = OutputArgs {
+                threshold: 0.05,
+                scores: true,
+                max_defect_lines: 1000,
+            };
+            let bytes =
+                stream_scan(&scorer, out.settings(&scorer, cols).unwrap(), rows, &data).unwrap();
             let dec = decode(&bytes);
             assert!(dec.errors.is_empty(), "{:?}", dec.errors);
             assert_eq!(dec.scans.len(), 1);
             let s = &dec.scans[0];
             assert!(s.problems.is_empty(), "{:?}", s.problems);
             let want = to_image(&scorer, &score_scan(&scorer, rows, cols, &data));
-            assert!(same(&magnitudes(&s.image()), &magnitudes(&want)), "{rows}x{cols} {j1}x{j2} {args:?}");
+            assert!(
+                same(&magnitudes(&s.image()), &magnitudes(&want)),
+                "{rows}x{cols} {j1}x{j2} {args:?}"
+            );
             // Defects decoded are exactly the positions at or above the threshold.
             let thr = scorer.threshold_from_units(0.05);
             let batch = score_scan(&scorer, rows, cols, &data);
@@ -85,13 +113,20 @@ fn sample_stream() -> (Scorer, Vec<u8>, usize, usize) {
     let (rows, cols, j1, j2) = (12, 50, 9, 9);
     let data = scan(&mut r, rows, cols, j1 * j2);
     let scorer = ScoringArgs::default().scorer(j1, j2).unwrap();
-    let out = OutputArgs { threshold: 0.05, scores: true, max_defect_lines: 1000 };
+    let out = OutputArgs {
+        threshold: 0.05,
+        scores: true,
+        max_defect_lines: 1000,
+    };
     let bytes = stream_scan(&scorer, out.settings(&scorer, cols).unwrap(), rows, &data).unwrap();
     (scorer, bytes, rows, cols)
 }
 
 fn lines(bytes: &[u8]) -> Vec<Vec<u8>> {
-    bytes.split_inclusive(|&b| b == b'\n').map(|l| l.to_vec()).collect()
+    bytes
+        .split_inclusive(|&b| b == b'\n')
+        .map(|l| l.to_vec())
+        .collect()
 }
 
 /// A changed byte, a truncated line, a lost row line: each is reported by
@@ -136,7 +171,11 @@ fn damage_is_reported_and_the_rest_survives() {
         } else {
             assert!(dec.errors.is_empty());
             // A lost line is noticed by the cross-checks.
-            assert!(!s.problems.is_empty(), "trial {trial}: lost {} line undetected", kind as char);
+            assert!(
+                !s.problems.is_empty(),
+                "trial {trial}: lost {} line undetected",
+                kind as char
+            );
         }
         // Everything that was not on the damaged line is intact.
         let img = magnitudes(&s.image());
@@ -153,7 +192,10 @@ fn damage_is_reported_and_the_rest_survives() {
             if on_line {
                 assert!(a.is_nan());
             } else {
-                assert!(a == b || (a.is_nan() && b.is_nan()), "trial {trial}: position {i} changed");
+                assert!(
+                    a == b || (a.is_nan() && b.is_nan()),
+                    "trial {trial}: position {i} changed"
+                );
             }
         }
         assert_eq!(s.n_rows(), rows);
@@ -168,7 +210,13 @@ fn duplicated_and_missing_frames_reach_the_totals() {
     let mut r = ChaCha8Rng::seed_from_u64(2);
     let data = scan(&mut r, rows, cols, j1 * j2);
     let scorer = ScoringArgs::default().scorer(j1, j2).unwrap();
-    let settings = OutputArgs { threshold: 0.05, scores: true, max_defect_lines: 100 }.settings(&scorer, cols).unwrap();
+    let settings = OutputArgs {
+        threshold: 0.05,
+        scores: true,
+        max_defect_lines: 100,
+    }
+    .settings(&scorer, cols)
+    .unwrap();
     let words = cvm_core::stream::row_words(cols, j1 * j2, 1);
     let (mut a, mut b) = (vec![0i32; words], vec![0i32; words]);
     let mut p = cvm_core::Pipeline::<16>::new(&scorer, settings, &mut a, &mut b).unwrap();
@@ -176,7 +224,10 @@ fn duplicated_and_missing_frames_reach_the_totals() {
     p.begin(&mut sink);
     let n = j1 * j2;
     for i in 0..rows * cols {
-        let pos = Position { row: (i / cols) as u32, col: (i % cols) as u32 };
+        let pos = Position {
+            row: (i / cols) as u32,
+            col: (i % cols) as u32,
+        };
         let f = &data[i * n..(i + 1) * n];
         if i == 9 {
             p.mark_missing(pos, &mut sink);
@@ -191,7 +242,10 @@ fn duplicated_and_missing_frames_reach_the_totals() {
     let dec = decode(&sink.0);
     let s = &dec.scans[0];
     let e = s.end.unwrap().totals;
-    assert_eq!((e.frames, e.missing, e.rejected), ((rows * cols - 1) as u32, 1, 1));
+    assert_eq!(
+        (e.frames, e.missing, e.rejected),
+        ((rows * cols - 1) as u32, 1, 1)
+    );
     let img = magnitudes(&s.image());
     assert!(img[9].is_nan());
     assert_eq!(img.iter().filter(|v| v.is_nan()).count(), 1);
@@ -212,10 +266,25 @@ fn binaries_agree() {
     let mut r = ChaCha8Rng::seed_from_u64(4);
     let data = scan(&mut r, rows, cols, j1 * j2);
     let scan_path = dir.join("scan.npy");
-    dmap::npy::write_scan_u16(&scan_path, rows, cols, cvm_reference::Geometry::new(j1, j2).unwrap(), &data).unwrap();
+    dmap::npy::write_scan_u16(
+        &scan_path,
+        rows,
+        cols,
+        cvm_reference::Geometry::new(j1, j2).unwrap(),
+        &data,
+    )
+    .unwrap();
     let exe = env!("CARGO_BIN_EXE_dmap");
-    let lines = std::process::Command::new(exe).args(["stream", "--scores"]).arg(&scan_path).output().unwrap();
-    assert!(lines.status.success(), "{}", String::from_utf8_lossy(&lines.stderr));
+    let lines = std::process::Command::new(exe)
+        .args(["stream", "--scores"])
+        .arg(&scan_path)
+        .output()
+        .unwrap();
+    assert!(
+        lines.status.success(),
+        "{}",
+        String::from_utf8_lossy(&lines.stderr)
+    );
     let lines_path = dir.join("lines.txt");
     std::fs::write(&lines_path, &lines.stdout).unwrap();
     let img_path = dir.join("img.npy");
@@ -226,7 +295,11 @@ fn binaries_agree() {
         .arg(&img_path)
         .output()
         .unwrap();
-    assert!(listen.status.success(), "{}", String::from_utf8_lossy(&listen.stderr));
+    assert!(
+        listen.status.success(),
+        "{}",
+        String::from_utf8_lossy(&listen.stderr)
+    );
     let fixed_path = dir.join("fixed.npy");
     let score = std::process::Command::new(exe)
         .args(["score", "--distance", "cvm-fixed", "-o"])
@@ -234,7 +307,11 @@ fn binaries_agree() {
         .arg(&scan_path)
         .output()
         .unwrap();
-    assert!(score.status.success(), "{}", String::from_utf8_lossy(&score.stderr));
+    assert!(
+        score.status.success(),
+        "{}",
+        String::from_utf8_lossy(&score.stderr)
+    );
     let a = dmap::npy::read_gradient(&img_path).unwrap();
     let b = dmap::npy::read_gradient(&fixed_path).unwrap();
     assert_eq!((a.rows, a.cols), (rows, cols));
