@@ -47,6 +47,9 @@ impl Kernels {
 }
 
 /// Weights `w(b)` of the paper kernels (square kernels always use 1).
+// A configuration is built once, and `no_std` without allocation cannot box
+// the separable variant: its size is the price of being `Copy` and `const`.
+#[allow(clippy::large_enum_variant)]
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Weights {
     /// `w(b) = 1 / (n1 * n2)` with `n_i` the number of sizes on axis `i`,

@@ -94,12 +94,12 @@ impl LineBuf {
 
     pub fn byte(&mut self, b: u8) {
         // Keep room for "*XXXX\n".
-        if self.len + 6 < MAX_LINE {
-            if let Some(slot) = self.buf.get_mut(self.len) {
-                *slot = b;
-                self.len += 1;
-                return;
-            }
+        if self.len + 6 < MAX_LINE
+            && let Some(slot) = self.buf.get_mut(self.len)
+        {
+            *slot = b;
+            self.len += 1;
+            return;
         }
         self.overflow = true;
     }

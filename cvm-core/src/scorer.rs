@@ -76,8 +76,9 @@ pub struct Scorer {
 const MAX_FRAC: i32 = 24;
 const I31: f64 = 2147483647.0;
 const LIMIT_E: f64 = 1073741823.0; // 2^30 - 1
-const LIMIT_ACC: f64 = 4.6116860184273879e18; // 2^62
-const LIMIT_SQUARE: f64 = 9.2233720368547758e18; // 2^63, for the u64 accumulator
+const LIMIT_ACC: f64 = (1u64 << 62) as f64;
+/// For the `u64` accumulator of square kernels.
+const LIMIT_SQUARE: f64 = (1u64 << 63) as f64;
 
 impl Scorer {
     /// Builds the tables for `cfg`. Usable in `const` context, so a firmware
@@ -108,7 +109,7 @@ impl Scorer {
             Err(e) => return Err(e),
         };
         let wsum = weight_sum(&cfg.kernels, &w1, n1, &w2, n2);
-        if !(wsum > 0.0) {
+        if wsum.is_nan() || wsum <= 0.0 {
             return Err(ConfigError::Weights);
         }
 

@@ -37,7 +37,7 @@ pub const fn axis_weights(
             Weights::Unit => 1.0,
             Weights::Separable { w1, w2 } => {
                 let v = if axis == 0 { w1[b] } else { w2[b] };
-                if !(v >= 0.0 && v < f64::INFINITY) {
+                if !v.is_finite() || v < 0.0 {
                     return Err(ConfigError::Weights);
                 }
                 v
@@ -75,7 +75,7 @@ pub const fn axis_kernel(j: usize, w: &[f64; MAX_J], n: usize) -> Mat {
 
 /// Square root by Newton's method (core has no `f64::sqrt` in `no_std`).
 pub const fn sqrt(x: f64) -> f64 {
-    if !(x > 0.0) {
+    if x.is_nan() || x <= 0.0 {
         return 0.0;
     }
     let mut g = if x > 1.0 { x } else { 1.0 };
