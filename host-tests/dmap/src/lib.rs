@@ -5,3 +5,7 @@ pub mod npy;
 
 pub mod fixed;
 pub mod options;
+pub mod eval;
+pub mod font;
+pub mod render;
+pub mod simulate;

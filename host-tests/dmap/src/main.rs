@@ -11,11 +11,22 @@ struct Cli {
 }
 
 #[derive(Subcommand)]
-enum Command {}
+enum Command {
+    /// Simulate a scan (ray model of the scanner) and its ground-truth defect mask
+    Simulate(dmap::simulate::SimulateArgs),
+    /// Pseudo-colour PNG of gradient images with colour bars, side by side
+    Render(dmap::render::RenderArgs),
+    /// SNR, PSNR, CNR and defect sizes of a gradient image against a truth mask
+    Eval(dmap::eval::EvalArgs),
+}
 
 fn main() {
     let cli = Cli::parse();
-    let result: anyhow::Result<()> = match cli.command {};
+    let result: anyhow::Result<()> = match cli.command {
+        Command::Simulate(args) => dmap::simulate::run(&args),
+        Command::Render(args) => dmap::render::run(&args),
+        Command::Eval(args) => dmap::eval::run(&args),
+    };
     if let Err(e) = result {
         // One line, no backtrace: users read this in a terminal or a CI log.
         eprintln!("dmap: error: {e:#}");

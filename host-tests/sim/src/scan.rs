@@ -91,6 +91,9 @@ impl Config {
                 rx.j1, rx.j2
             ));
         }
+        if !(rx.spot.is_finite() && rx.spot >= 0.0) {
+            return Err(format!("detector spot size must be >= 0, got {}", rx.spot));
+        }
         if !(self.footprint.is_finite() && self.footprint >= 0.0) {
             return Err(format!(
                 "truth footprint must be >= 0, got {}",

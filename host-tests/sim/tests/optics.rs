@@ -12,6 +12,7 @@ fn receiver() -> Receiver {
         j1: 15,
         j2: 15,
         pixel: 0.5,
+        spot: 0.0,
     }
 }
 
@@ -270,6 +271,7 @@ fn stochastic_and_split_agree_on_average() {
         j1: 9,
         j2: 9,
         pixel: 5.0,
+        spot: 0.0,
     };
     cfg.raster.rays = 2000;
     let body = cfg.part.body();
@@ -314,4 +316,40 @@ fn stochastic_and_split_agree_on_average() {
         "bubble must scatter light off the centre cell: {off0}"
     );
     assert!((off0 - off1).abs() < 0.01 + 0.1 * off0, "{off0} vs {off1}");
+}
+
+#[test]
+fn point_spread_shares_power_by_gaussian_cell_integrals() {
+    // Spot centred on the middle cell, sigma = half a pixel: each axis keeps
+    // Phi(1) - Phi(-1) = 0.682689 in the centre cell, so 0.466064 in 2-D;
+    // the next cell on one axis gets Phi(3) - Phi(1) = 0.157305 of that axis.
+    let rx = Receiver {
+        spot: 0.25,
+        ..receiver()
+    };
+    let mut map = vec![0.0; 225];
+    let mut scratch = Vec::new();
+    let on = rx.spread(0.0, 0.0, 1.0, &mut map, &mut scratch);
+    assert!((map[7 * 15 + 7] - 0.682_689_49f64.powi(2)).abs() < 1e-6);
+    assert!((map[7 * 15 + 8] - 0.682_689_49 * 0.157_305_46).abs() < 1e-6);
+    assert!((map[6 * 15 + 7] - map[7 * 15 + 8]).abs() < 1e-12);
+    assert!((on - 1.0).abs() < 1e-6);
+    assert!((map.iter().sum::<f64>() - on).abs() < 1e-12);
+    // A spot at the array's right edge loses half its power beside it.
+    let mut map = vec![0.0; 225];
+    let on = rx.spread(7.5 * 0.5, 0.0, 1.0, &mut map, &mut scratch);
+    assert!((on - 0.5).abs() < 1e-6, "{on}");
+}
+
+#[test]
+fn erf_matches_tabulated_values() {
+    // erf(0.5) = 0.5204998778, erf(1) = 0.8427007929, erf(2) = 0.9953222650.
+    for (x, e) in [
+        (0.5, 0.520_499_877_8),
+        (1.0, 0.842_700_792_9),
+        (2.0, 0.995_322_265_0),
+    ] {
+        assert!((trace::erf(x) - e).abs() < 2e-7);
+        assert!((trace::erf(-x) + e).abs() < 2e-7);
+    }
 }

@@ -1,0 +1,382 @@
+//! `dmap eval`: the paper's detection metrics (design.md §3) and per-defect
+//! size estimates of a gradient image against a ground-truth mask.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Result, bail};
+use clap::Args;
+
+#[derive(Args, Clone, Debug)]
+pub struct EvalArgs {
+    /// Gradient image (.npy, rows x cols x 3)
+    #[arg(value_name = "GRAD.npy")]
+    pub input: PathBuf,
+    /// Ground-truth mask (.npy, bool, rows x cols)
+    #[arg(long, value_name = "MASK.npy")]
+    pub truth: PathBuf,
+    /// Channel of a rows x cols x C input: 0 horizontal, 1 vertical, 2 magnitude
+    #[arg(long, default_value_t = 2)]
+    pub channel: usize,
+    /// Score above which a position counts as defective (default: defect-free mean + K std)
+    #[arg(long, allow_hyphen_values = true)]
+    pub threshold: Option<f64>,
+    /// K of the automatic threshold
+    #[arg(long, default_value_t = 5.0)]
+    pub k: f64,
+    /// Positions around each truth component searched for above-threshold scores
+    #[arg(long, default_value_t = 2)]
+    pub dilate: usize,
+    /// Distance between scan positions (µm)
+    #[arg(long, default_value_t = 334.0)]
+    pub pitch_um: f64,
+    /// Print one JSON object instead of the table
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Statistics of the paper's Eqs. 11-12 and the CNR. NaN pixels are left
+/// out of every statistic and counted.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Metrics {
+    pub snr: f64,
+    pub psnr: f64,
+    pub cnr: f64,
+    pub mean_defect: f64,
+    pub max_defect: f64,
+    pub mean_free: f64,
+    /// Population standard deviation (ddof = 0) over defect-free pixels.
+    pub std_free: f64,
+    pub n_defect: usize,
+    pub n_free: usize,
+    pub nan_defect: usize,
+    pub nan_free: usize,
+}
+
+/// SNR, PSNR and CNR of `values` with defect pixels where `truth` is set.
+/// Statistics over an empty set are NaN.
+pub fn metrics(values: &[f64], truth: &[bool]) -> Metrics {
+    let (mut sd, mut maxd, mut nd, mut nand) = (0.0, f64::NEG_INFINITY, 0usize, 0usize);
+    let (mut sf, mut nf, mut nanf) = (0.0, 0usize, 0usize);
+    for (&v, &t) in values.iter().zip(truth) {
+        match (v.is_nan(), t) {
+            (true, true) => nand += 1,
+            (true, false) => nanf += 1,
+            (false, true) => {
+                sd += v;
+                maxd = maxd.max(v);
+                nd += 1;
+            }
+            (false, false) => {
+                sf += v;
+                nf += 1;
+            }
+        }
+    }
+    let nan = f64::NAN;
+    let mean_defect = if nd > 0 { sd / nd as f64 } else { nan };
+    let max_defect = if nd > 0 { maxd } else { nan };
+    let mean_free = if nf > 0 { sf / nf as f64 } else { nan };
+    // Two-pass variance: the scores span many decades.
+    let std_free = if nf > 0 {
+        let ss: f64 = values
+            .iter()
+            .zip(truth)
+            .filter(|(v, t)| !**t && !v.is_nan())
+            .map(|(v, _)| (v - mean_free).powi(2))
+            .sum();
+        (ss / nf as f64).sqrt()
+    } else {
+        nan
+    };
+    Metrics {
+        snr: mean_defect / std_free,
+        psnr: max_defect / std_free,
+        cnr: (max_defect - mean_free).abs() / std_free,
+        mean_defect,
+        max_defect,
+        mean_free,
+        std_free,
+        n_defect: nd,
+        n_free: nf,
+        nan_defect: nand,
+        nan_free: nanf,
+    }
+}
+
+/// 8-connected components of a mask, each as its list of (row, col), in
+/// raster order of their first pixel.
+pub fn components(mask: &[bool], rows: usize, cols: usize) -> Vec<Vec<(usize, usize)>> {
+    let mut label = vec![usize::MAX; mask.len()];
+    let mut out = Vec::new();
+    for start in 0..mask.len() {
+        if !mask[start] || label[start] != usize::MAX {
+            continue;
+        }
+        let id = out.len();
+        let mut comp = Vec::new();
+        let mut stack = vec![start];
+        label[start] = id;
+        while let Some(i) = stack.pop() {
+            let (r, c) = (i / cols, i % cols);
+            comp.push((r, c));
+            for nr in r.saturating_sub(1)..=(r + 1).min(rows - 1) {
+                for nc in c.saturating_sub(1)..=(c + 1).min(cols - 1) {
+                    let j = nr * cols + nc;
+                    if mask[j] && label[j] == usize::MAX {
+                        label[j] = id;
+                        stack.push(j);
+                    }
+                }
+            }
+        }
+        comp.sort_unstable();
+        out.push(comp);
+    }
+    out
+}
+
+/// Bounding box (rows, cols) in positions of a set of pixels.
+fn extent(px: &[(usize, usize)]) -> (usize, usize) {
+    if px.is_empty() {
+        return (0, 0);
+    }
+    let (r0, r1) = px
+        .iter()
+        .fold((usize::MAX, 0), |(a, b), p| (a.min(p.0), b.max(p.0)));
+    let (c0, c1) = px
+        .iter()
+        .fold((usize::MAX, 0), |(a, b), p| (a.min(p.1), b.max(p.1)));
+    (r1 - r0 + 1, c1 - c0 + 1)
+}
+
+/// Size of one defect: the truth component's bounding box and that of the
+/// above-threshold positions within `dilate` positions (Chebyshev) of it,
+/// both as (width = columns, height = rows) in positions.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DefectSize {
+    pub first: (usize, usize),
+    pub truth: (usize, usize),
+    pub estimated: (usize, usize),
+    pub above: usize,
+}
+
+pub fn defect_sizes(
+    values: &[f64],
+    truth: &[bool],
+    rows: usize,
+    cols: usize,
+    threshold: f64,
+    dilate: usize,
+) -> Vec<DefectSize> {
+    components(truth, rows, cols)
+        .into_iter()
+        .map(|comp| {
+            let mut near = vec![false; values.len()];
+            for &(r, c) in &comp {
+                for nr in r.saturating_sub(dilate)..=(r + dilate).min(rows - 1) {
+                    for nc in c.saturating_sub(dilate)..=(c + dilate).min(cols - 1) {
+                        near[nr * cols + nc] = true;
+                    }
+                }
+            }
+            let hits: Vec<(usize, usize)> = (0..values.len())
+                .filter(|&i| near[i] && values[i] > threshold)
+                .map(|i| (i / cols, i % cols))
+                .collect();
+            let (th, tw) = extent(&comp);
+            let (eh, ew) = extent(&hits);
+            DefectSize {
+                first: comp[0],
+                truth: (tw, th),
+                estimated: (ew, eh),
+                above: hits.len(),
+            }
+        })
+        .collect()
+}
+
+/// Load one channel of a gradient file as (rows, cols, values).
+fn load_scores(path: &Path, channel: usize) -> Result<(usize, usize, Vec<f64>)> {
+    let p = crate::render::load_panel(path, channel, String::new())?;
+    Ok((p.rows, p.cols, p.values))
+}
+
+fn json_num(v: f64) -> serde_json::Value {
+    // JSON has no NaN or infinity: undefined statistics become null.
+    serde_json::Number::from_f64(v).map_or(serde_json::Value::Null, serde_json::Value::Number)
+}
+
+fn fmt(v: f64) -> String {
+    if v.is_finite() {
+        format!("{v:.4}")
+    } else {
+        "n/a".into()
+    }
+}
+
+pub fn run(a: &EvalArgs) -> Result<()> {
+    if !(a.pitch_um.is_finite() && a.pitch_um > 0.0) {
+        bail!("--pitch-um must be positive, got {}", a.pitch_um);
+    }
+    if !a.k.is_finite() {
+        bail!("--k must be finite");
+    }
+    if a.threshold.is_some_and(|t| !t.is_finite()) {
+        bail!("--threshold must be finite");
+    }
+    let (rows, cols, values) = load_scores(&a.input, a.channel)?;
+    let mask = crate::npy::read_mask(&a.truth)?;
+    if (mask.rows, mask.cols) != (rows, cols) {
+        bail!(
+            "truth mask {} is {}x{} but the scores are {rows}x{cols}",
+            a.truth.display(),
+            mask.rows,
+            mask.cols
+        );
+    }
+    let truth = mask.data;
+    let m = metrics(&values, &truth);
+    let (threshold, rule) = match a.threshold {
+        Some(t) => (t, "given".to_string()),
+        None => {
+            if m.n_free == 0 {
+                bail!("no defect-free positions with a score: give --threshold");
+            }
+            (
+                m.mean_free + a.k * m.std_free,
+                format!("defect-free mean + {} x std", a.k),
+            )
+        }
+    };
+    let sizes = defect_sizes(&values, &truth, rows, cols, threshold, a.dilate);
+    let mm = |n: usize| n as f64 * a.pitch_um / 1000.0;
+    if a.json {
+        let defects: Vec<serde_json::Value> = sizes
+            .iter()
+            .map(|d| {
+                serde_json::json!({
+                    "truth_mm": [mm(d.truth.0), mm(d.truth.1)],
+                    "estimated_mm": [mm(d.estimated.0), mm(d.estimated.1)],
+                })
+            })
+            .collect();
+        let obj = serde_json::json!({
+            "snr": json_num(m.snr),
+            "psnr": json_num(m.psnr),
+            "cnr": json_num(m.cnr),
+            "threshold": json_num(threshold),
+            "defects": defects,
+        });
+        println!("{obj}");
+        return Ok(());
+    }
+    println!("SNR   {}", fmt(m.snr));
+    println!("PSNR  {}", fmt(m.psnr));
+    println!("CNR   {}", fmt(m.cnr));
+    println!(
+        "defect-free: {} positions, mean {}, std {} (population); defect: {} positions, mean {}, max {}",
+        m.n_free,
+        fmt(m.mean_free),
+        fmt(m.std_free),
+        m.n_defect,
+        fmt(m.mean_defect),
+        fmt(m.max_defect)
+    );
+    if m.nan_free + m.nan_defect > 0 {
+        println!(
+            "NaN scores left out: {} defect-free, {} defect positions",
+            m.nan_free, m.nan_defect
+        );
+    }
+    println!(
+        "threshold {threshold:.6} ({rule}); sizes from positions above it within {} of each defect, pitch {} um",
+        a.dilate, a.pitch_um
+    );
+    println!(
+        "{:<7}{:<14}{:<18}{:<18}above",
+        "defect", "first (r,c)", "truth w x h mm", "estimated mm"
+    );
+    for (i, d) in sizes.iter().enumerate() {
+        println!(
+            "{:<7}{:<14}{:<18}{:<18}{}",
+            i + 1,
+            format!("({},{})", d.first.0, d.first.1),
+            format!("{:.2} x {:.2}", mm(d.truth.0), mm(d.truth.1)),
+            format!("{:.2} x {:.2}", mm(d.estimated.0), mm(d.estimated.1)),
+            d.above
+        );
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn metrics_match_hand_computation() {
+        // Defect-free values 1, 2, 3, 4: mean 2.5, population variance 1.25.
+        // Defect values 10, 20: mean 15, max 20. NaNs excluded and counted.
+        let values = [1.0, 2.0, 3.0, 4.0, 10.0, 20.0, f64::NAN, f64::NAN];
+        let truth = [false, false, false, false, true, true, true, false];
+        let m = metrics(&values, &truth);
+        let s = 1.25f64.sqrt();
+        assert!((m.std_free - s).abs() < 1e-15);
+        assert!((m.snr - 15.0 / s).abs() < 1e-12);
+        assert!((m.psnr - 20.0 / s).abs() < 1e-12);
+        assert!((m.cnr - 17.5 / s).abs() < 1e-12);
+        assert_eq!(
+            (m.n_defect, m.n_free, m.nan_defect, m.nan_free),
+            (2, 4, 1, 1)
+        );
+    }
+
+    #[test]
+    fn metrics_without_defects_are_nan() {
+        let m = metrics(&[1.0, 2.0], &[false, false]);
+        assert!(m.snr.is_nan() && m.psnr.is_nan() && m.cnr.is_nan());
+        assert_eq!(m.std_free, 0.5);
+    }
+
+    #[test]
+    fn components_are_eight_connected() {
+        // Two diagonal pixels form one component; a far pixel another.
+        #[rustfmt::skip]
+        let mask = [
+            true,  false, false, false,
+            false, true,  false, false,
+            false, false, false, true,
+        ];
+        let c = components(&mask, 3, 4);
+        assert_eq!(c, vec![vec![(0, 0), (1, 1)], vec![(2, 3)]]);
+    }
+
+    #[test]
+    fn sizes_count_above_threshold_positions_near_each_defect() {
+        // 6x8 image; truth: 2x2 block at rows 1-2, cols 1-2 and one pixel at (4, 6).
+        // Scores above 5 at rows 0-2, cols 1-3 (3 wide, 3 high) near the first
+        // defect, and a lone high score at (5, 0) too far from both (dilate 1).
+        let (rows, cols) = (6, 8);
+        let mut truth = vec![false; rows * cols];
+        for (r, c) in [(1, 1), (1, 2), (2, 1), (2, 2), (4, 6)] {
+            truth[r * cols + c] = true;
+        }
+        let mut v = vec![1.0; rows * cols];
+        for r in 0..3 {
+            for c in 1..4 {
+                v[r * cols + c] = 9.0;
+            }
+        }
+        v[5 * cols] = 9.0;
+        let s = defect_sizes(&v, &truth, rows, cols, 5.0, 1);
+        assert_eq!(s.len(), 2);
+        assert_eq!(
+            (s[0].truth, s[0].estimated, s[0].above),
+            ((2, 2), (3, 3), 9)
+        );
+        assert_eq!(
+            (s[1].truth, s[1].estimated, s[1].above),
+            ((1, 1), (0, 0), 0)
+        );
+    }
+}

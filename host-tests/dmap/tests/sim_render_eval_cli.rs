@@ -1,0 +1,314 @@
+//! `dmap simulate`, `render` and `eval` run as a user would: real files,
+//! the real binary, one-line errors on bad input.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use dmap::npy;
+
+fn dmap(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_dmap"))
+        .args(args)
+        .output()
+        .expect("run dmap")
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("dmap-sre-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// The command failed with exactly one line on stderr, naming the problem.
+fn assert_one_line_error(out: &Output, needle: &str) {
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "expected failure, stderr: {err}");
+    assert_eq!(out.status.code(), Some(1), "stderr: {err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "not one line: {err}");
+    assert!(err.starts_with("dmap: error:"), "{err}");
+    assert!(err.contains(needle), "{err:?} lacks {needle:?}");
+    assert!(!err.contains("panicked"));
+}
+
+fn ok(out: &Output) {
+    assert!(
+        out.status.success(),
+        "stderr: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+#[test]
+fn simulate_writes_scan_and_truth_of_the_asked_shape_whatever_the_threads() {
+    let a = tmp("sim-a.npy");
+    let b = tmp("sim-b.npy");
+    let mask = tmp("sim-a-mask.npy");
+    let args = [
+        "simulate",
+        "--preset",
+        "prototype",
+        "--rows",
+        "5",
+        "--cols",
+        "7",
+        "--rays",
+        "64",
+        "--center-mm",
+        "-3,3",
+    ];
+    ok(&dmap(
+        &[
+            &args[..],
+            &["-o", s(&a), "--truth", s(&mask), "--threads", "1"],
+        ]
+        .concat(),
+    ));
+    ok(&dmap(
+        &[&args[..], &["-o", s(&b), "--threads", "2"]].concat(),
+    ));
+    let scan = npy::read_scan(&a).unwrap();
+    assert_eq!(
+        (scan.rows, scan.cols, scan.geometry.j1(), scan.geometry.j2()),
+        (5, 7, 9, 9)
+    );
+    assert_eq!(scan.dtype, npy::ScanDtype::U16);
+    assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
+    // Default truth path sits beside the scan.
+    let m = npy::read_mask(&mask).unwrap();
+    assert_eq!(m, npy::read_mask(&tmp("sim-b.truth.npy")).unwrap());
+    // Centred on the 2.8 mm patch at (-3, 3): every position is on the defect.
+    assert_eq!((m.rows, m.cols), (5, 7));
+    assert!(m.data.iter().all(|&t| t));
+}
+
+#[test]
+fn simulate_rejects_bad_parameters_in_one_line() {
+    let o = tmp("bad.npy");
+    // Every case fails while checking the configuration, before simulating.
+    let base = ["simulate", "--preset", "prototype", "-o", s(&o)];
+    for (extra, needle) in [
+        (vec!["--detector", "20x20"], "detector"),
+        (vec!["--detector", "9by9"], "J1xJ2"),
+        (vec!["--bubble", "1,2"], "--bubble"),
+        (vec!["--bubble", "0,0,-3,0.1"], "not inside the part"),
+        (vec!["--bits", "17"], "bit depth"),
+        (vec!["--rows", "0"], "at least one position"),
+        (vec!["--rays", "0"], "rays per beam"),
+        (vec!["--pitch-um=-5"], "pitch"),
+        (vec!["--index", "nan"], "refractive index"),
+        (vec!["--threads", "0"], "--threads"),
+        (vec!["--part", "plate", "--radius-mm", "5"], "flat plate"),
+    ] {
+        assert_one_line_error(&dmap(&[&base[..], &extra[..]].concat()), needle);
+    }
+    let nowhere = tmp("no/such/dir/x.npy");
+    assert_one_line_error(
+        &dmap(&[
+            "simulate",
+            "--preset",
+            "prototype",
+            "--rows",
+            "1",
+            "--cols",
+            "1",
+            "-o",
+            s(&nowhere),
+        ]),
+        "no/such/dir",
+    );
+}
+
+/// A 4x5 gradient whose magnitude channel is `mag`.
+fn gradient(path: &Path, mag: &[f64]) {
+    let data: Vec<f64> = mag.iter().flat_map(|&m| [m * 0.6, m * 0.8, m]).collect();
+    npy::write_gradient(path, 4, 5, &data).unwrap();
+}
+
+fn mask(path: &Path, rows: usize, cols: usize, on: &[(usize, usize)]) {
+    let mut data = vec![false; rows * cols];
+    for &(r, c) in on {
+        data[r * cols + c] = true;
+    }
+    npy::write_mask(path, &npy::Mask { rows, cols, data }).unwrap();
+}
+
+#[test]
+fn eval_json_matches_hand_computed_metrics_and_sizes() {
+    // Defect (truth) = 2x2 block rows 1-2, cols 1-2 with scores 10, 20, 30, NaN.
+    #[rustfmt::skip]
+    let mag = [
+        1.0, 1.0, 1.0, 1.0, 1.0,
+        1.0, 10.0, 20.0, 3.0, 1.0,
+        1.0, 30.0, f64::NAN, 1.0, 1.0,
+        1.0, 1.0, 1.0, 1.0, 3.0,
+    ];
+    let g = tmp("eval-g.npy");
+    let m = tmp("eval-m.npy");
+    gradient(&g, &mag);
+    mask(&m, 4, 5, &[(1, 1), (1, 2), (2, 1), (2, 2)]);
+    let out = dmap(&[
+        "eval",
+        s(&g),
+        "--truth",
+        s(&m),
+        "--json",
+        "--threshold",
+        "5",
+        "--pitch-um",
+        "500",
+    ]);
+    ok(&out);
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert_eq!(text.trim_end().lines().count(), 1);
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    // Defect-free: 14 ones and two threes: mean 20/16 = 1.25, E[x^2] = (14 + 18)/16 = 2,
+    // variance 2 - 1.5625 = 0.4375. Defect (NaN left out): mean 20, max 30.
+    let sd = 0.4375f64.sqrt();
+    let close = |k: &str, want: f64| {
+        let got = v[k].as_f64().unwrap();
+        assert!(
+            (got - want).abs() < 1e-12 * want.abs(),
+            "{k}: {got} vs {want}"
+        );
+    };
+    close("snr", 20.0 / sd);
+    close("psnr", 30.0 / sd);
+    close("cnr", (30.0 - 1.25) / sd);
+    close("threshold", 5.0);
+    // Above 5 near the defect: (1,1), (1,2), (2,1): 2 wide, 2 high -> 1.0 mm at 500 um.
+    assert_eq!(
+        v["defects"],
+        serde_json::json!([{"truth_mm": [1.0, 1.0], "estimated_mm": [1.0, 1.0]}])
+    );
+    let keys: Vec<&String> = v.as_object().unwrap().keys().collect();
+    assert_eq!(keys.len(), 5);
+}
+
+#[test]
+fn eval_table_states_the_automatic_threshold_rule() {
+    let g = tmp("eval-auto-g.npy");
+    let m = tmp("eval-auto-m.npy");
+    let mut mag = [0.0; 20];
+    mag[7] = 9.0;
+    mag[0] = 1.0;
+    gradient(&g, &mag);
+    mask(&m, 4, 5, &[(1, 2)]);
+    let out = dmap(&["eval", s(&g), "--truth", s(&m)]);
+    ok(&out);
+    let text = String::from_utf8(out.stdout).unwrap();
+    // 19 defect-free values: one 1 and eighteen 0: mean 1/19, variance 1/19 - 1/361.
+    let mean: f64 = 1.0 / 19.0;
+    let t = mean + 5.0 * (mean - mean * mean).sqrt();
+    assert!(
+        text.contains(&format!("threshold {t:.6} (defect-free mean + 5 x std)")),
+        "{text}"
+    );
+    assert!(text.contains("0.33 x 0.33"), "{text}");
+}
+
+#[test]
+fn eval_and_render_reject_bad_input_in_one_line() {
+    let g = tmp("bad-g.npy");
+    let m = tmp("bad-m.npy");
+    let m2 = tmp("bad-m2.npy");
+    gradient(&g, &[1.0; 20]);
+    mask(&m, 4, 5, &[(0, 0)]);
+    mask(&m2, 5, 4, &[(0, 0)]);
+    let missing = tmp("missing.npy");
+    let junk = tmp("junk.npy");
+    std::fs::write(&junk, b"not an npy file").unwrap();
+    let scan = tmp("bad-scan.npy");
+    npy::write_scan_u16(
+        &scan,
+        1,
+        1,
+        cvm_reference::Geometry::new(2, 2).unwrap(),
+        &[1, 2, 3, 4],
+    )
+    .unwrap();
+    assert_one_line_error(
+        &dmap(&["eval", s(&g), "--truth", s(&m2)]),
+        "is 5x4 but the scores are 4x5",
+    );
+    assert_one_line_error(
+        &dmap(&["eval", s(&missing), "--truth", s(&m)]),
+        "missing.npy",
+    );
+    assert_one_line_error(
+        &dmap(&["eval", s(&g), "--truth", s(&missing)]),
+        "missing.npy",
+    );
+    assert_one_line_error(&dmap(&["eval", s(&junk), "--truth", s(&m)]), "junk.npy");
+    assert_one_line_error(&dmap(&["eval", s(&g), "--truth", s(&g)]), "bad-g.npy");
+    assert_one_line_error(&dmap(&["eval", s(&scan), "--truth", s(&m)]), "bad-scan.npy");
+    assert_one_line_error(
+        &dmap(&["eval", s(&g), "--truth", s(&m), "--pitch-um", "0"]),
+        "--pitch-um",
+    );
+    assert_one_line_error(
+        &dmap(&["eval", s(&g), "--truth", s(&m), "--channel", "3"]),
+        "--channel",
+    );
+    let png = tmp("bad.png");
+    assert_one_line_error(
+        &dmap(&["render", s(&missing), "-o", s(&png)]),
+        "missing.npy",
+    );
+    assert_one_line_error(&dmap(&["render", s(&junk), "-o", s(&png)]), "junk.npy");
+    assert_one_line_error(&dmap(&["render", s(&scan), "-o", s(&png)]), "bad-scan.npy");
+    assert_one_line_error(
+        &dmap(&["render", s(&g), "-o", s(&png), "--channel", "3"]),
+        "--channel",
+    );
+    assert_one_line_error(
+        &dmap(&["render", s(&g), s(&g), "-o", s(&png), "--titles", "one"]),
+        "--titles",
+    );
+    assert_one_line_error(
+        &dmap(&["render", s(&g), "-o", s(&png), "--vmin", "2", "--vmax", "1"]),
+        "--vmin",
+    );
+    assert_one_line_error(
+        &dmap(&["render", s(&g), "-o", s(&tmp("no/dir/x.png"))]),
+        "no/dir/x.png",
+    );
+}
+
+#[test]
+fn render_writes_a_png_with_one_panel_per_file() {
+    let g = tmp("render-g.npy");
+    let mut mag: Vec<f64> = (0..20).map(f64::from).collect();
+    mag[3] = f64::NAN;
+    gradient(&g, &mag);
+    let one = tmp("one.png");
+    let two = tmp("two.png");
+    ok(&dmap(&["render", s(&g), "-o", s(&one), "--scale", "10"]));
+    ok(&dmap(&[
+        "render",
+        s(&g),
+        s(&g),
+        "-o",
+        s(&two),
+        "--scale",
+        "10",
+        "--titles",
+        "a,b",
+        "--log",
+    ]));
+    let dims = |p: &Path| {
+        let bytes = std::fs::read(p).unwrap();
+        assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n");
+        // IHDR: width and height, big-endian, right after the chunk header.
+        let w = u32::from_be_bytes(bytes[16..20].try_into().unwrap());
+        let h = u32::from_be_bytes(bytes[20..24].try_into().unwrap());
+        (w, h)
+    };
+    let (w1, h1) = dims(&one);
+    let (w2, h2) = dims(&two);
+    assert_eq!(h1, h2);
+    assert!(w1 > 50 && w2 > 2 * w1 - 20 && w2 < 2 * w1, "{w1} {w2}");
+}
