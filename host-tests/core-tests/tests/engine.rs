@@ -127,12 +127,12 @@ proptest! {
         let mut r = rng(seed);
         let data = random_scan(&mut r, rows, cols, j1, j2);
         let scorer = dmap::options::ScoringArgs::default().scorer(j1, j2).unwrap();
-        let present: Vec<bool> = (0..rows * cols).map(|i| !(holes[i % 64] && (i / 64 + seed as usize) % 2 == 0)).collect();
+        let present: Vec<bool> = (0..rows * cols).map(|i| !(holes[i % 64] && (i / 64 + seed as usize).is_multiple_of(2))).collect();
         let mut frames = Vec::new();
         for (i, f) in clean_frames(rows, cols, n, &data).into_iter().enumerate() {
             if present[i] {
                 frames.push(f);
-            } else if i % 3 == 0 {
+            } else if i.is_multiple_of(3) {
                 // An explicit "no frame here" (detector overrun).
                 frames.push((f.0, None));
             }
@@ -141,7 +141,7 @@ proptest! {
         let want = batch_with_gaps(&scorer, rows, cols, &data, &present);
         // Trailing missing rows are never seen by the engine: it cannot
         // know the scan had them.
-        let last_row = (0..rows * cols).rev().find(|&i| present[i] || i % 3 == 0).map_or(0, |i| i / cols + 1);
+        let last_row = (0..rows * cols).rev().find(|&i| present[i] || i.is_multiple_of(3)).map_or(0, |i| i / cols + 1);
         prop_assert_eq!(out.len(), last_row);
         prop_assert_eq!(&flatten(&out)[..], &want[..last_row * cols]);
         let missing = want[..last_row * cols].iter().filter(|s| s.flags & flags::NO_DATA != 0).count();

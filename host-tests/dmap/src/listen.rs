@@ -106,10 +106,12 @@ impl ScanResult {
         let mut img = vec![f64::NAN; rows * cols * 3];
         for (&r, line) in &self.scores {
             for (c, v) in line.iter().enumerate() {
-                if let Some((mag, fl)) = v {
-                    if fl & flags::NO_DATA == 0 && (r as usize) < rows && c < cols {
-                        img[(r as usize * cols + c) * 3 + 2] = self.units(*mag);
-                    }
+                if let Some((mag, fl)) = v
+                    && fl & flags::NO_DATA == 0
+                    && (r as usize) < rows
+                    && c < cols
+                {
+                    img[(r as usize * cols + c) * 3 + 2] = self.units(*mag);
                 }
             }
         }

@@ -64,12 +64,12 @@ impl ScoringArgs {
                     bail!("square kernels use unit weights (design.md §3); drop --weights uniform");
                 }
                 let limit = j1.max(j2) - 1;
-                if let Some(k) = self.bmax {
-                    if k > limit {
-                        bail!(
-                            "--bmax {k} is too large for square kernels on {j1}x{j2} maps (at most {limit})"
-                        );
-                    }
+                if let Some(k) = self.bmax
+                    && k > limit
+                {
+                    bail!(
+                        "--bmax {k} is too large for square kernels on {j1}x{j2} maps (at most {limit})"
+                    );
                 }
             }
         }

@@ -54,7 +54,7 @@ impl Default for OutputArgs {
 
 impl OutputArgs {
     pub fn settings(&self, scorer: &Scorer, cols: usize) -> Result<Settings> {
-        if !(self.threshold >= 0.0) {
+        if self.threshold.is_nan() || self.threshold < 0.0 {
             bail!(
                 "--threshold must be a non-negative number, got {}",
                 self.threshold
