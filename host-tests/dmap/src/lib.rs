@@ -2,6 +2,7 @@
 //! a module here so that tests can call it without spawning the binary.
 
 pub mod npy;
+pub mod score;
 
 pub mod fixed;
 pub mod options;

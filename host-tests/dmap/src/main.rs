@@ -12,6 +12,8 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Gradient image (Eq. 1) of a scan under a distance: cvm, cvm-fixed, emd, mean-dir
+    Score(dmap::score::ScoreArgs),
     /// Simulate a scan (ray model of the scanner) and its ground-truth defect mask
     Simulate(dmap::simulate::SimulateArgs),
     /// Pseudo-colour PNG of gradient images with colour bars, side by side
@@ -23,6 +25,7 @@ enum Command {
 fn main() {
     let cli = Cli::parse();
     let result: anyhow::Result<()> = match cli.command {
+        Command::Score(args) => dmap::score::run(&args),
         Command::Simulate(args) => dmap::simulate::run(&args),
         Command::Render(args) => dmap::render::run(&args),
         Command::Eval(args) => dmap::eval::run(&args),

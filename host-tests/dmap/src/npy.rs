@@ -111,8 +111,12 @@ fn open_npy<'a>(path: &Path, bytes: &'a [u8]) -> Result<NpyFile<&'a [u8]>> {
     if !bytes.starts_with(b"\x93NUMPY") {
         bail!("{p}: not a .npy file (no NumPy magic bytes)");
     }
-    let npy = NpyFile::new(bytes)
-        .map_err(|e| anyhow!("{p}: not a valid .npy file: {}", one_line(&e.to_string())))?;
+    let npy = NpyFile::new(bytes).map_err(|e| {
+        anyhow!(
+            "{p}: not a valid .npy file (header unreadable or truncated): {}",
+            one_line(&e.to_string())
+        )
+    })?;
     if npy.order() == Order::Fortran {
         bail!(
             "{p}: Fortran-order arrays are not supported; save it in C order (np.ascontiguousarray)"
@@ -130,20 +134,18 @@ fn open_npy<'a>(path: &Path, bytes: &'a [u8]) -> Result<NpyFile<&'a [u8]>> {
         .iter()
         .try_fold(item as u64, |acc, &d| acc.checked_mul(d))
         .ok_or_else(|| anyhow!("{p}: shape {:?} is too large", npy.shape()))?;
-    let have = npy.header().clone();
-    let data_len = {
-        // NpyFile consumed the header from the slice; what remains is data.
-        let rest: &[u8] = NpyFile::new(bytes).map(|f| f.into_inner()).unwrap_or(&[]);
-        rest.len() as u64
-    };
-    if data_len != want {
+    let header = npy.header().clone();
+    // NpyFile has consumed the header from the slice; what remains is data.
+    let data = npy.into_inner();
+    if data.len() as u64 != want {
         bail!(
-            "{p}: holds {data_len} data bytes but shape {:?} of {} needs {want} (truncated or corrupt file)",
-            have.shape(),
-            npy.dtype().descr()
+            "{p}: holds {} data bytes but shape {:?} of {} needs {want} (truncated or corrupt file)",
+            data.len(),
+            header.shape(),
+            header.dtype().descr()
         );
     }
-    Ok(npy)
+    Ok(NpyFile::with_header(header, data))
 }
 
 fn one_line(s: &str) -> String {
