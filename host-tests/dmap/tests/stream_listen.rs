@@ -318,3 +318,64 @@ fn binaries_agree() {
     assert!(same(&magnitudes(&a.data), &magnitudes(&b.data)));
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// The byte counts quoted in docs/protocol.md ("Bandwidth"), measured on a
+/// 300-column scan of 15x15 maps.
+#[test]
+fn bandwidth_figures_of_the_protocol_document() {
+    let (rows, cols, j1, j2) = (3, 300, 15, 15);
+    let mut r = ChaCha8Rng::seed_from_u64(8);
+    let data = scan(&mut r, rows, cols, j1 * j2);
+    let scorer = ScoringArgs::default().scorer(j1, j2).unwrap();
+    // A threshold no position reaches: no D lines.
+    let out = OutputArgs {
+        threshold: 1e9,
+        scores: true,
+        max_defect_lines: 16,
+    };
+    let bytes = stream_scan(&scorer, out.settings(&scorer, cols).unwrap(), rows, &data).unwrap();
+    let ls = lines(&bytes);
+    let per_type = |t: u8| {
+        ls.iter()
+            .filter(|l| l[0] == t)
+            .map(|l| l.len())
+            .collect::<Vec<_>>()
+    };
+    assert!(
+        per_type(b'R').iter().all(|&n| n <= 95),
+        "{:?}",
+        per_type(b'R')
+    );
+    assert_eq!(per_type(b'S').iter().sum::<usize>(), rows * 1960);
+    assert!(per_type(b'S').iter().all(|&n| n <= 208));
+    // A defect line with a 10-digit magnitude at row 299, column 123.
+    let mut sink = dmap::stream::VecSink::default();
+    let p = cvm_core::PositionScore {
+        g0: 0,
+        g1: 0,
+        mag: 1_234_567_890,
+        flags: 0,
+    };
+    let mut row = vec![cvm_core::PositionScore::default(); 124];
+    row[123] = p;
+    let summary = cvm_core::RowSummary {
+        row: 299,
+        max: p.mag,
+        argmax: Some(123),
+        defects: 1,
+        ..Default::default()
+    };
+    cvm_core::protocol::encode_row(
+        &cvm_core::RowView {
+            summary,
+            scores: &row,
+            threshold: 1,
+        },
+        16,
+        false,
+        &mut sink,
+    );
+    let ls = lines(&sink.0);
+    assert_eq!(ls[0].len(), 36);
+    assert_eq!(ls[1].len(), 28);
+}
