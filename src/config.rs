@@ -97,7 +97,7 @@ pub mod h743 {
     /// SPI clock to the detector (the kernel clock divided by a power of two).
     pub const SPI_HZ: u32 = 50_000_000;
     const _: () = assert!(
-        SPI_KERNEL_HZ % SPI_HZ == 0
+        SPI_KERNEL_HZ.is_multiple_of(SPI_HZ)
             && (SPI_KERNEL_HZ / SPI_HZ).is_power_of_two()
             && SPI_KERNEL_HZ / SPI_HZ >= 2,
         "the SPI clock must be the kernel clock divided by a power of two (2..=256)"

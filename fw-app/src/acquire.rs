@@ -125,14 +125,15 @@ impl<const BUFS: usize, const LOG: usize> Acquisition<BUFS, LOG> {
     /// SPI must now read the frame into, or `None` when the frame is lost.
     pub fn drdy(&mut self, sync: bool) -> Option<usize> {
         self.counts.drdy = self.counts.drdy.wrapping_add(1);
-        if !self.spi_busy() && self.len + 2 <= LOG {
-            if let Some(buf) = self.bufs.iter().position(|b| *b == Buf::Free) {
-                self.bufs[buf] = Buf::Filling;
-                let at = self.slot(self.len);
-                self.log[at] = Slot::Filling { sync, buf };
-                self.len += 1;
-                return Some(buf);
-            }
+        if !self.spi_busy()
+            && self.len + 2 <= LOG
+            && let Some(buf) = self.bufs.iter().position(|b| *b == Buf::Free)
+        {
+            self.bufs[buf] = Buf::Filling;
+            let at = self.slot(self.len);
+            self.log[at] = Slot::Filling { sync, buf };
+            self.len += 1;
+            return Some(buf);
         }
         self.counts.overruns = self.counts.overruns.wrapping_add(1);
         self.push_lost(sync, LostCause::Overrun);
@@ -188,7 +189,7 @@ impl<const BUFS: usize, const LOG: usize> Acquisition<BUFS, LOG> {
     }
 
     /// The oldest beam record, once its frame (if any) is complete.
-    pub fn next(&mut self) -> Option<BeamRecord> {
+    pub fn take_next(&mut self) -> Option<BeamRecord> {
         if self.len == 0 {
             return None;
         }
@@ -204,10 +205,10 @@ impl<const BUFS: usize, const LOG: usize> Acquisition<BUFS, LOG> {
 
     /// The scoring side is done with `buf`.
     pub fn release(&mut self, buf: usize) {
-        if let Some(b) = self.bufs.get_mut(buf) {
-            if *b == Buf::Busy {
-                *b = Buf::Free;
-            }
+        if let Some(b) = self.bufs.get_mut(buf)
+            && *b == Buf::Busy
+        {
+            *b = Buf::Free;
         }
     }
 }

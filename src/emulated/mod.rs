@@ -220,7 +220,7 @@ async fn scan_task(syst: cortex_m::peripheral::SYST) {
 
     while beam < beams {
         // The "DRDY" of the next beam: LINE_SYNC on each row's first beam.
-        let sync = beam % u64::from(header.cols) == 0;
+        let sync = beam.is_multiple_of(u64::from(header.cols));
         let Some(buf) = acq.drdy(sync) else {
             fail(
                 EXIT_INTERNAL,
@@ -234,7 +234,7 @@ async fn scan_task(syst: cortex_m::peripheral::SYST) {
         }
         acq.read_done(buf, true);
         beam += 1;
-        while let Some(rec) = acq.next() {
+        while let Some(rec) = acq.take_next() {
             drain().await;
             let mut frames = Decoder {
                 bufs: &FRAMES,
@@ -276,7 +276,7 @@ async fn scan_task(syst: cortex_m::peripheral::SYST) {
     let seq = *driver.sequence_counts();
     let q = QUEUE.lock(|q| *q.borrow().counts());
     let instr = stopwatch.instructions();
-    let per_beam = if beam == 0 { 0 } else { instr / beam };
+    let per_beam = instr.checked_div(beam).unwrap_or(0);
     let mut err = Stderr::new();
     let _ = writeln!(
         err,

@@ -365,7 +365,7 @@ async fn score_task(
             let rec = if driver.busy() {
                 None
             } else {
-                ACQ.lock(|a| a.borrow_mut().next())
+                ACQ.lock(|a| a.borrow_mut().take_next())
             };
             if rec.is_none() && !driver.busy() {
                 break;

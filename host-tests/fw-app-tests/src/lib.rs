@@ -249,7 +249,7 @@ impl<'a, const CAP: usize> Board<'a, CAP> {
                 if taken == max_beams {
                     return;
                 }
-                let r = self.acq.next();
+                let r = self.acq.take_next();
                 if r.is_some() {
                     taken += 1;
                 }

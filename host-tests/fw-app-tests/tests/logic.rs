@@ -297,21 +297,21 @@ fn full_beam_log_folds_lost_beams_into_a_run() {
     assert_eq!(acq.counts().overruns, 5);
     assert_eq!(acq.counts().sync_folded, 1);
     assert_eq!(
-        acq.next(),
+        acq.take_next(),
         Some(BeamRecord::Frame {
             sync: true,
             buf: b0
         })
     );
     assert_eq!(
-        acq.next(),
+        acq.take_next(),
         Some(BeamRecord::Frame {
             sync: false,
             buf: b1
         })
     );
     assert_eq!(
-        acq.next(),
+        acq.take_next(),
         Some(BeamRecord::Lost {
             sync: false,
             cause: LostCause::Overrun,
@@ -319,14 +319,14 @@ fn full_beam_log_folds_lost_beams_into_a_run() {
         })
     );
     assert_eq!(
-        acq.next(),
+        acq.take_next(),
         Some(BeamRecord::Lost {
             sync: false,
             cause: LostCause::Overrun,
             run: 4
         })
     );
-    assert_eq!(acq.next(), None);
+    assert_eq!(acq.take_next(), None);
 }
 
 fn run(seq: &mut Sequencer<u32>, beams: &[(bool, Payload<u32>)]) -> Vec<Action<u32>> {
