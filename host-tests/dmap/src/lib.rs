@@ -1,12 +1,14 @@
 //! Library side of the `dmap` host toolkit: every subcommand's logic lives in
 //! a module here so that tests can call it without spawning the binary.
 
-pub mod npy;
-pub mod score;
-
-pub mod fixed;
-pub mod options;
+pub mod emulate;
 pub mod eval;
+pub mod fixed;
 pub mod font;
+pub mod listen;
+pub mod npy;
+pub mod options;
 pub mod render;
+pub mod score;
 pub mod simulate;
+pub mod stream;

@@ -10,6 +10,8 @@ struct Cli {
     command: Command,
 }
 
+// Parsed once per run: the size of the largest variant does not matter.
+#[allow(clippy::large_enum_variant)]
 #[derive(Subcommand)]
 enum Command {
     /// Gradient image (Eq. 1) of a scan under a distance: cvm, cvm-fixed, emd, mean-dir
@@ -20,6 +22,12 @@ enum Command {
     Render(dmap::render::RenderArgs),
     /// SNR, PSNR, CNR and defect sizes of a gradient image against a truth mask
     Eval(dmap::eval::EvalArgs),
+    /// Run the firmware's pipeline on the host and print its result lines
+    Stream(dmap::stream::StreamArgs),
+    /// Decode result lines (file, stdin or serial port) into a score image and a summary
+    Listen(dmap::listen::ListenArgs),
+    /// Run the firmware (emulated board, QEMU mps2-an386) over a scan and print its UART output
+    Emulate(dmap::emulate::EmulateArgs),
 }
 
 fn main() {
@@ -29,6 +37,9 @@ fn main() {
         Command::Simulate(args) => dmap::simulate::run(&args),
         Command::Render(args) => dmap::render::run(&args),
         Command::Eval(args) => dmap::eval::run(&args),
+        Command::Stream(args) => dmap::stream::run(&args),
+        Command::Listen(args) => dmap::listen::run(&args),
+        Command::Emulate(args) => dmap::emulate::run(&args),
     };
     if let Err(e) = result {
         // One line, no backtrace: users read this in a terminal or a CI log.
