@@ -103,13 +103,58 @@ impl Basis<'_> {
     }
 }
 
+/// Least-cost start: cells in order of increasing cost each take as much
+/// flow as their row and column still allow. Every allocation exhausts its
+/// row or its column, so the allocated cells form a forest; zero-flow cells
+/// (cheapest first) then join its trees into the spanning tree a basis needs.
+fn initial_basis(basis: &mut Basis, supply: &[f64], demand: &[f64]) {
+    let (m, n) = (basis.m, basis.n);
+    let mut order: Vec<usize> = (0..m * n).collect();
+    order.sort_unstable_by(|&a, &b| basis.cost[a].total_cmp(&basis.cost[b]));
+    let (mut s, mut d) = (supply.to_vec(), demand.to_vec());
+    let mut comp: Vec<usize> = (0..m + n).collect();
+    fn root(comp: &mut [usize], mut x: usize) -> usize {
+        while comp[x] != x {
+            comp[x] = comp[comp[x]];
+            x = comp[x];
+        }
+        x
+    }
+    let mut placed = 0;
+    for &c in &order {
+        let (i, j) = (c / n, c % n);
+        if s[i] > 0.0 && d[j] > 0.0 {
+            let x = s[i].min(d[j]);
+            s[i] -= x;
+            d[j] -= x;
+            basis.add(i, j, x);
+            let (a, b) = (root(&mut comp, i), root(&mut comp, m + j));
+            comp[a] = b;
+            placed += 1;
+        }
+    }
+    for &c in &order {
+        if placed == m + n - 1 {
+            break;
+        }
+        let (i, j) = (c / n, c % n);
+        let (a, b) = (root(&mut comp, i), root(&mut comp, m + j));
+        if a != b && !basis.basic[c] {
+            basis.add(i, j, 0.0);
+            comp[a] = b;
+            placed += 1;
+        }
+    }
+}
+
 /// Minimum of `sum_ij cost[i * n + j] * x_ij` over transport plans `x >= 0`
 /// with row sums `supply` and column sums `demand` (which must have equal
 /// totals up to rounding; masses non-negative, costs finite).
 ///
 /// Exact: the simplex stops at a basic optimal solution (no reduced cost
-/// below `-1e-12` of the largest cost). Starts from the north-west corner
-/// rule, prices with Dantzig's rule, and switches to Bland's rule for good
+/// below `-1e-12` of the largest cost). Starts from the least-cost rule,
+/// prices by block search (Dantzig's rule within blocks of about `sqrt(m n)`
+/// cells), and switches to Bland's rule for good
 /// after a run of degenerate pivots so that it cannot cycle. Should the
 /// iteration budget run out anyway, the result comes from the (slower)
 /// successive-shortest-path solver [`crate::min_cost_transport`].
@@ -141,26 +186,7 @@ pub fn transport_simplex_checked(supply: &[f64], demand: &[f64], cost: &[f64]) -
         basic: vec![false; m * n],
         adj: vec![Vec::new(); m + n],
     };
-    // North-west corner: walks from (0, 0) to (m-1, n-1) one step at a time,
-    // so it places exactly m + n - 1 cells forming a spanning tree.
-    let (mut s, mut d) = (supply.to_vec(), demand.to_vec());
-    let (mut i, mut j) = (0, 0);
-    loop {
-        let x = s[i].min(d[j]).max(0.0);
-        basis.add(i, j, x);
-        s[i] -= x;
-        d[j] -= x;
-        if i == m - 1 && j == n - 1 {
-            break;
-        }
-        if i == m - 1 {
-            j += 1;
-        } else if j == n - 1 || s[i] <= d[j] {
-            i += 1;
-        } else {
-            j += 1;
-        }
-    }
+    initial_basis(&mut basis, supply, demand);
 
     let cmax = cost.iter().fold(0.0f64, |a, &c| a.max(c.abs()));
     let tol = REDUCED_TOL * cmax.max(f64::MIN_POSITIVE);
@@ -169,27 +195,39 @@ pub fn transport_simplex_checked(supply: &[f64], demand: &[f64], cost: &[f64]) -
     let mut parent = vec![0; m + n];
     let mut stack = Vec::new();
     let mut bland = false;
+    let mut cursor = 0;
+    let block = (((m * n) as f64).sqrt() as usize).max(16);
     let mut degenerate_run = 0;
     let budget = 100 * (m + n) * (m + n) + 1000;
     for _ in 0..budget {
         basis.potentials(&mut u, &mut v, &mut stack, &mut seen);
-        let mut entering = None;
-        let mut best = -tol;
-        'pricing: for i in 0..m {
-            for j in 0..n {
-                if basis.basic[i * n + j] {
-                    continue;
-                }
-                let r = cost[i * n + j] - u[i] - v[j];
-                if r < best {
-                    entering = Some((i, j));
-                    if bland {
-                        break 'pricing;
+        let entering = if bland {
+            // Bland: the first improving cell in a fixed order.
+            (0..m * n)
+                .find(|&c| !basis.basic[c] && cost[c] - u[c / n] - v[c % n] < -tol)
+                .map(|c| (c / n, c % n))
+        } else {
+            // Block search: scan from where the last search stopped and take
+            // the best cell of the first block holding an improving one. A
+            // full round without one proves optimality.
+            let mut entering = None;
+            let mut best = -tol;
+            for scanned in 1..=m * n {
+                let c = cursor;
+                cursor = if cursor + 1 == m * n { 0 } else { cursor + 1 };
+                if !basis.basic[c] {
+                    let r = cost[c] - u[c / n] - v[c % n];
+                    if r < best {
+                        best = r;
+                        entering = Some((c / n, c % n));
                     }
-                    best = r;
+                }
+                if scanned % block == 0 && entering.is_some() {
+                    break;
                 }
             }
-        }
+            entering
+        };
         let Some((ei, ej)) = entering else {
             return Some(basis.flow.iter().zip(cost).map(|(x, c)| x * c).sum());
         };

@@ -201,6 +201,30 @@ fn degenerate_problems_reach_the_optimum() {
     assert_eq!(min_cost_transport(&supply, &demand, &cost), 0.5 * n as f64);
 }
 
+/// Assignment problems (unit supplies and demands, integer costs) are as
+/// degenerate as transport gets: half the basic cells carry zero flow.
+#[test]
+fn random_assignment_problems_match_independent_solver() {
+    let mut state = 0x9e37_79b9_7f4a_7c15u64;
+    let mut next = |k: u64| {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        state % k
+    };
+    for trial in 0..200 {
+        let n = 2 + (trial % 14);
+        let ones = vec![1.0; n];
+        let cost: Vec<f64> = (0..n * n).map(|_| next(5) as f64).collect();
+        let fast = transport_simplex_checked(&ones, &ones, &cost).expect("within budget");
+        let slow = min_cost_transport(&ones, &ones, &cost);
+        assert!(
+            close(fast, slow, 1e-12, 1e-12),
+            "trial {trial}: {fast} vs {slow}"
+        );
+    }
+}
+
 #[test]
 fn mean_direction_hand_values() {
     let g = Geometry::new(3, 4).unwrap();
