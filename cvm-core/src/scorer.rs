@@ -35,7 +35,7 @@
 //! maps, so a score never exceeds `u32` and a magnitude of two scores never
 //! exceeds `u32` either.
 
-use crate::config::{Config, ConfigError, Geometry, Kernels, MAX_CELLS, MAX_J};
+use crate::config::{Config, ConfigError, Geometry, Kernels, MAX_J};
 use crate::flags;
 use crate::tables::{
     axis_kernel, axis_weights, cholesky_psd, norms, pow2, quantise, sqrt, weight_sum,
@@ -63,7 +63,8 @@ pub struct Scorer {
     /// Input format `Q(f)`.
     frac: i32,
     r1: [[i32; MAX_J]; MAX_J],
-    r2: [[i32; MAX_J]; MAX_J],
+    /// `R2` transposed: `r2t[l][k] = R2[k][l]`, zero outside `J2 x J2`.
+    r2t: [[i32; MAX_J]; MAX_J],
     p1: u32,
     p2: u32,
     /// Extra right shift of the embedding: `E` is in `Q(f - e_shift)`.
@@ -199,7 +200,7 @@ impl Scorer {
             kind,
             frac: f,
             r1,
-            r2,
+            r2t: transpose(&r2),
             p1,
             p2,
             e_shift,
@@ -251,8 +252,8 @@ impl Scorer {
         }
     }
 
-    /// Normalises `frame` (Eq. 5) into `x` in `Q(f)` and returns its flags
-    /// ([`flags::DARK`], [`flags::SATURATED`]).
+    /// Normalises `frame` (Eq. 5) into `x` (`J1 * J2` values, row-major) in
+    /// `Q(f)` and returns its flags ([`flags::DARK`], [`flags::SATURATED`]).
     pub fn normalise(&self, frame: &[u16], x: &mut [i32]) -> Result<u8, FrameError> {
         let n = self.cells();
         let (Some(frame), Some(x)) = (frame.get(..n), x.get_mut(..n)) else {
@@ -261,94 +262,137 @@ impl Scorer {
         if frame.len() != n {
             return Err(FrameError::Length);
         }
+        let (fl, conv) = self.converter(frame);
+        match conv {
+            Conv::Zero => x.fill(0),
+            Conv::Recip(r) => fill(x, frame, |a| recip_sample(a, r)),
+            Conv::Shl(s) => fill(x, frame, |a| (a as i32) << s),
+            Conv::Shr(s) => fill(x, frame, |a| shr_sample(a, s)),
+        }
+        Ok(fl)
+    }
+
+    /// Flags of a frame and how its samples become `Q(f)` values.
+    fn converter(&self, frame: &[u16]) -> (u8, Conv) {
         let mut fl = 0;
         let mut sum: u32 = 0;
+        let mut peak: u16 = 0;
         for &a in frame {
             // At most 256 * 65535 < 2^24: no overflow.
             sum += a as u32;
-            if a >= self.config.full_scale {
-                fl |= flags::SATURATED;
-            }
+            peak = peak.max(a);
+        }
+        if peak >= self.config.full_scale {
+            fl |= flags::SATURATED;
         }
         if sum == 0 {
             fl |= flags::DARK;
         }
-        if self.config.normalise {
+        let conv = if self.config.normalise {
             if sum == 0 {
-                x.fill(0);
+                Conv::Zero
             } else {
-                // x = round(a * 2^f / S) through one reciprocal per map;
-                // a <= S, so a * recip + 2^31 <= 2^(32+f) + 2^31 < 2^57.
-                // Rounding (not truncating) keeps Σx within N/2 of 2^f
-                // instead of biasing every map's mass low.
-                let recip = (1u64 << (32 + self.frac as u32)) / sum as u64;
-                for (xv, &a) in x.iter_mut().zip(frame) {
-                    *xv = ((a as u64 * recip + (1 << 31)) >> 32) as i32;
-                }
+                // One division per map, then a multiply per sample.
+                Conv::Recip((1u64 << (32 + self.frac as u32)) / sum as u64)
             }
         } else if self.frac >= 0 {
-            let s = self.frac as u32;
-            for (xv, &a) in x.iter_mut().zip(frame) {
-                *xv = (a as i32) << s;
-            }
+            Conv::Shl(self.frac as u32)
         } else {
-            let s = (-self.frac) as u32;
-            let half = 1i32 << (s - 1);
-            for (xv, &a) in x.iter_mut().zip(frame) {
-                *xv = (a as i32 + half) >> s;
-            }
-        }
-        Ok(fl)
+            Conv::Shr((-self.frac) as u32)
+        };
+        (fl, conv)
     }
 
     /// Normalises and embeds one raw frame into `state` (`J1 * J2` words):
     /// the per-map work, done once per beam. Returns the map's flags.
     pub fn prepare(&self, frame: &[u16], state: &mut [i32]) -> Result<u8, FrameError> {
+        self.prepare_with(frame, state, &mut Scratch::new())
+    }
+
+    /// [`Scorer::prepare`] with caller-owned scratch space, so that the
+    /// per-beam path does not clear 2 KiB of stack for every map.
+    pub fn prepare_with(
+        &self,
+        frame: &[u16],
+        state: &mut [i32],
+        scratch: &mut Scratch,
+    ) -> Result<u8, FrameError> {
         let n = self.cells();
+        if frame.len() != n {
+            return Err(FrameError::Length);
+        }
         let Some(state) = state.get_mut(..n) else {
             return Err(FrameError::Length);
         };
         match self.kind {
             Kind::Square { .. } => self.normalise(frame, state),
             Kind::Paper => {
-                let mut x = [0i32; MAX_CELLS];
-                let fl = self.normalise(frame, &mut x)?;
-                self.embed(&x, state);
+                let (fl, conv) = self.converter(frame);
+                let j2 = (self.config.geometry.j2 as usize).max(1);
+                let x = &mut scratch.x;
+                match conv {
+                    Conv::Zero => x.iter_mut().for_each(|r| r.fill(0)),
+                    Conv::Recip(r) => fill_rows(x, frame, j2, |a| recip_sample(a, r)),
+                    Conv::Shl(s) => fill_rows(x, frame, j2, |a| (a as i32) << s),
+                    Conv::Shr(s) => fill_rows(x, frame, j2, |a| shr_sample(a, s)),
+                }
+                self.embed(scratch, state);
                 Ok(fl)
             }
         }
     }
 
     /// `E = R1 x R2ᵀ`, exploiting that both factors are upper triangular.
-    fn embed(&self, x: &[i32], e: &mut [i32]) {
-        let j2 = self.config.geometry.j2 as usize;
-        let j1 = self.config.geometry.j1 as usize;
-        let mut t = [0i32; MAX_CELLS];
-        // Row pass: T[i][k] = Σ_{l>=k} x[i][l] R2[k][l].
-        for (xrow, trow) in x.chunks_exact(j2).zip(t.chunks_exact_mut(j2)).take(j1) {
-            for (k, (tv, r2row)) in trow.iter_mut().zip(self.r2.iter()).enumerate() {
-                let mut acc: i64 = 0;
-                for (&xv, &rv) in xrow.iter().zip(r2row.iter()).skip(k) {
-                    acc += xv as i64 * rv as i64;
+    ///
+    /// Outputs are computed in pairs of neighbouring columns so that each
+    /// loaded coefficient serves two multiply-accumulates (`SMLAL` on the
+    /// Cortex-M) and the pair's operands sit next to each other in memory.
+    /// The padding column of an odd `J2` is computed too (from zero
+    /// coefficients, so it is 0) and never stored in `E`.
+    fn embed(&self, scratch: &mut Scratch, e: &mut [i32]) {
+        let j1 = (self.config.geometry.j1 as usize).min(MAX_J);
+        let j2 = (self.config.geometry.j2 as usize).clamp(1, MAX_J);
+        let Scratch { x, t } = scratch;
+        // Row pass: T[i][k] = Σ_{l>=k} x[i][l] R2[k][l] = Σ_{l>=k} x[i][l] R2ᵀ[l][k].
+        for (xr, tr) in x.iter().zip(t.iter_mut()).take(j1) {
+            for kp in (0..j2).step_by(2) {
+                let k = kp & (MAX_J - 2);
+                let (mut a0, mut a1) = (0i64, 0i64);
+                let (Some(xs), Some(rs)) = (xr.get(k..j2), self.r2t.get(k..j2)) else {
+                    continue;
+                };
+                for (&xv, rr) in xs.iter().zip(rs) {
+                    a0 += xv as i64 * rr[k] as i64;
+                    a1 += xv as i64 * rr[k + 1] as i64;
                 }
-                *tv = round_shift(acc, self.p2) as i32;
+                tr[k] = round_shift(a0, self.p2) as i32;
+                tr[k + 1] = round_shift(a1, self.p2) as i32;
             }
         }
-        // Column pass: E[i][k] = Σ_{l>=i} R1[i][l] T[l][k], accumulated row-wise.
-        for (i, (erow, r1row)) in e
+        // Column pass: E[i][k] = Σ_{l>=i} R1[i][l] T[l][k].
+        let shift = self.p1 + self.e_shift;
+        for (i, (er, r1r)) in e
             .chunks_exact_mut(j2)
             .zip(self.r1.iter())
             .take(j1)
             .enumerate()
         {
-            let mut acc = [0i64; MAX_J];
-            for (&c, trow) in r1row.iter().zip(t.chunks_exact(j2)).take(j1).skip(i) {
-                for (a, &tv) in acc.iter_mut().zip(trow) {
-                    *a += c as i64 * tv as i64;
+            let (Some(rs), Some(ts)) = (r1r.get(i..j1), t.get(i..j1)) else {
+                continue;
+            };
+            for kp in (0..j2).step_by(2) {
+                let k = kp & (MAX_J - 2);
+                let (mut a0, mut a1) = (0i64, 0i64);
+                for (&r, tr) in rs.iter().zip(ts) {
+                    a0 += r as i64 * tr[k] as i64;
+                    a1 += r as i64 * tr[k + 1] as i64;
                 }
-            }
-            for (ev, &a) in erow.iter_mut().zip(acc.iter()) {
-                *ev = round_shift(a, self.p1 + self.e_shift) as i32;
+                if let Some(v) = er.get_mut(k) {
+                    *v = round_shift(a0, shift) as i32;
+                }
+                if let Some(v) = er.get_mut(k + 1) {
+                    *v = round_shift(a1, shift) as i32;
+                }
             }
         }
     }
@@ -437,6 +481,84 @@ impl Scorer {
             v as u32
         }
     }
+}
+
+/// How samples become `Q(f)` values for one frame.
+#[derive(Clone, Copy)]
+enum Conv {
+    /// A dark map, normalised: all zero.
+    Zero,
+    /// Normalised: `round(a * recip / 2^32)`, `recip = floor(2^(32+f) / Σa)`.
+    Recip(u64),
+    /// Raw, `f >= 0`: `a << f`.
+    Shl(u32),
+    /// Raw, `f < 0`: `round(a / 2^-f)`.
+    Shr(u32),
+}
+
+/// `round(a * 2^f / S)`: `a <= S`, so `a * recip + 2^31 <= 2^(32+f) + 2^31 < 2^57`.
+/// Rounding (not truncating) keeps `Σx` within `N/2` of `2^f` instead of
+/// biasing every map's mass low.
+#[inline(always)]
+fn recip_sample(a: u16, recip: u64) -> i32 {
+    ((a as u64 * recip + (1 << 31)) >> 32) as i32
+}
+
+#[inline(always)]
+fn shr_sample(a: u16, s: u32) -> i32 {
+    (a as i32 + (1i32 << (s - 1))) >> s
+}
+
+#[inline(always)]
+fn fill(x: &mut [i32], frame: &[u16], f: impl Fn(u16) -> i32) {
+    for (xv, &a) in x.iter_mut().zip(frame) {
+        *xv = f(a);
+    }
+}
+
+/// Row-major frame into the padded `MAX_J`-stride scratch.
+#[inline(always)]
+fn fill_rows(x: &mut [[i32; MAX_J]; MAX_J], frame: &[u16], j2: usize, f: impl Fn(u16) -> i32) {
+    for (xr, fr) in x.iter_mut().zip(frame.chunks_exact(j2)) {
+        fill(xr, fr, &f);
+    }
+}
+
+/// Scratch space of the embedding (the input map and the row pass), in a
+/// fixed `MAX_J` stride so that the inner loops need no index arithmetic.
+#[derive(Clone)]
+pub struct Scratch {
+    x: [[i32; MAX_J]; MAX_J],
+    t: [[i32; MAX_J]; MAX_J],
+}
+
+impl Scratch {
+    pub const fn new() -> Self {
+        Scratch {
+            x: [[0; MAX_J]; MAX_J],
+            t: [[0; MAX_J]; MAX_J],
+        }
+    }
+}
+
+impl Default for Scratch {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+const fn transpose(r: &[[i32; MAX_J]; MAX_J]) -> [[i32; MAX_J]; MAX_J] {
+    let mut t = [[0; MAX_J]; MAX_J];
+    let mut i = 0;
+    while i < MAX_J {
+        let mut l = 0;
+        while l < MAX_J {
+            t[l][i] = r[i][l];
+            l += 1;
+        }
+        i += 1;
+    }
+    t
 }
 
 /// `round(acc / 2^p)`, half up, for `p >= 1` (p = 0 is the identity).

@@ -24,7 +24,7 @@
 
 use crate::config::MAX_CELLS;
 use crate::flags;
-use crate::scorer::{Scorer, magnitude};
+use crate::scorer::{Scorer, Scratch, magnitude};
 
 /// Scan position of a beam: `row = m2 - 1`, `col = m1 - 1`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -148,6 +148,9 @@ pub struct Engine<'a, const MAX_COLS: usize> {
     next_col: usize,
     pending: Option<u32>,
     totals: Totals,
+    /// The map in flight, prepared before it replaces the slot it needs.
+    fresh: [i32; MAX_CELLS],
+    scratch: Scratch,
 }
 
 impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
@@ -180,6 +183,8 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
             next_col: 0,
             pending: None,
             totals: Totals::default(),
+            fresh: [0; MAX_CELLS],
+            scratch: Scratch::new(),
         })
     }
 
@@ -323,8 +328,10 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
         let Some(r) = self.current else { return };
         let c = self.next_col;
         let b = (r % 2) as usize;
-        let mut state = [0i32; MAX_CELLS];
-        let own = match frame.map(|f| self.scorer.prepare(f, &mut state)) {
+        let own = match frame.map(|f| {
+            self.scorer
+                .prepare_with(f, &mut self.fresh, &mut self.scratch)
+        }) {
             Some(Ok(fl)) => {
                 self.totals.frames += 1;
                 if fl & flags::DARK != 0 {
@@ -340,7 +347,7 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
                 flags::NO_DATA
             }
         };
-        let state = state.get(..self.cells).unwrap_or(&[]);
+        let state = self.fresh.get(..self.cells).unwrap_or(&[]);
 
         // Vertical component of (r-1, c): slot c still holds (r-2, c).
         if self.pending.is_some() {
