@@ -4,7 +4,11 @@
 use clap::{Parser, Subcommand};
 
 #[derive(Parser)]
-#[command(name = "dmap", version, about = "Deflection-map defect scoring toolkit")]
+#[command(
+    name = "dmap",
+    version,
+    about = "Deflection-map defect scoring toolkit"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
