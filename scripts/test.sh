@@ -24,4 +24,11 @@ step "host: lints"
 (cd host-tests && cargo clippy --workspace --all-targets -- -D warnings)
 
 step "host: tests"
-(cd host-tests && cargo test --workspace)
+log=$(mktemp)
+trap 'rm -f "$log"' EXIT
+(cd host-tests && cargo test --workspace 2>&1) | tee "$log"
+
+# One closing line over every test binary (cargo prints one per binary, the
+# last of which is often an empty doc-test run).
+awk '/^test result:/ { for (i = 1; i <= NF; i++) { if ($(i+1) ~ /^passed/) p += $i; if ($(i+1) ~ /^failed/) f += $i } }
+     END { printf "\ntests: %d passed, %d failed\n", p, f }' "$log"
