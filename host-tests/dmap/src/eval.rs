@@ -158,6 +158,8 @@ pub struct DefectSize {
     pub truth: (usize, usize),
     pub estimated: (usize, usize),
     pub above: usize,
+    /// Largest finite score within the searched neighbourhood (NaN if none).
+    pub peak: f64,
 }
 
 pub fn defect_sizes(
@@ -183,6 +185,10 @@ pub fn defect_sizes(
                 .filter(|&i| near[i] && values[i] > threshold)
                 .map(|i| (i / cols, i % cols))
                 .collect();
+            let peak = (0..values.len())
+                .filter(|&i| near[i] && !values[i].is_nan())
+                .map(|i| values[i])
+                .fold(f64::NAN, f64::max);
             let (th, tw) = extent(&comp);
             let (eh, ew) = extent(&hits);
             DefectSize {
@@ -190,6 +196,7 @@ pub fn defect_sizes(
                 truth: (tw, th),
                 estimated: (ew, eh),
                 above: hits.len(),
+                peak,
             }
         })
         .collect()
@@ -293,17 +300,19 @@ pub fn run(a: &EvalArgs) -> Result<()> {
         a.dilate, a.pitch_um
     );
     println!(
-        "{:<7}{:<14}{:<18}{:<18}above",
-        "defect", "first (r,c)", "truth w x h mm", "estimated mm"
+        "{:<7}{:<14}{:<18}{:<18}{:<7}{:<12}(peak-mean)/std",
+        "defect", "first (r,c)", "truth w x h mm", "estimated mm", "above", "peak"
     );
     for (i, d) in sizes.iter().enumerate() {
         println!(
-            "{:<7}{:<14}{:<18}{:<18}{}",
+            "{:<7}{:<14}{:<18}{:<18}{:<7}{:<12}{}",
             i + 1,
             format!("({},{})", d.first.0, d.first.1),
             format!("{:.2} x {:.2}", mm(d.truth.0), mm(d.truth.1)),
             format!("{:.2} x {:.2}", mm(d.estimated.0), mm(d.estimated.1)),
-            d.above
+            d.above,
+            fmt(d.peak),
+            fmt((d.peak - m.mean_free) / m.std_free)
         );
     }
     Ok(())

@@ -42,6 +42,9 @@ pub struct RenderArgs {
     /// One colour scale for all panels instead of one each
     #[arg(long)]
     pub shared: bool,
+    /// Draw only rows R0..R0+H and columns C0..C0+W of every input
+    #[arg(long, value_name = "R0,C0,H,W")]
+    pub crop: Option<String>,
     /// Pixels per scan position (default: about 400 pixels per panel side)
     #[arg(long)]
     pub scale: Option<usize>,
@@ -318,6 +321,30 @@ pub fn load_panel(path: &Path, channel: usize, title: String) -> Result<Panel> {
     })
 }
 
+/// The part of a panel at rows r0..r0+h, columns c0..c0+w.
+pub fn crop_panel(p: &Panel, (r0, c0, h, w): (usize, usize, usize, usize)) -> Result<Panel> {
+    if r0 + h > p.rows || c0 + w > p.cols {
+        bail!(
+            "--crop {r0},{c0},{h},{w} exceeds the {}x{} image",
+            p.rows,
+            p.cols
+        );
+    }
+    let values = (r0..r0 + h)
+        .flat_map(|r| {
+            p.values[r * p.cols + c0..r * p.cols + c0 + w]
+                .iter()
+                .copied()
+        })
+        .collect();
+    Ok(Panel {
+        rows: h,
+        cols: w,
+        values,
+        title: p.title.clone(),
+    })
+}
+
 pub fn run(a: &RenderArgs) -> Result<()> {
     let titles: Vec<String> = match &a.titles {
         Some(t) => {
@@ -349,11 +376,31 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     if a.log && (a.vmin.is_some_and(|v| v <= 0.0) || a.vmax.is_some_and(|v| v <= 0.0)) {
         bail!("--log needs positive --vmin/--vmax");
     }
+    let crop = match &a.crop {
+        None => None,
+        Some(c) => {
+            let v: Vec<usize> = c
+                .split(',')
+                .map(|t| t.trim().parse::<usize>())
+                .collect::<std::result::Result<_, _>>()
+                .map_err(|_| anyhow::anyhow!("--crop {c:?}: expected R0,C0,H,W"))?;
+            if v.len() != 4 || v[2] == 0 || v[3] == 0 {
+                bail!("--crop {c:?}: expected R0,C0,H,W with H, W >= 1");
+            }
+            Some((v[0], v[1], v[2], v[3]))
+        }
+    };
     let panels = a
         .inputs
         .iter()
         .zip(titles)
-        .map(|(p, t)| load_panel(p, a.channel, t))
+        .map(|(p, t)| {
+            let panel = load_panel(p, a.channel, t)?;
+            match crop {
+                Some(c) => crop_panel(&panel, c).with_context(|| p.display().to_string()),
+                None => Ok(panel),
+            }
+        })
         .collect::<Result<Vec<_>>>()?;
     let im = render(
         &panels,
@@ -422,6 +469,19 @@ mod tests {
         assert_eq!(label(0.012345), "0.01235");
         assert_eq!(label(0.00012), "1.20E-4");
         assert_eq!(label(-2.0), "-2");
+    }
+
+    #[test]
+    fn crop_keeps_the_asked_window() {
+        let p = Panel {
+            rows: 3,
+            cols: 4,
+            values: (0..12).map(f64::from).collect(),
+            title: "T".into(),
+        };
+        let c = crop_panel(&p, (1, 2, 2, 2)).unwrap();
+        assert_eq!(c.values, vec![6.0, 7.0, 10.0, 11.0]);
+        assert!(crop_panel(&p, (2, 0, 2, 1)).is_err());
     }
 
     #[test]
