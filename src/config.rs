@@ -87,7 +87,7 @@ pub mod h743 {
     };
 
     /// Defect threshold on the gradient magnitude, in `dmap` units.
-    pub const THRESHOLD_UNITS: f64 = 0.05;
+    pub const THRESHOLD_UNITS: f64 = 0.5;
     /// Emit per-position score lines (dropped first when the UART lags).
     pub const SCORES: bool = true;
 
