@@ -1,6 +1,7 @@
 //! Library side of the `dmap` host toolkit: every subcommand's logic lives in
 //! a module here so that tests can call it without spawning the binary.
 
+pub mod bench;
 pub mod emulate;
 pub mod eval;
 pub mod fixed;

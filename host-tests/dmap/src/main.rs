@@ -32,6 +32,8 @@ enum Command {
     Listen(dmap::listen::ListenArgs),
     /// Run the firmware (emulated board, QEMU mps2-an386) over a scan and print its UART output
     Emulate(dmap::emulate::EmulateArgs),
+    /// Maps scored per second by each implementation (f64 brute/SAT/embedding, fixed point, EMD), one thread
+    Bench(dmap::bench::BenchArgs),
 }
 
 fn main() {
@@ -44,6 +46,7 @@ fn main() {
         Command::Stream(args) => dmap::stream::run(&args),
         Command::Listen(args) => dmap::listen::run(&args),
         Command::Emulate(args) => dmap::emulate::run(&args),
+        Command::Bench(args) => dmap::bench::run(&args),
     };
     if let Err(e) = result {
         // One line, no backtrace: users read this in a terminal or a CI log.
