@@ -37,7 +37,29 @@ enum Command {
 }
 
 fn main() {
-    let cli = Cli::parse();
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        // --help, --version, or no subcommand at all: clap's own text.
+        Err(e)
+            if !e.use_stderr()
+                || e.kind() == clap::error::ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand =>
+        {
+            e.exit()
+        }
+        Err(e) => {
+            // One line like every other error; clap's full usage text is
+            // one `--help` away.
+            let text = e.to_string();
+            let what: Vec<&str> = text
+                .lines()
+                .take_while(|l| !l.starts_with("Usage:"))
+                .map(|l| l.trim().trim_start_matches("error: "))
+                .filter(|l| !l.is_empty())
+                .collect();
+            eprintln!("dmap: error: {} (see dmap --help)", what.join(" "));
+            std::process::exit(2);
+        }
+    };
     let result: anyhow::Result<()> = match cli.command {
         Command::Score(args) => dmap::score::run(&args),
         Command::Simulate(args) => dmap::simulate::run(&args),
