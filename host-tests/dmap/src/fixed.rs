@@ -7,6 +7,10 @@ use cvm_core::{PositionScore, Scorer, flags, magnitude};
 
 /// Scores every position of a `rows x cols` scan of `u16` maps (raster
 /// order, `cells` samples per map), with the border rule of design.md §3.
+///
+/// # Panics
+/// If `data` does not hold `rows * cols` maps: callers pass a scan that
+/// [`crate::npy`] has read and checked.
 pub fn score_scan(scorer: &Scorer, rows: usize, cols: usize, data: &[u16]) -> Vec<PositionScore> {
     let n = scorer.cells();
     assert_eq!(
