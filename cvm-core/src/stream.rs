@@ -140,10 +140,13 @@ pub struct Engine<'a, const MAX_COLS: usize> {
     bufs: [&'a mut [i32]; 2],
     /// Flags of each slot of each buffer; `NO_DATA` where no state is held.
     meta: [[u8; MAX_COLS]; 2],
-    /// Row being received (`g0` filled as beams arrive).
-    cur: [PositionScore; MAX_COLS],
-    /// Previous row (`g0` final, `g1` filled as the current row arrives).
-    prev: [PositionScore; MAX_COLS],
+    /// Results of two rows: `results[cur]` is the row being received (`g0`
+    /// filled as beams arrive), the other one the previous row (`g0` final,
+    /// `g1` filled as the current row arrives). A finished row changes
+    /// their roles instead of copying `MAX_COLS` scores.
+    results: [[PositionScore; MAX_COLS]; 2],
+    /// Index (0 or 1) of the row being received in `results`.
+    cur: usize,
     current: Option<u32>,
     next_col: usize,
     pending: Option<u32>,
@@ -177,8 +180,8 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
             threshold,
             bufs: [row_a, row_b],
             meta: [[flags::NO_DATA; MAX_COLS]; 2],
-            cur: [PositionScore::default(); MAX_COLS],
-            prev: [PositionScore::default(); MAX_COLS],
+            results: [[PositionScore::default(); MAX_COLS]; 2],
+            cur: 0,
             current: None,
             next_col: 0,
             pending: None,
@@ -241,7 +244,7 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
                 } else {
                     0
                 };
-                if let Some(s) = self.prev.get_mut(c) {
+                if let Some(s) = self.prev_row().get_mut(c) {
                     s.g1 = g1;
                 }
             }
@@ -313,6 +316,14 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
         outcome
     }
 
+    fn cur_row(&mut self) -> &mut [PositionScore; MAX_COLS] {
+        &mut self.results[self.cur & 1]
+    }
+
+    fn prev_row(&mut self) -> &mut [PositionScore; MAX_COLS] {
+        &mut self.results[(self.cur ^ 1) & 1]
+    }
+
     fn slot(&self, buf: usize, col: usize) -> &[i32] {
         let start = col * self.cells;
         self.bufs
@@ -361,7 +372,7 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
                     (false, true) => self.scorer.distance(self.slot(1 - b, c), state),
                     (false, false) => 0,
                 };
-                if let Some(s) = self.prev.get_mut(c) {
+                if let Some(s) = self.results[(self.cur ^ 1) & 1].get_mut(c) {
                     s.g1 = g1;
                 }
             }
@@ -377,7 +388,7 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
         if let Some(m) = self.meta[b].get_mut(c) {
             *m = own;
         }
-        if let Some(s) = self.cur.get_mut(c) {
+        if let Some(s) = self.cur_row().get_mut(c) {
             *s = PositionScore {
                 flags: own,
                 ..PositionScore::default()
@@ -413,7 +424,7 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
             self.scorer
                 .distance(self.slot(b, left), self.slot(b, right))
         };
-        if let Some(s) = self.cur.get_mut(c) {
+        if let Some(s) = self.cur_row().get_mut(c) {
             s.g0 = g0;
         }
     }
@@ -431,7 +442,7 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
         if let Some(p) = self.pending {
             self.emit_prev(p, out);
         }
-        self.prev = self.cur;
+        self.cur ^= 1;
         self.pending = Some(r);
         self.current = None;
         self.next_col = 0;
@@ -443,7 +454,11 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
             row,
             ..RowSummary::default()
         };
-        for (c, s) in self.prev.iter_mut().take(self.cols).enumerate() {
+        for (c, s) in self.results[(self.cur ^ 1) & 1]
+            .iter_mut()
+            .take(self.cols)
+            .enumerate()
+        {
             if s.flags & flags::NO_DATA != 0 {
                 *s = PositionScore {
                     flags: s.flags,
@@ -475,7 +490,9 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
         self.totals.rows += 1;
         let view = RowView {
             summary: sum,
-            scores: self.prev.get(..self.cols).unwrap_or(&[]),
+            scores: self.results[(self.cur ^ 1) & 1]
+                .get(..self.cols)
+                .unwrap_or(&[]),
             threshold: self.threshold,
         };
         out(&view);
