@@ -153,7 +153,7 @@ pub fn synthetic_scan(j1: usize, j2: usize, rows: usize, cols: usize, seed: u64)
             let (rf, cf) = (r as f64, c as f64);
             let cy = (j1 as f64 - 1.0) * (0.5 + 0.2 * (0.11 * cf + 0.07 * rf).sin());
             let cx = (j2 as f64 - 1.0) * (0.5 + 0.2 * (0.09 * cf - 0.05 * rf).cos());
-            let scatter = key % 30 == 0;
+            let scatter = key.is_multiple_of(30);
             let (sigma, peak) = if scatter {
                 (2.5, 4_000.0)
             } else {
