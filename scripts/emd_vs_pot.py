@@ -14,11 +14,16 @@ Usage (from the repository root): python3 scripts/emd_vs_pot.py [--pairs N] [--s
 import argparse
 import pathlib
 import subprocess
+import sys
 import tempfile
 import time
 
-import numpy as np
-import ot
+try:
+    import numpy as np
+    import ot
+except ImportError as e:
+    missing = {"ot": "POT (module ot)", "numpy": "numpy"}.get(e.name, e.name or "numpy or POT")
+    sys.exit(f"emd_vs_pot.py: {missing} is not installed; install both with `pip install numpy pot`")
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 HOST = ROOT / "host-tests"
