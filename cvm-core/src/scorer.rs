@@ -37,9 +37,7 @@
 
 use crate::config::{Config, ConfigError, Geometry, Kernels, MAX_J};
 use crate::flags;
-use crate::tables::{
-    axis_kernel, axis_weights, cholesky_psd, norms, pow2, quantise, sqrt, weight_sum,
-};
+use crate::tables::{axis_kernel, axis_weights, norms, pow2, sqrt, weight_sum};
 
 /// Why a frame could not be scored.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -62,23 +60,37 @@ pub struct Scorer {
     kind: Kind,
     /// Input format `Q(f)`.
     frac: i32,
-    r1: [[i32; MAX_J]; MAX_J],
-    /// `R2` transposed: `r2t[l][k] = R2[k][l]`, zero outside `J2 x J2`.
-    r2t: [[i32; MAX_J]; MAX_J],
-    p1: u32,
-    p2: u32,
-    /// Extra right shift of the embedding: `E` is in `Q(f - e_shift)`.
-    e_shift: u32,
+    /// Folded factors of axis 1 and axis 2 (paper kernels), in `Q(p1)`, `Q(p2)`.
+    f1: Factor,
+    f2: Factor,
+    /// Embedding format `Q(f + p1 + p2 - 64)` (paper kernels; `f` for square).
+    e_frac: i32,
+    /// `2^(32+f)`: numerator of the per-map scale of normalised maps.
+    scale_num: f32,
     /// Score format `Q(q)`.
     q: i32,
 }
 
-/// Finest input format tried; `2^(32+f)` must fit the reciprocal's `u64`.
+mod embed;
+
+pub use embed::{Factor, MAX_H, TRI};
+use embed::{RealFactor, precision, quantise, real_factor, saturation_offset};
+
+/// Finest input format tried for square kernels; `2^(32+f)` must fit the
+/// reciprocal's `u64`.
 const MAX_FRAC: i32 = 24;
+/// Finest input format of normalised maps with paper kernels: the per-map
+/// multiplier `2^(32+f) / S'` (`S' >= 2^30`) must stay below `2^31`.
+const MAX_FRAC_NORM: i32 = 28;
+/// Finest input format of raw maps with paper kernels: `v << (f + 2)` of a
+/// folded count `|v| < 2^18` must stay below `2^31`.
+const MAX_FRAC_RAW: i32 = 11;
+/// Relative error bound of the `f32` per-map multiplier (two roundings and
+/// a truncation, each below `2^-23` relative... with margin).
+const SCALE_SLACK: f64 = 1.0 / 1048576.0; // 2^-20
 const I31: f64 = 2147483647.0;
 const LIMIT_E: f64 = 1073741823.0; // 2^30 - 1
-const LIMIT_ACC: f64 = (1u64 << 62) as f64;
-/// For the `u64` accumulator of square kernels.
+/// `2^63`: the `i64`/`u64` accumulators.
 const LIMIT_SQUARE: f64 = (1u64 << 63) as f64;
 
 impl Scorer {
@@ -114,74 +126,50 @@ impl Scorer {
             return Err(ConfigError::Weights);
         }
 
-        let (r1, p1, r2, p2, rb1, rb2) = match kind {
-            Kind::Paper => {
-                let (r1, p1) = quantise(&cholesky_psd(&axis_kernel(j1, &w1, n1), j1), j1);
-                let (r2, p2) = quantise(&cholesky_psd(&axis_kernel(j2, &w2, n2), j2), j2);
-                let b1 = norms(&dequantise(&r1, p1), j1);
-                let b2 = norms(&dequantise(&r2, p2), j2);
-                (r1, p1, r2, p2, b1, b2)
-            }
-            Kind::Square { .. } => (
-                [[0; MAX_J]; MAX_J],
-                0,
-                [[0; MAX_J]; MAX_J],
-                0,
-                (0.0, 0.0, 0.0),
-                (0.0, 0.0, 0.0),
-            ),
+        let empty = Factor {
+            h: 0,
+            g: 0,
+            even: [0; TRI],
+            odd: [0; TRI],
         };
-
-        // Largest input format whose accumulators provably stay in range.
-        let mut f: i32 = MAX_FRAC;
-        loop {
-            if f < -16 {
-                return Err(ConfigError::Range);
-            }
-            let scale = pow2(f);
-            let cell = 65535.0 * scale + 1.0;
-            let xsum = if cfg.normalise { scale + n } else { n * cell };
-            let xmax = if cfg.normalise { scale } else { cell };
-            let ok = xmax < I31
-                && match kind {
-                    Kind::Paper => {
-                        let t = xsum * rb2.0 + 1.0;
-                        xsum * 1073741824.0 < LIMIT_ACC && t < I31
-                    }
-                    Kind::Square { kmax } => {
-                        let box_max = 2.0 * xsum;
-                        box_max < I31 && (kmax as f64 + 1.0) * n * box_max * box_max < LIMIT_SQUARE
-                    }
+        let (f, f1, f2, e_frac) = match kind {
+            Kind::Paper => {
+                let rf1 = real_factor(&axis_kernel(j1, &w1, n1), j1);
+                let rf2 = real_factor(&axis_kernel(j2, &w2, n2), j2);
+                let (f, p1, p2) = match paper_formats(cfg, &rf1, &rf2) {
+                    Ok(v) => v,
+                    Err(e) => return Err(e),
                 };
-            if ok {
-                break;
+                (
+                    f,
+                    quantise(&rf1, p1),
+                    quantise(&rf2, p2),
+                    f + p1 as i32 + p2 as i32 - 64,
+                )
             }
-            f -= 1;
-        }
-
-        // The embedding keeps `Q(f - s)`: the smallest extra shift `s` that
-        // keeps ‖E‖_F below 2^30, so that a large kernel (unit weights) costs
-        // precision of E relative to its own size, not of the input map.
-        let mut e_shift: u32 = 0;
-        if let Kind::Paper = kind {
-            let scale = pow2(f);
-            let xfro = if cfg.normalise {
-                scale + n
-            } else {
-                sqrt(n) * (65535.0 * scale + 1.0)
-            };
-            loop {
-                let e = (rb1.1 * rb2.1 * xfro + sqrt(n) * 0.5 * rb1.2) * pow2(-(e_shift as i32))
-                    + sqrt(n) * 0.5;
-                if e < LIMIT_E {
-                    break;
+            Kind::Square { kmax } => {
+                // Largest input format whose sums provably stay in range.
+                let mut f: i32 = MAX_FRAC;
+                loop {
+                    if f < -16 {
+                        return Err(ConfigError::Range);
+                    }
+                    let scale = pow2(f);
+                    let cell = 65535.0 * scale + 1.0;
+                    let xsum = if cfg.normalise { scale + n } else { n * cell };
+                    let xmax = if cfg.normalise { scale } else { cell };
+                    let box_max = 2.0 * xsum;
+                    if xmax < I31
+                        && box_max < I31
+                        && (kmax as f64 + 1.0) * n * box_max * box_max < LIMIT_SQUARE
+                    {
+                        break;
+                    }
+                    f -= 1;
                 }
-                e_shift += 1;
-                if e_shift > 60 {
-                    return Err(ConfigError::Range);
-                }
+                (f, empty, empty, f)
             }
-        }
+        };
 
         // Distance bound in real units, then the largest score format for it.
         let dmax = if cfg.normalise {
@@ -199,11 +187,10 @@ impl Scorer {
             config: *cfg,
             kind,
             frac: f,
-            r1,
-            r2t: transpose(&r2),
-            p1,
-            p2,
-            e_shift,
+            f1,
+            f2,
+            e_frac,
+            scale_num: pow2(32 + f) as f32,
             q,
         })
     }
@@ -327,73 +314,45 @@ impl Scorer {
         match self.kind {
             Kind::Square { .. } => self.normalise(frame, state),
             Kind::Paper => {
-                let (fl, conv) = self.converter(frame);
-                let j2 = (self.config.geometry.j2 as usize).max(1);
-                let x = &mut scratch.x;
-                match conv {
-                    Conv::Zero => x.iter_mut().for_each(|r| r.fill(0)),
-                    Conv::Recip(r) => fill_rows(x, frame, j2, |a| recip_sample(a, r)),
-                    Conv::Shl(s) => fill_rows(x, frame, j2, |a| (a as i32) << s),
-                    Conv::Shr(s) => fill_rows(x, frame, j2, |a| shr_sample(a, s)),
+                let g = self.config.geometry;
+                let (j1, j2) = (g.j1 as usize, g.j2 as usize);
+                let off = saturation_offset(self.config.full_scale);
+                let (sum, sat) = embed::fold_rows(frame, j1, j2, off, &mut scratch.v);
+                let mut fl = 0;
+                if sat & 0x1_0000 != 0 {
+                    fl |= flags::SATURATED;
                 }
-                self.embed(scratch, state);
+                if sum == 0 {
+                    fl |= flags::DARK;
+                }
+                let conv = self.scale(sum);
+                embed::embed(&self.f1, &self.f2, &scratch.v, conv, &mut scratch.t, state);
                 Ok(fl)
             }
         }
     }
 
-    /// `E = R1 x R2ᵀ`, exploiting that both factors are upper triangular.
+    /// How the folded counts `v` of a map with sample sum `sum` become
+    /// `Q(f)` values: `y = round((v << k) * m / 2^32)`, returned as `(k, m)`.
     ///
-    /// Outputs are computed in pairs of neighbouring columns so that each
-    /// loaded coefficient serves two multiply-accumulates (`SMLAL` on the
-    /// Cortex-M) and the pair's operands sit next to each other in memory.
-    /// The padding column of an odd `J2` is computed too (from zero
-    /// coefficients, so it is 0) and never stored in `E`.
-    fn embed(&self, scratch: &mut Scratch, e: &mut [i32]) {
-        let j1 = (self.config.geometry.j1 as usize).min(MAX_J);
-        let j2 = (self.config.geometry.j2 as usize).clamp(1, MAX_J);
-        let Scratch { x, t } = scratch;
-        // Row pass: T[i][k] = Σ_{l>=k} x[i][l] R2[k][l] = Σ_{l>=k} x[i][l] R2ᵀ[l][k].
-        for (xr, tr) in x.iter().zip(t.iter_mut()).take(j1) {
-            for kp in (0..j2).step_by(2) {
-                let k = kp & (MAX_J - 2);
-                let (mut a0, mut a1) = (0i64, 0i64);
-                let (Some(xs), Some(rs)) = (xr.get(k..j2), self.r2t.get(k..j2)) else {
-                    continue;
-                };
-                for (&xv, rr) in xs.iter().zip(rs) {
-                    a0 += xv as i64 * rr[k] as i64;
-                    a1 += xv as i64 * rr[k + 1] as i64;
-                }
-                tr[k] = round_shift(a0, self.p2) as i32;
-                tr[k + 1] = round_shift(a1, self.p2) as i32;
+    /// Normalised (`y ≈ v 2^f / S`): `k` puts `S' = S << k` in
+    /// `[2^30, 2^31)` (so `|v << k| <= S' < 2^31`) and
+    /// `m = floor(2^(32+f) / S') <= 2^30`, so `|y - v 2^f / S| < 1`. A dark
+    /// map gets `m = 0`. Raw (`y = v 2^f`): `k = f + 2`, `m = 2^30`, exact;
+    /// for `f < -1`, `k = 0`, `m = 2^(32+f)`, rounded.
+    fn scale(&self, sum: u32) -> (u32, i32) {
+        let f = self.frac;
+        if self.config.normalise {
+            if sum == 0 {
+                return (0, 0);
             }
-        }
-        // Column pass: E[i][k] = Σ_{l>=i} R1[i][l] T[l][k].
-        let shift = self.p1 + self.e_shift;
-        for (i, (er, r1r)) in e
-            .chunks_exact_mut(j2)
-            .zip(self.r1.iter())
-            .take(j1)
-            .enumerate()
-        {
-            let (Some(rs), Some(ts)) = (r1r.get(i..j1), t.get(i..j1)) else {
-                continue;
-            };
-            for kp in (0..j2).step_by(2) {
-                let k = kp & (MAX_J - 2);
-                let (mut a0, mut a1) = (0i64, 0i64);
-                for (&r, tr) in rs.iter().zip(ts) {
-                    a0 += r as i64 * tr[k] as i64;
-                    a1 += r as i64 * tr[k + 1] as i64;
-                }
-                if let Some(v) = er.get_mut(k) {
-                    *v = round_shift(a0, shift) as i32;
-                }
-                if let Some(v) = er.get_mut(k + 1) {
-                    *v = round_shift(a1, shift) as i32;
-                }
-            }
+            let k = sum.leading_zeros().saturating_sub(1);
+            let s = sum << k;
+            (k, reciprocal(self.scale_num, f, s))
+        } else if f >= -1 {
+            ((f + 2) as u32, 1 << 30)
+        } else {
+            (0, 1i32 << (32 + f).clamp(0, 30))
         }
     }
 
@@ -404,15 +363,7 @@ impl Scorer {
             return u32::MAX;
         };
         let acc = match self.kind {
-            Kind::Paper => {
-                let mut acc: i64 = 0;
-                for (&x, &y) in a.iter().zip(b) {
-                    // |x|, |y| < 2^30: the difference fits i32.
-                    let d = x.wrapping_sub(y) as i64;
-                    acc += d * d;
-                }
-                acc as u64
-            }
+            Kind::Paper => squared_difference(a, b),
             Kind::Square { kmax } => self.square_distance(a, b, kmax as usize),
         };
         self.to_score(acc)
@@ -458,8 +409,8 @@ impl Scorer {
 
     /// `Q(2f)` squared distance to a `Q(q)` score, rounded, saturating.
     fn to_score(&self, acc: u64) -> u32 {
-        // Squared distances are in Q(2(f - e_shift)).
-        let shift = 2 * (self.frac - self.e_shift as i32) - self.q;
+        // Squared distances are in Q(2 e_frac).
+        let shift = 2 * self.e_frac - self.q;
         let v = if shift > 0 {
             let s = shift as u32;
             if s >= 64 {
@@ -481,6 +432,100 @@ impl Scorer {
             v as u32
         }
     }
+}
+
+/// Formats of the folded embedding: the finest input format `f` and the
+/// factor precisions `p1`, `p2` for which every bound of the module docs
+/// holds.
+const fn paper_formats(
+    cfg: &Config,
+    rf1: &RealFactor,
+    rf2: &RealFactor,
+) -> Result<(i32, u32, u32), ConfigError> {
+    let (j1, j2) = (rf1.h + rf1.g, rf2.h + rf2.g);
+    let n = (j1 * j2) as f64;
+    let (Some(p1max), Some(p2)) = (precision(rf1), precision(rf2)) else {
+        return Err(ConfigError::Range);
+    };
+    let fro1 = frobenius(rf1);
+    let fro2 = frobenius(rf2);
+    // Coefficient magnitudes and norms, with the rounding of every entry
+    // (at most 2 * TRI entries of 1/2 each).
+    let slack = sqrt(2.0 * TRI as f64) * 0.5;
+    let r2max = rf2.max * pow2(p2 as i32) + 0.5;
+    let r2fro = fro2 * pow2(p2 as i32) + slack;
+    let mut f = if cfg.normalise {
+        MAX_FRAC_NORM
+    } else {
+        MAX_FRAC_RAW
+    };
+    while f >= -16 {
+        let scale = pow2(f);
+        // Bounds on Σ|y| over one block of a row, on Σ|y| over one block of
+        // all rows, and on ‖F1 y‖_F, for the converted map y folded along
+        // axis 2 (F1 y: also folded along axis 1).
+        let (yrow, yhalf, yfro) = if cfg.normalise {
+            let s = scale * (1.0 + SCALE_SLACK);
+            (s + 8.0, s + 128.0, 2.0 * s + 32.0)
+        } else {
+            let c = 65535.0 * scale;
+            (j2 as f64 * c + 8.0, n * c + 128.0, 2.0 * sqrt(n) * c + 32.0)
+        };
+        // Every term of a pass is rounded on its own: a sum of at most
+        // MAX_H terms is within MAX_H / 2 of the exact one.
+        let err = MAX_H as f64 * 0.5;
+        let row_ok = yrow * r2max * pow2(-32) + err < I31;
+        // Σ over a column block of |T| after the fold along axis 1.
+        let tcol = yhalf * r2max * pow2(-32) + MAX_J as f64 * err;
+        let row_ok = row_ok && tcol < I31;
+        let mut p1 = p1max as i32;
+        while row_ok && p1 >= 0 {
+            let r1max = rf1.max * pow2(p1) + 0.5;
+            let r1fro = fro1 * pow2(p1) + slack;
+            let e = r1fro * r2fro * yfro * pow2(-64)
+                + r1fro * sqrt(2.0 * n) * err * pow2(-32)
+                + sqrt(n) * err;
+            if tcol * r1max * pow2(-32) + err < I31 && e < LIMIT_E {
+                return Ok((f, p1 as u32, p2));
+            }
+            p1 -= 1;
+        }
+        f -= 1;
+    }
+    Err(ConfigError::Range)
+}
+
+/// Frobenius norm of both blocks of a real factor.
+const fn frobenius(r: &RealFactor) -> f64 {
+    let (_, fe, _) = norms(&r.even, r.h);
+    let (_, fo, _) = norms(&r.odd, r.g);
+    sqrt(fe * fe + fo * fo)
+}
+
+/// `floor(2^(32+f) / s)` for `s` in `[2^30, 2^31)` and `f <= 28`, without
+/// a 64-bit division (a library call on the Cortex-M4): a single-precision
+/// estimate (`num = 2^(32+f)` as `f32`), refined once through its exact
+/// remainder, then settled by at most a few unit steps. The result is the
+/// exact quotient, so the host and the target agree however `f32` rounds.
+#[inline(always)]
+fn reciprocal(num: f32, f: i32, s: u32) -> i32 {
+    let n = 1i64 << (32 + f).clamp(0, 60);
+    let sf = s as f32;
+    let mut m = (num / sf) as i64;
+    let mut r = n - m * s as i64;
+    let c = (r as f32 / sf) as i64;
+    m += c;
+    r -= c * s as i64;
+    for _ in 0..4 {
+        if r < 0 {
+            m -= 1;
+            r += s as i64;
+        } else if r >= s as i64 {
+            m += 1;
+            r -= s as i64;
+        }
+    }
+    m as i32
 }
 
 /// How samples become `Q(f)` values for one frame.
@@ -516,26 +561,44 @@ fn fill(x: &mut [i32], frame: &[u16], f: impl Fn(u16) -> i32) {
     }
 }
 
-/// Row-major frame into the padded `MAX_J`-stride scratch.
-#[inline(always)]
-fn fill_rows(x: &mut [[i32; MAX_J]; MAX_J], frame: &[u16], j2: usize, f: impl Fn(u16) -> i32) {
-    for (xr, fr) in x.iter_mut().zip(frame.chunks_exact(j2)) {
-        fill(xr, fr, &f);
+/// `Σ (a - b)²` of two embeddings: `|a|, |b| < 2^30`, so each difference
+/// fits `i32` and the sum (below `2^62`) fits `i64`. Four words at a time
+/// (one `LDM` per operand, four `SUB` + `SMLAL`), kept out of line so that
+/// its registers are not shared with the square-kernel path.
+#[inline(never)]
+fn squared_difference(a: &[i32], b: &[i32]) -> u64 {
+    let mut acc: i64 = 0;
+    let (ac, bc) = (a.chunks_exact(4), b.chunks_exact(4));
+    let (ar, br) = (ac.remainder(), bc.remainder());
+    for (x, y) in ac.zip(bc) {
+        let (Ok(x), Ok(y)) = (<&[i32; 4]>::try_from(x), <&[i32; 4]>::try_from(y)) else {
+            break;
+        };
+        let d0 = x[0].wrapping_sub(y[0]) as i64;
+        let d1 = x[1].wrapping_sub(y[1]) as i64;
+        let d2 = x[2].wrapping_sub(y[2]) as i64;
+        let d3 = x[3].wrapping_sub(y[3]) as i64;
+        acc += d0 * d0 + d1 * d1 + d2 * d2 + d3 * d3;
     }
+    for (&x, &y) in ar.iter().zip(br) {
+        let d = x.wrapping_sub(y) as i64;
+        acc += d * d;
+    }
+    acc as u64
 }
 
-/// Scratch space of the embedding (the input map and the row pass), in a
+/// Scratch space of the embedding (the folded map and the row pass), in a
 /// fixed `MAX_J` stride so that the inner loops need no index arithmetic.
 #[derive(Clone)]
 pub struct Scratch {
-    x: [[i32; MAX_J]; MAX_J],
+    v: [[i32; MAX_J]; MAX_J],
     t: [[i32; MAX_J]; MAX_J],
 }
 
 impl Scratch {
     pub const fn new() -> Self {
         Scratch {
-            x: [[0; MAX_J]; MAX_J],
+            v: [[0; MAX_J]; MAX_J],
             t: [[0; MAX_J]; MAX_J],
         }
     }
@@ -545,45 +608,6 @@ impl Default for Scratch {
     fn default() -> Self {
         Self::new()
     }
-}
-
-const fn transpose(r: &[[i32; MAX_J]; MAX_J]) -> [[i32; MAX_J]; MAX_J] {
-    let mut t = [[0; MAX_J]; MAX_J];
-    let mut i = 0;
-    while i < MAX_J {
-        let mut l = 0;
-        while l < MAX_J {
-            t[l][i] = r[i][l];
-            l += 1;
-        }
-        i += 1;
-    }
-    t
-}
-
-/// `round(acc / 2^p)`, half up, for `p >= 1` (p = 0 is the identity).
-#[inline(always)]
-fn round_shift(acc: i64, p: u32) -> i64 {
-    if p == 0 {
-        acc
-    } else {
-        (acc + (1i64 << (p - 1))) >> p
-    }
-}
-
-const fn dequantise(r: &[[i32; MAX_J]; MAX_J], p: u32) -> crate::tables::Mat {
-    let mut m = [[0.0; MAX_J]; MAX_J];
-    let s = pow2(-(p as i32));
-    let mut i = 0;
-    while i < MAX_J {
-        let mut l = 0;
-        while l < MAX_J {
-            m[i][l] = r[i][l] as f64 * s;
-            l += 1;
-        }
-        i += 1;
-    }
-    m
 }
 
 /// Gradient magnitude `floor(sqrt(g0² + g1²))` of two scores, same format.
