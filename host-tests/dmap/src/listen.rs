@@ -277,7 +277,12 @@ impl Decoder {
                     return self
                         .problem(format!("score line for row {row} runs past column {cols}"));
                 }
-                let line = s.scores.entry(row).or_insert_with(|| vec![None; cols]);
+                // Grown as scores arrive: a corrupted header's column count
+                // must not decide how much memory a row takes.
+                let line = s.scores.entry(row).or_default();
+                if line.len() < col0 as usize + n {
+                    line.resize(col0 as usize + n, None);
+                }
                 let mut dup = false;
                 for (k, c) in chars.chunks(protocol::SCORE_CHARS).enumerate() {
                     let slot = &mut line[col0 as usize + k];
@@ -305,15 +310,14 @@ impl Decoder {
     /// listed defect arrived, every position has a score when scores are on.
     fn check_complete(&self, s: &mut ScanResult) {
         let rows = s.n_rows() as u32;
-        let missing: Vec<u32> = (0..rows).filter(|r| !s.rows.contains_key(r)).collect();
-        if !missing.is_empty() {
+        // Gaps between the rows received, not every missing row: an end line
+        // may claim billions of rows.
+        let missing = gaps(s.rows.keys().copied(), rows);
+        let count: u64 = missing.iter().map(|&(a, b)| u64::from(b - a) + 1).sum();
+        if count > 0 {
             s.problems.push(LineError {
                 line: self.line_no,
-                what: format!(
-                    "no row line for {} row(s): {}",
-                    missing.len(),
-                    ranges(&missing)
-                ),
+                what: format!("no row line for {count} row(s): {}", ranges(&missing)),
             });
         }
         let listed: u64 =
@@ -355,21 +359,37 @@ impl Decoder {
     }
 }
 
-/// `1-3, 7` style list.
-fn ranges(v: &[u32]) -> String {
+/// The ranges of `0..end` not in `present` (ascending).
+fn gaps(present: impl Iterator<Item = u32>, end: u32) -> Vec<(u32, u32)> {
     let mut out = Vec::new();
-    let mut i = 0;
-    while i < v.len() {
-        let mut j = i;
-        while j + 1 < v.len() && v[j + 1] == v[j] + 1 {
-            j += 1;
+    let mut next = 0;
+    for k in present.take_while(|&k| k < end) {
+        if k > next {
+            out.push((next, k - 1));
         }
-        out.push(if i == j {
-            v[i].to_string()
-        } else {
-            format!("{}-{}", v[i], v[j])
-        });
-        i = j + 1;
+        next = k + 1;
+    }
+    if next < end {
+        out.push((next, end - 1));
+    }
+    out
+}
+
+/// `1-3, 7` style list, at most a dozen ranges.
+fn ranges(v: &[(u32, u32)]) -> String {
+    let mut out: Vec<String> = v
+        .iter()
+        .take(12)
+        .map(|&(a, b)| {
+            if a == b {
+                a.to_string()
+            } else {
+                format!("{a}-{b}")
+            }
+        })
+        .collect();
+    if v.len() > 12 {
+        out.push(format!("and {} more ranges", v.len() - 12));
     }
     out.join(", ")
 }

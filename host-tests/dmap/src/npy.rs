@@ -111,6 +111,20 @@ fn open_npy<'a>(path: &Path, bytes: &'a [u8]) -> Result<NpyFile<&'a [u8]>> {
     if !bytes.starts_with(b"\x93NUMPY") {
         bail!("{p}: not a .npy file (no NumPy magic bytes)");
     }
+    // The header's length field is checked against the file before the
+    // parser sizes a buffer by it: a corrupt field must not ask for 4 GiB.
+    let (len_at, len_bytes) = match bytes.get(6) {
+        Some(1) => (8, 2),
+        _ => (8, 4),
+    };
+    let header_len = bytes.get(len_at..len_at + len_bytes).map(|b| {
+        b.iter()
+            .rev()
+            .fold(0usize, |acc, &x| (acc << 8) | usize::from(x))
+    });
+    if header_len.is_none_or(|n| len_at + len_bytes + n > bytes.len()) {
+        bail!("{p}: not a valid .npy file (header truncated)");
+    }
     let npy = NpyFile::new(bytes).map_err(|e| {
         anyhow!(
             "{p}: not a valid .npy file (header unreadable or truncated): {}",
@@ -178,8 +192,12 @@ fn decode<T: npyz::Deserialize>(path: &Path, npy: NpyFile<&[u8]>) -> Result<Vec<
 /// a file shorter or longer than its header says, and NaN, infinite or
 /// negative samples.
 pub fn read_scan(path: &Path) -> Result<Scan> {
-    let bytes = read_bytes(path)?;
-    let npy = open_npy(path, &bytes)?;
+    scan_from_bytes(path, &read_bytes(path)?)
+}
+
+/// [`read_scan`] of a file already in memory; `path` only names it in errors.
+pub fn scan_from_bytes(path: &Path, bytes: &[u8]) -> Result<Scan> {
+    let npy = open_npy(path, bytes)?;
     let p = path.display();
     let shape: Vec<u64> = npy.shape().to_vec();
     if shape.len() != 4 {
@@ -304,8 +322,12 @@ pub struct GradientImage {
 
 /// Read a gradient image: float64 (or float32), shape `(rows, cols, 3)`.
 pub fn read_gradient(path: &Path) -> Result<GradientImage> {
-    let bytes = read_bytes(path)?;
-    let npy = open_npy(path, &bytes)?;
+    gradient_from_bytes(path, &read_bytes(path)?)
+}
+
+/// [`read_gradient`] of a file already in memory; `path` only names it in errors.
+pub fn gradient_from_bytes(path: &Path, bytes: &[u8]) -> Result<GradientImage> {
+    let npy = open_npy(path, bytes)?;
     let p = path.display();
     let shape = npy.shape().to_vec();
     if shape.len() != 3 || shape[2] != 3 {
@@ -340,8 +362,12 @@ pub struct Mask {
 
 /// Read a mask: dtype bool, shape `(rows, cols)`.
 pub fn read_mask(path: &Path) -> Result<Mask> {
-    let bytes = read_bytes(path)?;
-    let npy = open_npy(path, &bytes)?;
+    mask_from_bytes(path, &read_bytes(path)?)
+}
+
+/// [`read_mask`] of a file already in memory; `path` only names it in errors.
+pub fn mask_from_bytes(path: &Path, bytes: &[u8]) -> Result<Mask> {
+    let npy = open_npy(path, bytes)?;
     let p = path.display();
     let shape = npy.shape().to_vec();
     if shape.len() != 2 {

@@ -265,9 +265,19 @@ impl<'a, const CAP: usize> Board<'a, CAP> {
         }
     }
 
-    /// End of data, then everything sent.
+    /// End of data, then everything sent. As on the boards, the data is
+    /// only declared ended once every beam record has been scored (the UART
+    /// draining as needed), and each end-of-data step waits for queue room.
     pub fn end(&mut self) {
-        self.score(usize::MAX);
+        loop {
+            let before = self.acq.pending();
+            self.score(usize::MAX);
+            let stuck = self.acq.pending() == before && self.uart.queue.is_empty();
+            if (self.acq.pending() == 0 || stuck) && !self.driver.busy() {
+                break;
+            }
+            self.uart.send(usize::MAX);
+        }
         loop {
             self.uart.send(usize::MAX);
             let (more, _) = self.driver.end_of_data(&mut self.frames, &mut self.uart);

@@ -1,0 +1,243 @@
+//! The line protocol from both ends.
+//!
+//! 1. Arbitrary bytes, split into lines, go through `protocol::parse` and the
+//!    host's stream `Decoder`: neither may panic. Random bytes almost never
+//!    carry a valid CRC, so every line is also tried with its checksum
+//!    repaired, which takes the fuzzer into the field parsers.
+//! 2. Records built from the same bytes go through the encoder; every line
+//!    it writes must parse back to exactly what was encoded, and the decoder
+//!    must accept the whole stream without a single error.
+#![no_main]
+
+use cvm_core::flags;
+use cvm_core::protocol::{
+    self, EndInfo, HeaderInfo, Line, LineSink, MAX_FW, MAX_LINE, Priority, SCORE_CHARS,
+    SCORES_PER_LINE,
+};
+use cvm_core::stream::{PositionScore, RowSummary, RowView, Totals};
+use dmap::listen::Decoder;
+use libfuzzer_sys::arbitrary::{Result, Unstructured};
+use libfuzzer_sys::fuzz_target;
+
+#[derive(Default)]
+struct Lines(Vec<Vec<u8>>);
+
+impl LineSink for Lines {
+    fn line(&mut self, line: &[u8], _priority: Priority) {
+        self.0.push(line.to_vec());
+    }
+}
+
+/// `body*XXXX` with the right checksum.
+fn with_crc(body: &[u8]) -> Vec<u8> {
+    let mut l = body.to_vec();
+    l.extend_from_slice(format!("*{:04X}", protocol::crc16(body)).as_bytes());
+    l
+}
+
+fn decode_raw(data: &[u8]) {
+    let mut dec = Decoder::new();
+    for raw in data.split_inclusive(|&b| b == b'\n') {
+        let _ = protocol::parse(raw);
+        dec.feed(raw);
+        let body = raw.strip_suffix(b"\n").unwrap_or(raw);
+        let body = match body.iter().rposition(|&b| b == b'*') {
+            Some(star) => &body[..star],
+            None => body,
+        };
+        let fixed = with_crc(body);
+        if let Err(e) = protocol::parse(&fixed) {
+            assert_ne!(e, protocol::ParseError::Checksum, "repaired CRC refused");
+        }
+        dec.feed(&fixed);
+    }
+    dec.finish();
+    for s in &dec.scans {
+        let _ = s.coverage();
+        let _ = s.n_rows();
+    }
+    let _ = dmap::listen::summary_text(&dec);
+}
+
+fn totals(u: &mut Unstructured) -> Result<Totals> {
+    Ok(Totals {
+        rows: u.arbitrary()?,
+        frames: u.arbitrary()?,
+        missing: u.arbitrary()?,
+        dark: u.arbitrary()?,
+        saturated: u.arbitrary()?,
+        defects: u.arbitrary()?,
+        rejected: u.arbitrary()?,
+        extra: u.arbitrary()?,
+        bad: u.arbitrary()?,
+        clipped: u.arbitrary()?,
+    })
+}
+
+fn round_trip(u: &mut Unstructured) -> Result<()> {
+    let cols = u.int_in_range(1..=3 * SCORES_PER_LINE as u32)?;
+    let threshold: u32 = u.arbitrary()?;
+    let fw_raw: Vec<u8> = u.arbitrary()?;
+    let fw = String::from_utf8_lossy(&fw_raw).into_owned();
+    let weights = *u.choose(&["uniform", "unit", "separable"])?;
+    let h = HeaderInfo {
+        version: protocol::VERSION,
+        firmware: &fw,
+        j1: u.int_in_range(1..=16)?,
+        j2: u.int_in_range(1..=16)?,
+        cols,
+        kernels: *u.choose(b"PS")?,
+        kernel_size: u.arbitrary()?,
+        weights,
+        normalise: u.arbitrary()?,
+        full_scale: u.arbitrary()?,
+        threshold,
+        q: u.arbitrary()?,
+        scores: true,
+    };
+    let mut out = Lines::default();
+    protocol::encode_header(&h, &mut out);
+    let max_defects: u16 = u.int_in_range(0..=8)?;
+
+    let n_rows = u.int_in_range(0..=4u32)?;
+    let mut rows = Vec::new();
+    for row in 0..n_rows {
+        let scores: Vec<PositionScore> = (0..cols)
+            .map(|_| {
+                Ok(PositionScore {
+                    g0: 0,
+                    g1: 0,
+                    mag: u.arbitrary()?,
+                    flags: u.arbitrary()?,
+                })
+            })
+            .collect::<Result<_>>()?;
+        let summary = RowSummary {
+            row,
+            max: u.arbitrary()?,
+            argmax: u.arbitrary()?,
+            defects: u.arbitrary()?,
+            no_data: u.arbitrary()?,
+            dark: u.arbitrary()?,
+            saturated: u.arbitrary()?,
+        };
+        let view = RowView {
+            summary,
+            scores: &scores,
+            threshold,
+        };
+        protocol::encode_row(&view, max_defects, true, &mut out);
+        rows.push((summary, scores));
+    }
+    let end = EndInfo {
+        totals: totals(u)?,
+        dropped: u.arbitrary()?,
+    };
+    protocol::encode_end(&end.totals, end.dropped, &mut out);
+
+    // Line by line, against what was encoded.
+    let mut lines = out.0.iter();
+    let first = lines.next().expect("header line");
+    let Ok(Line::Header(got)) = protocol::parse(first) else {
+        panic!(
+            "header does not parse: {:?}",
+            String::from_utf8_lossy(first)
+        );
+    };
+    let fw_sent: String = fw
+        .bytes()
+        .take(MAX_FW)
+        .map(|b| {
+            if b.is_ascii_graphic() && b != b',' && b != b'*' {
+                b as char
+            } else {
+                '?'
+            }
+        })
+        .collect();
+    assert_eq!(got.firmware, fw_sent);
+    assert_eq!(
+        HeaderInfo {
+            firmware: &fw,
+            ..got
+        },
+        h
+    );
+    for (summary, scores) in &rows {
+        let listed = summary.defects.min(u32::from(max_defects));
+        let l = lines.next().expect("row line");
+        assert_eq!(
+            protocol::parse(l),
+            Ok(Line::Row {
+                summary: *summary,
+                listed
+            })
+        );
+        let defects: Vec<(u32, &PositionScore)> = scores
+            .iter()
+            .enumerate()
+            .filter(|(_, p)| p.flags & flags::NO_DATA == 0 && p.mag >= threshold)
+            .map(|(c, p)| (c as u32, p))
+            .take(listed as usize)
+            .collect();
+        for (col, p) in defects {
+            let l = lines.next().expect("defect line");
+            assert_eq!(
+                protocol::parse(l),
+                Ok(Line::Defect {
+                    row: summary.row,
+                    col,
+                    mag: p.mag,
+                    flags: p.flags
+                })
+            );
+        }
+        for (k, chunk) in scores.chunks(SCORES_PER_LINE).enumerate() {
+            let l = lines.next().expect("score line");
+            let Ok(Line::Scores { row, col0, chars }) = protocol::parse(l) else {
+                panic!(
+                    "score line does not parse: {:?}",
+                    String::from_utf8_lossy(l)
+                );
+            };
+            assert_eq!((row, col0), (summary.row, (k * SCORES_PER_LINE) as u32));
+            assert_eq!(chars.len(), chunk.len() * SCORE_CHARS);
+            for (c, p) in chars.chunks(SCORE_CHARS).zip(chunk) {
+                // Score lines carry the four defined flag bits.
+                assert_eq!(protocol::decode_score(c), Some((p.mag, p.flags & 0xF)));
+            }
+        }
+    }
+    let l = lines.next().expect("end line");
+    assert_eq!(protocol::parse(l), Ok(Line::End(end)));
+    assert!(lines.next().is_none());
+    assert!(
+        out.0
+            .iter()
+            .all(|l| l.len() <= MAX_LINE && l.ends_with(b"\n"))
+    );
+
+    // The whole stream through the host decoder: no damaged line, and every
+    // position's score where it was sent.
+    let mut dec = Decoder::new();
+    for l in &out.0 {
+        dec.feed(l);
+    }
+    dec.finish();
+    assert!(dec.errors.is_empty(), "{:?}", dec.errors);
+    assert_eq!(dec.scans.len(), 1);
+    let scan = &dec.scans[0];
+    assert_eq!(scan.end, Some(end));
+    for (summary, scores) in &rows {
+        let got = &scan.scores[&summary.row];
+        for (c, p) in scores.iter().enumerate() {
+            assert_eq!(got[c], Some((p.mag, p.flags & 0xF)));
+        }
+    }
+    Ok(())
+}
+
+fuzz_target!(|data: &[u8]| {
+    decode_raw(data);
+    let _ = round_trip(&mut Unstructured::new(data));
+});
