@@ -67,8 +67,10 @@ pub struct ScanResult {
     pub q: i32,
     pub threshold: f64,
     pub scores_enabled: bool,
-    /// Magnitudes received, by row then column (integer scores).
-    pub scores: BTreeMap<u32, Vec<Option<(u32, u8)>>>,
+    /// Magnitudes and flags received, by row then column (integer scores).
+    /// Sparse, so that memory follows the lines received, never the
+    /// geometry a (possibly corrupted) header claims.
+    pub scores: BTreeMap<u32, BTreeMap<u32, (u32, u8)>>,
     /// Row summaries received.
     pub rows: BTreeMap<u32, cvm_core::RowSummary>,
     pub defects: Vec<Defect>,
@@ -105,12 +107,9 @@ impl ScanResult {
         let (rows, cols) = (self.n_rows(), self.cols);
         let mut img = vec![f64::NAN; rows * cols * 3];
         for (&r, line) in &self.scores {
-            for (c, v) in line.iter().enumerate() {
-                if let Some((mag, fl)) = v
-                    && fl & flags::NO_DATA == 0
-                    && (r as usize) < rows
-                    && c < cols
-                {
+            for (&c, (mag, fl)) in line {
+                let c = c as usize;
+                if fl & flags::NO_DATA == 0 && (r as usize) < rows && c < cols {
                     img[(r as usize * cols + c) * 3 + 2] = self.units(*mag);
                 }
             }
@@ -132,7 +131,7 @@ impl ScanResult {
         let mut with = 0;
         let mut without = 0;
         for line in self.scores.values() {
-            for (_, fl) in line.iter().flatten() {
+            for (_, fl) in line.values() {
                 if fl & flags::NO_DATA == 0 {
                     with += 1;
                 } else {
@@ -277,17 +276,13 @@ impl Decoder {
                     return self
                         .problem(format!("score line for row {row} runs past column {cols}"));
                 }
-                // Grown as scores arrive: a corrupted header's column count
-                // must not decide how much memory a row takes.
                 let line = s.scores.entry(row).or_default();
-                if line.len() < col0 as usize + n {
-                    line.resize(col0 as usize + n, None);
-                }
                 let mut dup = false;
                 for (k, c) in chars.chunks(protocol::SCORE_CHARS).enumerate() {
-                    let slot = &mut line[col0 as usize + k];
-                    dup |= slot.is_some();
-                    *slot = protocol::decode_score(c);
+                    // In range: `col0 + n <= cols` was checked above.
+                    if let Some(v) = protocol::decode_score(c) {
+                        dup |= line.insert(col0 + k as u32, v).is_some();
+                    }
                 }
                 if dup {
                     self.problem(format!(

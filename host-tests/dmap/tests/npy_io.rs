@@ -210,3 +210,22 @@ fn masks_round_trip_and_match_numpy_bool() {
         );
     }
 }
+
+#[test]
+fn header_length_beyond_the_file_is_refused_before_any_allocation() {
+    // A version-2 header whose 4-byte length field claims ~4 GiB: the reader
+    // must say so rather than size a buffer by it.
+    let mut bytes = b"\x93NUMPY\x02\x00".to_vec();
+    bytes.extend_from_slice(&0xFFFF_FF00u32.to_le_bytes());
+    bytes.extend_from_slice(b"{'descr': '<u2', 'fortran_order': False, 'shape': (1, 1, 1, 1), }");
+    let p = path("huge_header_len.npy");
+    std::fs::write(&p, &bytes).unwrap();
+    for e in [
+        read_scan(&p).unwrap_err().to_string(),
+        read_gradient(&p).unwrap_err().to_string(),
+        read_mask(&p).unwrap_err().to_string(),
+    ] {
+        assert!(e.contains("header truncated"), "{e}");
+        assert!(!e.contains('\n'));
+    }
+}

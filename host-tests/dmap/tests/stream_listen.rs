@@ -380,3 +380,42 @@ fn bandwidth_figures_of_the_protocol_document() {
     assert_eq!(ls[0].len(), 36);
     assert_eq!(ls[1].len(), 28);
 }
+
+/// `body*XXXX\n` with its CRC-16/CCITT-FALSE.
+fn line_with_crc(body: &str) -> Vec<u8> {
+    format!(
+        "{body}*{:04X}\n",
+        cvm_core::protocol::crc16(body.as_bytes())
+    )
+    .into_bytes()
+}
+
+#[test]
+fn absurd_geometry_in_valid_lines_costs_no_memory() {
+    // Lines with valid CRCs but a header claiming 4e9 columns and an end
+    // line claiming 4e9 rows: the decoder reports the gaps as ranges and
+    // keeps only the scores that arrived.
+    let mut dec = Decoder::new();
+    for body in [
+        "H,v=1,fw=x,j=3x3,cols=4000000000,k=P,b=0,w=uniform,norm=1,fs=65535,thr=1,q=20,scores=1",
+        "R,2,0,-,0,0,1,0,0",
+        "S,2,3999999999,AAAAAB",
+        "E,rows=4000000000,frames=0,missing=0,dark=0,sat=0,defects=0,rejected=0,extra=0,bad=0,clipped=0,dropped=0",
+    ] {
+        dec.feed(&line_with_crc(body));
+    }
+    dec.finish();
+    assert!(dec.errors.is_empty(), "{:?}", dec.errors);
+    let s = &dec.scans[0];
+    assert_eq!(s.scores[&2].len(), 1);
+    assert_eq!(s.scores[&2][&3_999_999_999], (1, 0));
+    let rows = s
+        .problems
+        .iter()
+        .find(|p| p.what.starts_with("no row line"))
+        .expect("missing rows reported");
+    assert_eq!(
+        rows.what,
+        "no row line for 3999999999 row(s): 0-1, 3-3999999999"
+    );
+}

@@ -230,8 +230,9 @@ fn round_trip(u: &mut Unstructured) -> Result<()> {
     assert_eq!(scan.end, Some(end));
     for (summary, scores) in &rows {
         let got = &scan.scores[&summary.row];
+        assert_eq!(got.len(), scores.len());
         for (c, p) in scores.iter().enumerate() {
-            assert_eq!(got[c], Some((p.mag, p.flags & 0xF)));
+            assert_eq!(got.get(&(c as u32)), Some(&(p.mag, p.flags & 0xF)));
         }
     }
     Ok(())
