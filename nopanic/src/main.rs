@@ -1,0 +1,194 @@
+//! Link-time proof that nothing reachable from the per-beam path can panic.
+//!
+//! `_start` runs that path the way the firmware does, every input hidden
+//! from the optimiser behind `black_box`: SPI bytes → `decode_frame` →
+//! `Pipeline::push` (normalise → embed → window → gradient → decision →
+//! encode) or `mark_missing`, `begin` and `finish`, for paper and square
+//! kernels, normalised or raw; and around it the scoring side's own
+//! bookkeeping: DRDY/buffer accounting, LINE_SYNC sequencing, the output
+//! queue. The panic handler calls `cvm_panic_path_reachable`, which no
+//! object defines: after LTO and dead-code removal the link succeeds only
+//! if no panic call is left anywhere in the image.
+#![no_std]
+#![no_main]
+
+use core::hint::black_box;
+use core::panic::PanicInfo;
+
+use cvm_core::Scorer;
+use cvm_core::config::{Config, Geometry, Kernels, MAX_J, Weights};
+use cvm_core::pipeline::{Pipeline, Settings};
+use cvm_core::protocol::{LineSink, MAX_LINE, Priority};
+use cvm_core::stream::{Position, row_words};
+use cvm_fw_app::acquire::{Acquisition, BeamRecord};
+use cvm_fw_app::decode::{decode_frame, frame_bytes};
+use cvm_fw_app::driver::{CountingSink, FrameStore, ScanDriver};
+use cvm_fw_app::queue::LineQueue;
+
+unsafe extern "C" {
+    /// Defined nowhere: a reference to it is a link error naming it.
+    fn cvm_panic_path_reachable() -> !;
+}
+
+#[panic_handler]
+fn panic(_: &PanicInfo) -> ! {
+    unsafe { cvm_panic_path_reachable() }
+}
+
+/// The firmware's geometry and capacity (design.md §5: 300 columns, 15x15).
+const MAX_COLS: usize = 300;
+const WORDS: usize = row_words(MAX_COLS, MAX_J, MAX_J);
+const CELLS: usize = MAX_J * MAX_J;
+
+const fn scorer(cfg: Config) -> Scorer {
+    match Scorer::new(&cfg) {
+        Ok(s) => s,
+        Err(_) => panic!("configuration refused"),
+    }
+}
+
+const fn config(kernels: Kernels, normalise: bool) -> Config {
+    let g = match Geometry::new(15, 15) {
+        Ok(g) => g,
+        Err(_) => panic!("geometry refused"),
+    };
+    Config {
+        geometry: g,
+        kernels,
+        weights: Weights::Uniform,
+        normalise,
+        full_scale: 4095,
+    }
+}
+
+static PAPER: Scorer = scorer(config(Kernels::Paper { bmax: 0 }, true));
+static SQUARE: Scorer = scorer(config(Kernels::Square { kmax: 14 }, false));
+
+static mut ROW_A: [i32; WORDS] = [0; WORDS];
+static mut ROW_B: [i32; WORDS] = [0; WORDS];
+static mut QUEUE: LineQueue<8192> = LineQueue::new(4096);
+static mut BUS: [[u8; frame_bytes(CELLS)]; 2] = [[0; frame_bytes(CELLS)]; 2];
+
+/// The output queue as the line sink, as on the boards.
+struct Sink<'q>(&'q mut LineQueue<8192>);
+
+impl LineSink for Sink<'_> {
+    fn line(&mut self, line: &[u8], priority: Priority) {
+        self.0.push(line, priority);
+    }
+}
+
+impl CountingSink for Sink<'_> {
+    fn dropped(&self) -> u32 {
+        self.0.dropped()
+    }
+}
+
+/// Frame buffers holding bus bytes, decoded when the driver asks.
+struct Frames<'b> {
+    bus: &'b [[u8; frame_bytes(CELLS)]; 2],
+    cells: usize,
+    samples: [u16; CELLS],
+}
+
+impl FrameStore for Frames<'_> {
+    fn frame(&mut self, buf: usize) -> Option<&[u16]> {
+        let bytes = self.bus.get(buf)?.get(..frame_bytes(self.cells))?;
+        let out = self.samples.get_mut(..self.cells)?;
+        decode_frame(bytes, out).ok()?;
+        Some(out)
+    }
+
+    fn release(&mut self, buf: usize) {
+        black_box(buf);
+    }
+}
+
+#[unsafe(no_mangle)]
+pub extern "C" fn _start() -> ! {
+    let scorer: &'static Scorer = if black_box(true) { &PAPER } else { &SQUARE };
+    let settings = Settings {
+        cols: black_box(300),
+        threshold: black_box(1 << 20),
+        scores: black_box(true),
+        max_defect_lines_per_row: black_box(8),
+        firmware_version: "nopanic",
+    };
+    // SAFETY: `_start` runs once and is the only user of these statics.
+    let (row_a, row_b, queue, bus) = unsafe {
+        (
+            &mut *core::ptr::addr_of_mut!(ROW_A),
+            &mut *core::ptr::addr_of_mut!(ROW_B),
+            &mut *core::ptr::addr_of_mut!(QUEUE),
+            &mut *core::ptr::addr_of_mut!(BUS),
+        )
+    };
+    let Ok(mut pipeline) = Pipeline::<MAX_COLS>::new(scorer, settings, row_a, row_b) else {
+        loop {
+            black_box(());
+        }
+    };
+    let mut sink = Sink(queue);
+    let mut samples = [0u16; CELLS];
+    let mut line = [0u8; MAX_LINE];
+
+    // The per-beam path on its own.
+    loop {
+        let bytes: &[u8] = black_box(&bus[0][..]);
+        let n = black_box(scorer.cells());
+        let pos = Position {
+            row: black_box(0),
+            col: black_box(0),
+        };
+        match black_box(0u8) {
+            0 => {
+                if let Some(out) = samples.get_mut(..n)
+                    && decode_frame(bytes, out).is_ok()
+                {
+                    black_box(pipeline.push(pos, out, &mut sink));
+                } else {
+                    black_box(pipeline.mark_missing(pos, &mut sink));
+                }
+            }
+            1 => pipeline.begin(&mut sink),
+            2 => {
+                black_box(pipeline.finish(black_box(0), &mut sink));
+            }
+            3 => break,
+            _ => {
+                black_box(sink.0.pop_into(&mut line));
+            }
+        }
+    }
+
+    // The scoring side's loop as the boards run it.
+    let mut acq = Acquisition::<2, 64>::new();
+    let mut driver = ScanDriver::new(pipeline, black_box(300), black_box(300));
+    let mut frames = Frames {
+        bus: black_box(&*bus),
+        cells: black_box(CELLS),
+        samples: [0; CELLS],
+    };
+    loop {
+        match black_box(0u8) {
+            0 => {
+                black_box(acq.drdy(black_box(false)));
+            }
+            1 => acq.read_done(black_box(0), black_box(true)),
+            2 => {
+                if sink.0.keep_room() {
+                    let rec: Option<BeamRecord> =
+                        if driver.busy() { None } else { acq.take_next() };
+                    black_box(driver.step(rec, &mut frames, &mut sink));
+                }
+            }
+            3 => {
+                black_box(driver.end_of_data(&mut frames, &mut sink));
+            }
+            4 => acq.release(black_box(1)),
+            _ => {
+                black_box(sink.0.pop_into(&mut line));
+            }
+        }
+    }
+}
