@@ -4,7 +4,7 @@
 use cvm_core::protocol::Priority;
 use cvm_core::stream::Position;
 use cvm_fw_app::acquire::{Acquisition, BeamRecord, LostCause};
-use cvm_fw_app::decode::{FrameSizeError, decode_frame};
+use cvm_fw_app::decode::{FrameSizeError, decode_frame, frame_bytes};
 use cvm_fw_app::emufile::{HeaderError, ScanHeader};
 use cvm_fw_app::queue::LineQueue;
 use cvm_fw_app::sequence::{Action, Payload, Sequencer};
@@ -65,6 +65,7 @@ fn clean_scan_through_the_board_equals_the_pipeline() {
         board.uart.send(usize::MAX);
     }
     board.end();
+    assert_consistent(&board);
     let want = reference(&scan, true, &[], 0);
     // The gradient peaks next to the planted blob at (3, 4).
     assert!(
@@ -99,6 +100,7 @@ fn drdy_storm_overruns_are_counted_and_reported_missing_in_place() {
         board.uart.send(usize::MAX);
     }
     board.end();
+    assert_consistent(&board);
     assert!(lost.len() >= 5, "the storm must overrun ({lost:?})");
     assert_eq!(board.acq.counts().overruns as usize, lost.len());
     assert_eq!(board.driver.sequence_counts().lost as usize, lost.len());
@@ -127,6 +129,7 @@ fn missing_line_sync_keeps_every_position() {
         board.score(usize::MAX);
     }
     board.end();
+    assert_consistent(&board);
     assert_eq!(board.uart.sent, reference(&scan, true, &[], 0));
     assert_eq!(board.driver.sequence_counts().sync_missing, 2);
     assert_eq!(board.driver.sequence_counts().extra, 0);
@@ -148,6 +151,7 @@ fn extra_frame_after_a_row_is_discarded_and_counted() {
         board.score(usize::MAX);
     }
     board.end();
+    assert_consistent(&board);
     assert_eq!(board.uart.sent, reference(&scan, true, &[], 0));
     assert_eq!(board.driver.sequence_counts().extra, 1);
 }
@@ -168,6 +172,7 @@ fn short_row_is_reanchored_by_line_sync() {
         board.score(usize::MAX);
     }
     board.end();
+    assert_consistent(&board);
     assert_eq!(board.uart.sent, reference(&scan, true, &gone, 0));
     let c = board.driver.sequence_counts();
     assert_eq!((c.short_rows, c.short_positions), (1, 2));
@@ -187,6 +192,7 @@ fn spi_errors_become_missing_positions() {
         board.score(usize::MAX);
     }
     board.end();
+    assert_consistent(&board);
     assert_eq!(board.acq.counts().spi_errors, 2);
     assert_eq!(board.uart.sent, reference(&scan, false, &bad, 0));
 }
@@ -213,6 +219,7 @@ fn stalled_uart_drops_only_score_lines_and_loses_no_position_silently() {
         }
     }
     board.end();
+    assert_consistent(&board);
     let q = *board.uart.queue.counts();
     assert!(q.dropped_scores > 0, "the stall must drop score lines");
     assert_eq!(q.dropped_keep, 0);
@@ -423,4 +430,195 @@ fn scan_file_header_round_trips_and_rejects_garbage() {
     bad[20..24].copy_from_slice(&0u32.to_le_bytes());
     assert_eq!(ScanHeader::parse(&bad), Err(HeaderError::Columns));
     assert_eq!(ScanHeader::parse(&bytes[..100]), Err(HeaderError::Short));
+}
+
+/// What every fault must leave intact: each DRDY edge became one beam, each
+/// beam was placed, reported lost or counted extra, every scan that began
+/// ended, no record is left behind and no keep line was dropped.
+fn assert_consistent<const CAP: usize>(board: &Board<'_, CAP>) {
+    let a = *board.acq.counts();
+    let c = *board.driver.sequence_counts();
+    assert_eq!(board.acq.pending(), 0, "beam records left unscored");
+    assert_eq!(a.drdy, a.frames_read + a.overruns + a.spi_errors);
+    assert_eq!(c.beams, a.drdy, "every DRDY edge is one beam");
+    assert_eq!(c.beams, c.placed + c.lost + c.extra, "{c:?}");
+    assert_eq!(c.scans_begun, c.scans_finished);
+    assert_eq!(board.uart.queue.counts().dropped_keep, 0);
+    assert!(board.uart.queue.is_empty());
+}
+
+#[test]
+fn drdy_faster_than_the_spi_loses_the_frames_it_cannot_read_in_place() {
+    let scan = Scan::generate(4, 4, 10, 8, 9, (5, 3));
+    let scorer = scan.scorer();
+    let (mut a, mut b) = scan.row_buffers();
+    let mut board = Board::<BIG>::new(&scan, &scorer, true, (&mut a, &mut b), 4096);
+    let n = frame_bytes(scorer.cells());
+    let mut reading: Option<usize> = None;
+    let mut lost = vec![];
+    for beam in 0..scan.frames.len() {
+        let pos = scan.pos(beam);
+        // Beams 23..47: each DRDY edge comes while the SPI is still clocking
+        // out the previous frame (the read completes one edge late).
+        let storm = (23..47).contains(&beam);
+        if !storm && let Some(buf) = reading.take() {
+            board.acq.read_done(buf, true);
+        }
+        match board.acq.drdy(pos.col == 0) {
+            Some(buf) => {
+                let bytes: Vec<u8> = scan
+                    .frame(beam)
+                    .iter()
+                    .flat_map(|s| s.to_be_bytes())
+                    .collect();
+                board.frames.bufs[buf][..n].copy_from_slice(&bytes);
+                if storm {
+                    if let Some(prev) = reading.replace(buf) {
+                        board.acq.read_done(prev, true);
+                    }
+                } else {
+                    board.acq.read_done(buf, true);
+                }
+            }
+            None => lost.push(pos),
+        }
+        // An odd beam's read completes only at the next edge, so every even
+        // beam of the storm finds the SPI busy.
+        if storm
+            && beam % 2 == 0
+            && let Some(buf) = reading.take()
+        {
+            board.acq.read_done(buf, true);
+        }
+        board.score(usize::MAX);
+        board.uart.send(usize::MAX);
+    }
+    if let Some(buf) = reading.take() {
+        board.acq.read_done(buf, true);
+    }
+    board.end();
+    assert_consistent(&board);
+    assert_eq!(lost.len(), 12, "every even beam of the storm ({lost:?})");
+    assert!(
+        lost.iter()
+            .all(|p| (23..47).contains(&(p.row * 10 + p.col)))
+    );
+    assert_eq!(board.acq.counts().overruns as usize, lost.len());
+    // Every other position keeps its frame, every lost one is reported missing
+    // where it was, and the end line counts them.
+    assert_eq!(board.uart.sent, reference(&scan, true, &lost, 0));
+    assert_eq!(end_field(&board.uart.sent, "missing") as usize, lost.len());
+    assert_eq!(
+        end_field(&board.uart.sent, "frames") as usize,
+        80 - lost.len()
+    );
+}
+
+#[test]
+fn drdy_stuck_ends_the_scan_with_every_position_accounted_then_recovers() {
+    let scan = Scan::generate(4, 4, 9, 6, 10, (4, 4));
+    let scorer = scan.scorer();
+    let (mut a, mut b) = scan.row_buffers();
+    let mut board = Board::<BIG>::new(&scan, &scorer, true, (&mut a, &mut b), 4096);
+    // DRDY stops after 3 rows and 4 beams: the firmware's idle timeout ends
+    // the scan (end of data) with the positions no beam reached.
+    let delivered = 3 * 9 + 4;
+    for beam in 0..delivered {
+        board.drdy(scan.pos(beam).col == 0, scan.frame(beam), true);
+        board.score(usize::MAX);
+    }
+    board.end();
+    let unreached: Vec<Position> = (delivered..54).map(|k| scan.pos(k)).collect();
+    let first = board.uart.sent.clone();
+    assert_eq!(first, reference(&scan, true, &unreached, 0));
+    assert_eq!(end_field(&first, "rows"), 6);
+    assert_eq!(end_field(&first, "frames") as usize, delivered);
+    assert_eq!(end_field(&first, "missing") as usize, unreached.len());
+    assert_eq!(
+        board.driver.sequence_counts().unfinished_positions as usize,
+        unreached.len()
+    );
+    assert_consistent(&board);
+
+    // DRDY comes back: the next scan is complete and in place.
+    board.uart.sent.clear();
+    for beam in 0..scan.frames.len() {
+        board.drdy(scan.pos(beam).col == 0, scan.frame(beam), true);
+        board.score(usize::MAX);
+    }
+    board.end();
+    assert_eq!(board.uart.sent, reference(&scan, true, &[], 0));
+    assert_consistent(&board);
+}
+
+#[test]
+fn uart_stalled_for_seconds_drops_only_counted_score_lines() {
+    // 40 x 100 beams; at 1000 beams/s the UART is stalled for 3 s (3000
+    // beams), long enough to fill the queue, the frame buffers and the
+    // beam log, whose lost beams are then folded into runs.
+    let scan = Scan::generate(3, 3, 40, 100, 11, (80, 20));
+    let scorer = scan.scorer();
+    let (mut a, mut b) = scan.row_buffers();
+    const CAP: usize = 4096;
+    let mut board = Board::<CAP>::new(&scan, &scorer, true, (&mut a, &mut b), 2700);
+    let mut lost = vec![];
+    for beam in 0..scan.frames.len() {
+        if !board.drdy(scan.pos(beam).col == 0, scan.frame(beam), true) {
+            lost.push(scan.pos(beam));
+        }
+        board.score(usize::MAX);
+        if !(500..3500).contains(&beam) {
+            board.uart.send(8);
+        }
+    }
+    board.end();
+    assert_consistent(&board);
+    let q = *board.uart.queue.counts();
+    assert!(lost.len() > 2500, "the stall must overrun ({})", lost.len());
+    assert!(
+        board.acq.counts().sync_folded > 0,
+        "runs must fold LINE_SYNCs"
+    );
+    let sent = &board.uart.sent;
+    let want = reference(&scan, true, &lost, q.dropped_scores);
+    let keep = |v: &[String]| {
+        v.iter()
+            .filter(|l| !l.starts_with("S,"))
+            .cloned()
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(
+        keep(sent),
+        keep(&want),
+        "keep lines, in order, faults in place"
+    );
+    assert_eq!(end_field(sent, "missing") as usize, lost.len());
+    assert_eq!(end_field(sent, "dropped"), q.dropped_scores);
+    let s_sent = sent.iter().filter(|l| l.starts_with("S,")).count();
+    let s_want = want.iter().filter(|l| l.starts_with("S,")).count();
+    assert_eq!(s_sent + q.dropped_scores as usize, s_want);
+    // After the stall (with a row of margin) every line is the reference's.
+    let last = lost.iter().map(|p| p.row).max().unwrap();
+    assert_eq!(rows_from(sent, last + 2), rows_from(&want, last + 2));
+}
+
+#[test]
+#[ignore = "known gap: a LINE_SYNC glitch mid-row is taken for a short row and shifts every later row (see README, Reliability)"]
+fn extra_line_sync_mid_row_keeps_later_rows_in_place() {
+    let scan = Scan::generate(3, 3, 6, 5, 4, (2, 2));
+    let scorer = scan.scorer();
+    let (mut a, mut b) = scan.row_buffers();
+    let mut board = Board::<BIG>::new(&scan, &scorer, true, (&mut a, &mut b), 4096);
+    for beam in 0..scan.frames.len() {
+        let pos = scan.pos(beam);
+        let glitch = pos == (Position { row: 1, col: 3 });
+        board.drdy(pos.col == 0 || glitch, scan.frame(beam), true);
+        board.score(usize::MAX);
+    }
+    board.end();
+    assert_consistent(&board);
+    assert_eq!(
+        rows_from(&board.uart.sent, 3),
+        rows_from(&reference(&scan, true, &[], 0), 3)
+    );
 }
