@@ -304,6 +304,31 @@ impl Scorer {
         state: &mut [i32],
         scratch: &mut Scratch,
     ) -> Result<u8, FrameError> {
+        self.prepare_into(frame, state, scratch, false)
+            .map(|(fl, _)| fl)
+    }
+
+    /// [`Scorer::prepare_with`] into a `state` that holds a prepared map:
+    /// also returns the score of the distance between that map and the new
+    /// one, computed while the new one overwrites it (the streaming engine's
+    /// vertical component, without a copy of the new map or a second pass).
+    /// Equal to `distance(old, new)`.
+    pub fn prepare_replacing(
+        &self,
+        frame: &[u16],
+        state: &mut [i32],
+        scratch: &mut Scratch,
+    ) -> Result<(u8, u32), FrameError> {
+        self.prepare_into(frame, state, scratch, true)
+    }
+
+    fn prepare_into(
+        &self,
+        frame: &[u16],
+        state: &mut [i32],
+        scratch: &mut Scratch,
+        diff: bool,
+    ) -> Result<(u8, u32), FrameError> {
         let n = self.cells();
         if frame.len() != n {
             return Err(FrameError::Length);
@@ -312,12 +337,19 @@ impl Scorer {
             return Err(FrameError::Length);
         };
         match self.kind {
-            Kind::Square { .. } => self.normalise(frame, state),
+            Kind::Square { kmax } => {
+                if !diff {
+                    return self.normalise(frame, state).map(|fl| (fl, 0));
+                }
+                let new = scratch.v.as_flattened_mut().get_mut(..n).unwrap_or(&mut []);
+                let fl = self.normalise(frame, new)?;
+                let score = self.to_score(self.square_distance(state, new, kmax as usize));
+                state.copy_from_slice(new);
+                Ok((fl, score))
+            }
             Kind::Paper => {
-                let g = self.config.geometry;
-                let (j1, j2) = (g.j1 as usize, g.j2 as usize);
                 let off = saturation_offset(self.config.full_scale);
-                let (sum, sat) = embed::fold_rows(frame, j1, j2, off, &mut scratch.v);
+                let (sum, sat) = embed::sum_and_saturation(frame, off);
                 let mut fl = 0;
                 if sat & 0x1_0000 != 0 {
                     fl |= flags::SATURATED;
@@ -326,8 +358,9 @@ impl Scorer {
                     fl |= flags::DARK;
                 }
                 let conv = self.scale(sum);
-                embed::embed(&self.f1, &self.f2, &scratch.v, conv, &mut scratch.t, state);
-                Ok(fl)
+                let acc =
+                    embed::embed(&self.f1, &self.f2, frame, conv, &mut scratch.t, state, diff);
+                Ok((fl, if diff { self.to_score(acc) } else { 0 }))
             }
         }
     }

@@ -6,11 +6,13 @@
 //! The gradient of row `r` needs rows `r-1` and `r+1`. The engine keeps the
 //! prepared state (embedding) of two rows in two buffers, row `r` in buffer
 //! `r % 2`. When beam `(r+1, c)` arrives, slot `c` of its buffer still holds
-//! `(r-1, c)`: the vertical component of `(r, c)` is computed from the two
-//! and only then is the slot overwritten. The horizontal component of
-//! `(r+1, c-1)` is computed at the same time from slots `c-2` and `c`. So the
-//! window is two rows of state plus one map in flight, and row `r` is final
-//! (and emitted) when row `r+1` is complete.
+//! `(r-1, c)`: the new map is embedded straight into that slot, and the
+//! vertical component of `(r, c)`, the distance between the two, is summed
+//! by the embedding's last pass word by word before it overwrites each word
+//! ([`Scorer::prepare_replacing`]). The horizontal component of
+//! `(r+1, c-1)` is computed next from slots `c-2` and `c`. So the window is
+//! two rows of state and no map in flight, and row `r` is final (and
+//! emitted) when row `r+1` is complete.
 //!
 //! # Gaps
 //!
@@ -22,9 +24,8 @@
 //! order) is rejected and counted, one beyond the last column is counted as
 //! extra; neither shifts any later position.
 
-use crate::config::MAX_CELLS;
 use crate::flags;
-use crate::scorer::{Scorer, Scratch, magnitude};
+use crate::scorer::{FrameError, Scorer, Scratch, magnitude};
 
 /// Scan position of a beam: `row = m2 - 1`, `col = m1 - 1`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -151,8 +152,6 @@ pub struct Engine<'a, const MAX_COLS: usize> {
     next_col: usize,
     pending: Option<u32>,
     totals: Totals,
-    /// The map in flight, prepared before it replaces the slot it needs.
-    fresh: [i32; MAX_CELLS],
     scratch: Scratch,
 }
 
@@ -186,7 +185,6 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
             next_col: 0,
             pending: None,
             totals: Totals::default(),
-            fresh: [0; MAX_CELLS],
             scratch: Scratch::new(),
         })
     }
@@ -339,11 +337,28 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
         let Some(r) = self.current else { return };
         let c = self.next_col;
         let b = (r % 2) as usize;
-        let own = match frame.map(|f| {
-            self.scorer
-                .prepare_with(f, &mut self.fresh, &mut self.scratch)
-        }) {
-            Some(Ok(fl)) => {
+        let has = |m: &[u8; MAX_COLS]| m.get(c).is_some_and(|f| f & flags::NO_DATA == 0);
+        // (r-1, c) needs its vertical component when it has data; slot c of
+        // buffer b still holds (r-2, c), its upper neighbour.
+        let mid_ok = self.pending.is_some() && has(&self.meta[1 - b]);
+        let up_ok = has(&self.meta[b]);
+        // The new map is prepared straight into slot c. When both
+        // neighbours of (r-1, c) have data, their distance comes out of the
+        // embedding as it overwrites (r-2, c).
+        let start = c * self.cells;
+        let prepared = match (frame, self.bufs[b].get_mut(start..start + self.cells)) {
+            (Some(f), Some(slot)) if mid_ok && up_ok => self
+                .scorer
+                .prepare_replacing(f, slot, &mut self.scratch)
+                .map(|(fl, g1)| (fl, Some(g1))),
+            (Some(f), Some(slot)) => self
+                .scorer
+                .prepare_with(f, slot, &mut self.scratch)
+                .map(|fl| (fl, None)),
+            _ => Err(FrameError::Length),
+        };
+        let (own, fused) = match prepared {
+            Ok((fl, g1)) => {
                 self.totals.frames += 1;
                 if fl & flags::DARK != 0 {
                     self.totals.dark += 1;
@@ -351,40 +366,29 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
                 if fl & flags::SATURATED != 0 {
                     self.totals.saturated += 1;
                 }
-                fl
+                (fl, g1)
             }
-            Some(Err(_)) | None => {
+            Err(_) => {
                 self.totals.missing += 1;
-                flags::NO_DATA
+                (flags::NO_DATA, None)
             }
         };
-        let state = self.fresh.get(..self.cells).unwrap_or(&[]);
 
-        // Vertical component of (r-1, c): slot c still holds (r-2, c).
-        if self.pending.is_some() {
-            let mid = self.meta[1 - b].get(c).copied().unwrap_or(flags::NO_DATA);
-            if mid & flags::NO_DATA == 0 {
-                let up_ok = self.meta[b].get(c).is_some_and(|m| m & flags::NO_DATA == 0);
-                let down_ok = own & flags::NO_DATA == 0;
-                let g1 = match (up_ok, down_ok) {
-                    (true, true) => self.scorer.distance(self.slot(b, c), state),
-                    (true, false) => self.scorer.distance(self.slot(b, c), self.slot(1 - b, c)),
-                    (false, true) => self.scorer.distance(self.slot(1 - b, c), state),
-                    (false, false) => 0,
-                };
-                if let Some(s) = self.results[(self.cur ^ 1) & 1].get_mut(c) {
-                    s.g1 = g1;
-                }
+        // Vertical component of (r-1, c); a missing neighbour is replaced
+        // by (r-1, c) itself. Without a new map slot c still holds (r-2, c).
+        if mid_ok {
+            let down_ok = own & flags::NO_DATA == 0;
+            let g1 = match (up_ok, down_ok) {
+                (true, true) => fused.unwrap_or(0),
+                (true, false) => self.scorer.distance(self.slot(b, c), self.slot(1 - b, c)),
+                (false, true) => self.scorer.distance(self.slot(1 - b, c), self.slot(b, c)),
+                (false, false) => 0,
+            };
+            if let Some(s) = self.results[(self.cur ^ 1) & 1].get_mut(c) {
+                s.g1 = g1;
             }
         }
 
-        // Overwrite slot c with (r, c).
-        if own & flags::NO_DATA == 0 {
-            let start = c * self.cells;
-            if let Some(dst) = self.bufs[b].get_mut(start..start + self.cells) {
-                dst.copy_from_slice(state);
-            }
-        }
         if let Some(m) = self.meta[b].get_mut(c) {
             *m = own;
         }

@@ -244,40 +244,17 @@ impl Factor {
     }
 }
 
-/// Folds every row of a row-major `j1 x j2` frame along axis 2 into `w`
-/// (`w[i][0..h2]` even, `w[i][h2..j2]` odd part; exact integer sums and
-/// differences of two samples). Returns the sum of all samples and the OR
-/// of `a + off` over all samples (bit 16 set iff a sample reached the full
-/// scale, see [`saturation_offset`]).
-pub fn fold_rows(
-    frame: &[u16],
-    j1: usize,
-    j2: usize,
-    off: u32,
-    w: &mut [[i32; MAX_J]; MAX_J],
-) -> (u32, u32) {
-    let (h2, g2) = (j2.div_ceil(2), j2 / 2);
+/// The sum of all samples of a frame and the OR of `a + off` over all
+/// samples (bit 16 set iff a sample reached the full scale, see
+/// [`saturation_offset`]): the only per-map quantities needed before the
+/// row pass. At most `256 * 65535 < 2^24`: the sum cannot overflow.
+#[inline(never)]
+pub fn sum_and_saturation(frame: &[u16], off: u32) -> (u32, u32) {
     let mut sum = 0u32;
     let mut sat = 0u32;
-    for (row, wr) in frame.chunks_exact(j2.max(1)).zip(w.iter_mut()).take(j1) {
-        let (we, wo) = wr.split_at_mut(h2.min(MAX_J));
-        let pairs = row.iter().zip(row.iter().rev()).take(g2);
-        for (((&a, &b), e), o) in pairs.zip(we.iter_mut()).zip(wo.iter_mut()) {
-            let (a, b) = (a as u32, b as u32);
-            sat |= (a + off) | (b + off);
-            sum += a + b;
-            *e = (a + b) as i32;
-            *o = a.wrapping_sub(b) as i32;
-        }
-        if j2 % 2 == 1 {
-            // The middle cell is even.
-            let a = row.get(g2).copied().unwrap_or(0) as u32;
-            sat |= a + off;
-            sum += a;
-            if let Some(e) = we.get_mut(g2) {
-                *e = a as i32;
-            }
-        }
+    for &a in frame.iter().take(crate::config::MAX_CELLS) {
+        sum += a as u32;
+        sat |= a as u32 + off;
     }
     (sum, sat)
 }
@@ -312,57 +289,77 @@ fn tri<const N: usize>(r: &[i32; TRI], u: &[i32; N]) -> [i32; N] {
     acc
 }
 
-/// Row pass of one block (`N` folded columns from `c0`) over the `n_rows`
-/// rows of `w`: converts the folded counts to `Q(f)`
-/// (`round((v << k) * m / 2^32)`), applies the block and stores the result
-/// transposed, `t[c0 + k][i]`.
+/// Row pass for an axis 2 of `H + G` cells over the first `n_rows` rows of
+/// a row-major frame: folds each row along axis 2 (`a[l] ± a[H+G-1-l]`,
+/// exact), converts the folded counts to `Q(f)`
+/// (`round((v << k) * m / 2^32)`), applies the even and the odd block and
+/// stores the results transposed, `t[k][i]` (even) and `t[MAX_H + k][i]`
+/// (odd).
 #[inline(never)]
-fn rows<const N: usize>(
-    r: &[i32; TRI],
-    w: &[[i32; MAX_J]; MAX_J],
+fn rows<const H: usize, const G: usize>(
+    f2: &Factor,
+    frame: &[u16],
     n_rows: usize,
-    c0: usize,
     conv: (u32, i32),
     t: &mut [[i32; MAX_J]; MAX_J],
 ) {
-    let Some(Ok(tb)) = t
-        .get_mut(c0..c0 + N)
-        .map(<&mut [[i32; MAX_J]; N]>::try_from)
-    else {
+    let j2 = H + G;
+    let (sh, m) = (conv.0 & 31, conv.1);
+    let (te, to) = t.split_at_mut(MAX_H);
+    let (Some(Ok(te)), Some(Ok(to))) = (
+        te.get_mut(..H).map(<&mut [[i32; MAX_J]; H]>::try_from),
+        to.get_mut(..G).map(<&mut [[i32; MAX_J]; G]>::try_from),
+    ) else {
         return;
     };
-    let (sh, m) = (conv.0 & 31, conv.1);
-    for (i, wr) in w.iter().take(n_rows).enumerate() {
-        let Some(Ok(src)) = wr.get(c0..c0 + N).map(<&[i32; N]>::try_from) else {
+    for (i, row) in frame.chunks_exact(j2.max(1)).take(n_rows).enumerate() {
+        let Some(Ok(row)) = row.get(..j2).map(<&[u16]>::try_from) else {
             return;
         };
-        let u: [i32; N] = core::array::from_fn(|l| mul_hi_round(src[l] << sh, m));
-        let o = tri::<N>(r, &u);
-        for (tk, &ok) in tb.iter_mut().zip(o.iter()) {
-            tk[i & (MAX_J - 1)] = ok;
+        let row: &[u16] = row;
+        // Constant indices below the row's length once unrolled.
+        let at = |l: usize| row.get(l).copied().unwrap_or(0) as i32;
+        let ue: [i32; H] = core::array::from_fn(|l| {
+            let v = if l < G { at(l) + at(j2 - 1 - l) } else { at(l) };
+            mul_hi_round(v << sh, m)
+        });
+        let oe = tri::<H>(&f2.even, &ue);
+        for (tk, &v) in te.iter_mut().zip(oe.iter()) {
+            tk[i & (MAX_J - 1)] = v;
+        }
+        let uo: [i32; G] =
+            core::array::from_fn(|l| mul_hi_round((at(l) - at(j2 - 1 - l)) << sh, m));
+        let oo = tri::<G>(&f2.odd, &uo);
+        for (tk, &v) in to.iter_mut().zip(oo.iter()) {
+            tk[i & (MAX_J - 1)] = v;
         }
     }
 }
 
-/// Column pass for an axis 1 of `H + G` cells: for every folded column
-/// `k < n_cols`, folds `t[k]` along axis 1 (`t[l] ± t[H+G-1-l]`, exact),
-/// applies the even and the odd block and stores the embedding in
-/// `e[k * (H + G)..]` (even part first).
+/// Column pass for an axis 1 of `H + G` cells: for every row `t[k]` (a
+/// folded column of the map), folds it along axis 1 (`t[l] ± t[H+G-1-l]`,
+/// exact), applies the even and the odd block and stores the embedding in
+/// the `k`-th chunk of `e` (even part first).
+///
+/// With `DIFF`, returns `Σ (old - new)²` over the overwritten words: the
+/// squared distance to the map `e` held before, for the price of one load,
+/// one subtraction and one `SMLAL` per word (wrapping, so that a buffer
+/// that held no map cannot make it panic; for two maps it cannot wrap).
 #[inline(never)]
-fn cols<const H: usize, const G: usize>(
+fn cols<const H: usize, const G: usize, const DIFF: bool>(
     f1: &Factor,
-    t: &[[i32; MAX_J]; MAX_J],
-    n_cols: usize,
+    t: &[[i32; MAX_J]],
     e: &mut [i32],
-) {
+) -> u64 {
     let j1 = H + G;
-    for (tr, er) in t.iter().zip(e.chunks_exact_mut(j1.max(1))).take(n_cols) {
+    let mut acc = 0u64;
+    for (tr, er) in t.iter().zip(e.chunks_exact_mut(j1.max(1))) {
         let (de, dodd) = er.split_at_mut(H.min(er.len()));
         let (Ok(de), Ok(dodd)) = (
             <&mut [i32; H]>::try_from(de),
             <&mut [i32; G]>::try_from(dodd),
         ) else {
-            return;
+            return acc;
         };
         // Constant indices below MAX_J once unrolled: no bounds checks.
         let ue: [i32; H] = core::array::from_fn(|l| {
@@ -374,61 +371,94 @@ fn cols<const H: usize, const G: usize>(
         });
         let uo: [i32; G] =
             core::array::from_fn(|l| tr[l].wrapping_sub(tr[(j1 - 1 - l) & (MAX_J - 1)]));
-        *de = tri::<H>(&f1.even, &ue);
-        *dodd = tri::<G>(&f1.odd, &uo);
-    }
-}
-
-/// Runs `$pass::<n>($args)` for the runtime block size `n` (1 to 8).
-macro_rules! by_size {
-    ($n:expr, $pass:ident, $($arg:expr),*) => {
-        match $n {
-            1 => $pass::<1>($($arg),*),
-            2 => $pass::<2>($($arg),*),
-            3 => $pass::<3>($($arg),*),
-            4 => $pass::<4>($($arg),*),
-            5 => $pass::<5>($($arg),*),
-            6 => $pass::<6>($($arg),*),
-            7 => $pass::<7>($($arg),*),
-            8 => $pass::<8>($($arg),*),
-            _ => {}
+        let (ne, no) = (tri::<H>(&f1.even, &ue), tri::<G>(&f1.odd, &uo));
+        if DIFF {
+            // Two fixed-length loops: fully unrolled, one SMLAL per word.
+            for k in 0..H {
+                let d = de[k].wrapping_sub(ne[k]) as i64;
+                acc = acc.wrapping_add(d.wrapping_mul(d) as u64);
+            }
+            for k in 0..G {
+                let d = dodd[k].wrapping_sub(no[k]) as i64;
+                acc = acc.wrapping_add(d.wrapping_mul(d) as u64);
+            }
         }
-    };
+        *de = ne;
+        *dodd = no;
+    }
+    acc
 }
 
-/// `E = R1' y R2'ᵀ` of a map folded along axis 2 (`w`, converted by
-/// `conv`), folded along axis 1 between the passes, stored
-/// folded-column-major in `e` (`j1 * j2` words): `e[k * j1 + i]`.
+/// `E = R1' y R2'ᵀ` of a row-major frame (converted by `conv`), folded
+/// along axis 2 in the row pass and along axis 1 in the column pass, stored
+/// folded-column-major in `e` (`j1 * j2` words): `e[k * j1 + i]`, the even
+/// columns of axis 2 first. With `diff`, returns the squared distance
+/// between the map `e` held before and the new one (else 0).
 pub fn embed(
     f1: &Factor,
     f2: &Factor,
-    w: &[[i32; MAX_J]; MAX_J],
+    frame: &[u16],
     conv: (u32, i32),
     t: &mut [[i32; MAX_J]; MAX_J],
     e: &mut [i32],
-) {
+    diff: bool,
+) -> u64 {
     let j1 = f1.h + f1.g;
-    let j2 = f2.h + f2.g;
-    by_size!(f2.h, rows, &f2.even, w, j1, 0, conv, t);
-    by_size!(f2.g, rows, &f2.odd, w, j1, f2.h, conv, t);
-    let t = &*t;
+    match f2.h + f2.g {
+        1 => rows::<1, 0>(f2, frame, j1, conv, t),
+        2 => rows::<1, 1>(f2, frame, j1, conv, t),
+        3 => rows::<2, 1>(f2, frame, j1, conv, t),
+        4 => rows::<2, 2>(f2, frame, j1, conv, t),
+        5 => rows::<3, 2>(f2, frame, j1, conv, t),
+        6 => rows::<3, 3>(f2, frame, j1, conv, t),
+        7 => rows::<4, 3>(f2, frame, j1, conv, t),
+        8 => rows::<4, 4>(f2, frame, j1, conv, t),
+        9 => rows::<5, 4>(f2, frame, j1, conv, t),
+        10 => rows::<5, 5>(f2, frame, j1, conv, t),
+        11 => rows::<6, 5>(f2, frame, j1, conv, t),
+        12 => rows::<6, 6>(f2, frame, j1, conv, t),
+        13 => rows::<7, 6>(f2, frame, j1, conv, t),
+        14 => rows::<7, 7>(f2, frame, j1, conv, t),
+        15 => rows::<8, 7>(f2, frame, j1, conv, t),
+        16 => rows::<8, 8>(f2, frame, j1, conv, t),
+        _ => return 0,
+    }
+    let (te, to) = t.split_at(MAX_H);
+    let (Some(te), Some(to)) = (te.get(..f2.h), to.get(..f2.g)) else {
+        return 0;
+    };
+    let Some(e) = e.get_mut(..j1 * (f2.h + f2.g)) else {
+        return 0;
+    };
+    let (ee, eo) = e.split_at_mut(j1 * f2.h);
+    macro_rules! both {
+        ($h:literal, $g:literal) => {
+            if diff {
+                cols::<$h, $g, true>(f1, te, ee).wrapping_add(cols::<$h, $g, true>(f1, to, eo))
+            } else {
+                cols::<$h, $g, false>(f1, te, ee);
+                cols::<$h, $g, false>(f1, to, eo);
+                0
+            }
+        };
+    }
     match j1 {
-        1 => cols::<1, 0>(f1, t, j2, e),
-        2 => cols::<1, 1>(f1, t, j2, e),
-        3 => cols::<2, 1>(f1, t, j2, e),
-        4 => cols::<2, 2>(f1, t, j2, e),
-        5 => cols::<3, 2>(f1, t, j2, e),
-        6 => cols::<3, 3>(f1, t, j2, e),
-        7 => cols::<4, 3>(f1, t, j2, e),
-        8 => cols::<4, 4>(f1, t, j2, e),
-        9 => cols::<5, 4>(f1, t, j2, e),
-        10 => cols::<5, 5>(f1, t, j2, e),
-        11 => cols::<6, 5>(f1, t, j2, e),
-        12 => cols::<6, 6>(f1, t, j2, e),
-        13 => cols::<7, 6>(f1, t, j2, e),
-        14 => cols::<7, 7>(f1, t, j2, e),
-        15 => cols::<8, 7>(f1, t, j2, e),
-        16 => cols::<8, 8>(f1, t, j2, e),
-        _ => {}
+        1 => both!(1, 0),
+        2 => both!(1, 1),
+        3 => both!(2, 1),
+        4 => both!(2, 2),
+        5 => both!(3, 2),
+        6 => both!(3, 3),
+        7 => both!(4, 3),
+        8 => both!(4, 4),
+        9 => both!(5, 4),
+        10 => both!(5, 5),
+        11 => both!(6, 5),
+        12 => both!(6, 6),
+        13 => both!(7, 6),
+        14 => both!(7, 7),
+        15 => both!(8, 7),
+        16 => both!(8, 8),
+        _ => 0,
     }
 }
