@@ -595,25 +595,13 @@ fn fill(x: &mut [i32], frame: &[u16], f: impl Fn(u16) -> i32) {
 }
 
 /// `Σ (a - b)²` of two embeddings: `|a|, |b| < 2^30`, so each difference
-/// fits `i32` and the sum (below `2^62`) fits `i64`. Four words at a time
-/// (one `LDM` per operand, four `SUB` + `SMLAL`), kept out of line so that
-/// its registers are not shared with the square-kernel path.
+/// fits `i32` and the sum (below `2^62`) fits `i64`: one `SUB` and one
+/// `SMLAL` per word. Kept out of line so that its registers are not shared
+/// with the square-kernel path.
 #[inline(never)]
 fn squared_difference(a: &[i32], b: &[i32]) -> u64 {
     let mut acc: i64 = 0;
-    let (ac, bc) = (a.chunks_exact(4), b.chunks_exact(4));
-    let (ar, br) = (ac.remainder(), bc.remainder());
-    for (x, y) in ac.zip(bc) {
-        let (Ok(x), Ok(y)) = (<&[i32; 4]>::try_from(x), <&[i32; 4]>::try_from(y)) else {
-            break;
-        };
-        let d0 = x[0].wrapping_sub(y[0]) as i64;
-        let d1 = x[1].wrapping_sub(y[1]) as i64;
-        let d2 = x[2].wrapping_sub(y[2]) as i64;
-        let d3 = x[3].wrapping_sub(y[3]) as i64;
-        acc += d0 * d0 + d1 * d1 + d2 * d2 + d3 * d3;
-    }
-    for (&x, &y) in ar.iter().zip(br) {
+    for (&x, &y) in a.iter().zip(b) {
         let d = x.wrapping_sub(y) as i64;
         acc += d * d;
     }

@@ -252,7 +252,16 @@ impl Factor {
 pub fn sum_and_saturation(frame: &[u16], off: u32) -> (u32, u32) {
     let mut sum = 0u32;
     let mut sat = 0u32;
-    for &a in frame.iter().take(crate::config::MAX_CELLS) {
+    let quads = frame.chunks_exact(4);
+    let rest = quads.remainder();
+    for q in quads {
+        if let &[a, b, c, d] = q {
+            let (a, b, c, d) = (a as u32, b as u32, c as u32, d as u32);
+            sum += (a + b) + (c + d);
+            sat |= ((a + off) | (b + off)) | ((c + off) | (d + off));
+        }
+    }
+    for &a in rest {
         sum += a as u32;
         sat |= a as u32 + off;
     }
