@@ -543,10 +543,12 @@ const fn frobenius(r: &RealFactor) -> f64 {
 #[inline(always)]
 fn reciprocal(num: f32, f: i32, s: u32) -> i32 {
     let n = 1i64 << (32 + f).clamp(0, 60);
-    let sf = s as f32;
-    let mut m = (num / sf) as i64;
+    // Within 2^-22 of the quotient (at most 2^30): off by at most 2^9.
+    let mut m = (num / s as f32) as i32 as i64;
     let mut r = n - m * s as i64;
-    let c = (r as f32 / sf) as i64;
+    // |r| < 2^41: its top bits over those of s give the correction to
+    // within one (only `f32 <-> i32` conversions, single instructions).
+    let c = ((r >> 20) as i32 as f32 / (s >> 20) as f32) as i32 as i64;
     m += c;
     r -= c * s as i64;
     for _ in 0..4 {
