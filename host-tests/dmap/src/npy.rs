@@ -122,8 +122,14 @@ fn open_npy<'a>(path: &Path, bytes: &'a [u8]) -> Result<NpyFile<&'a [u8]>> {
             .rev()
             .fold(0usize, |acc, &x| (acc << 8) | usize::from(x))
     });
-    if header_len.is_none_or(|n| len_at + len_bytes + n > bytes.len()) {
+    let Some(header) =
+        header_len.and_then(|n| bytes.get(len_at + len_bytes..len_at + len_bytes + n))
+    else {
         bail!("{p}: not a valid .npy file (header truncated)");
+    };
+    // The header parser backtracks exponentially on deeply nested brackets.
+    if nesting(header) > MAX_HEADER_NESTING {
+        bail!("{p}: not a valid .npy file (header nested too deeply for a plain array)");
     }
     let npy = NpyFile::new(bytes).map_err(|e| {
         anyhow!(
@@ -160,6 +166,29 @@ fn open_npy<'a>(path: &Path, bytes: &'a [u8]) -> Result<NpyFile<&'a [u8]>> {
         );
     }
     Ok(NpyFile::with_header(header, data))
+}
+
+/// Deepest bracket nesting in a header dict allowed through to the parser:
+/// a plain array's header nests two deep (the dict, the shape tuple).
+const MAX_HEADER_NESTING: usize = 3;
+
+/// Deepest nesting of `{[(` brackets outside quoted strings.
+fn nesting(header: &[u8]) -> usize {
+    let (mut depth, mut deepest, mut quote) = (0usize, 0, None);
+    for &b in header {
+        match (quote, b) {
+            (Some(q), _) if b == q => quote = None,
+            (Some(_), _) => {}
+            (None, b'\'' | b'"') => quote = Some(b),
+            (None, b'{' | b'[' | b'(') => {
+                depth += 1;
+                deepest = deepest.max(depth);
+            }
+            (None, b'}' | b']' | b')') => depth = depth.saturating_sub(1),
+            _ => {}
+        }
+    }
+    deepest
 }
 
 fn one_line(s: &str) -> String {

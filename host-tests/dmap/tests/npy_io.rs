@@ -229,3 +229,22 @@ fn header_length_beyond_the_file_is_refused_before_any_allocation() {
         assert!(!e.contains('\n'));
     }
 }
+
+#[test]
+fn deeply_nested_header_is_refused_without_parsing_it() {
+    // Unbalanced nested brackets make the header parser backtrack
+    // exponentially (minutes at a dozen levels); the reader refuses them.
+    let dict = format!(
+        "{{'descr': '<u2', 'shape': {}{}",
+        "{".repeat(60),
+        " ".repeat(20)
+    );
+    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
+    bytes.extend_from_slice(&(dict.len() as u16 + 1).to_le_bytes());
+    bytes.extend_from_slice(dict.as_bytes());
+    bytes.push(b'\n');
+    let p = path("nested_header.npy");
+    std::fs::write(&p, &bytes).unwrap();
+    let e = read_scan(&p).unwrap_err().to_string();
+    assert!(e.contains("nested too deeply"), "{e}");
+}
