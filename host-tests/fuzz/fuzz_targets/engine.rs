@@ -86,6 +86,7 @@ struct Run<'s> {
     max_defects: u32,
     full_scale: u16,
     cells: usize,
+    jumped: bool,
     model: Model,
     pipeline: Pipeline<'s, MAX_COLS>,
 }
@@ -108,7 +109,7 @@ impl Run<'_> {
         pos.col < self.cols && after && pos.row - self.expected_row().min(pos.row) <= MAX_ROW_JUMP
     }
 
-    fn position(&self, u: &mut Unstructured) -> Result<Position> {
+    fn position(&mut self, u: &mut Unstructured) -> Result<Position> {
         let next = match self.model.last {
             None => Position { row: 0, col: 0 },
             Some(l) if l.col + 1 == self.cols => Position {
@@ -134,9 +135,13 @@ impl Run<'_> {
                 row: base + u.int_in_range(1..=3)?,
                 col: u.int_in_range(0..=self.cols - 1)?,
             },
-            // Around the largest accepted jump.
-            14 if base + 2 * MAX_ROW_JUMP < MAX_ROWS => Position {
-                row: self.expected_row() + MAX_ROW_JUMP + u.int_in_range(0..=1)?,
+            // Around the largest accepted jump (its empty rows are costly:
+            // at most one per input).
+            14 if !self.jumped && base + 2 * MAX_ROW_JUMP < MAX_ROWS => Position {
+                row: {
+                    self.jumped = true;
+                    self.expected_row() + MAX_ROW_JUMP + u.int_in_range(0..=1)?
+                },
                 col: u.int_in_range(0..=self.cols - 1)?,
             },
             // Far away.
@@ -480,6 +485,7 @@ fn run(u: &mut Unstructured) -> Result<()> {
         max_defects: u32::from(settings.max_defect_lines_per_row),
         full_scale: cfg.full_scale,
         cells,
+        jumped: false,
         model: Model::default(),
         pipeline,
     };
