@@ -1,33 +1,64 @@
 //! The fixed-point scorer: normalise a raw map, embed it once, and score a
 //! pair of embedded maps in `O(J1*J2)`.
 //!
+//! # The folded embedding (paper kernels)
+//!
+//! `d = ‖R1 D R2ᵀ‖²_F` with `Ki = Riᵀ Ri` (design.md §4). Each axis kernel
+//! is centrosymmetric, so folding an axis (`u[l] = x[l] + x[J-1-l]`,
+//! `v[l] = x[l] - x[J-1-l]`, the middle cell in `u`) splits it into an even
+//! and an odd block of at most 8 x 8 that do not interact; the factors `R'`
+//! are the Cholesky factors of those blocks (module `embed`). A map costs
+//! about `J1 J2 (J1 + J2) / 4` multiply-adds instead of `J1 J2 (J1 + J2) / 2`,
+//! and every block size has its own fully unrolled code.
+//!
+//! Per map: the sample sum `S` (and the saturation flag) first; then the row
+//! pass folds each detector row along axis 2, converts it to `Q(f)` and
+//! applies `R2'`; the column pass folds each column of that along axis 1,
+//! applies `R1'` and stores `E`. In the streaming engine the column pass
+//! also sums `(old - new)²` over the words it overwrites, which is the
+//! vertical gradient component ([`Scorer::prepare_replacing`]).
+//!
 //! # Fixed-point formats
 //!
 //! | quantity | type | format |
 //! |---|---|---|
 //! | raw sample `a` | `u16` | counts |
-//! | input map `x` | `i32` | `Q(f)`: normalised `x = round(ã * 2^f)`, raw `x = round(a * 2^f)`; `f` per configuration (at most 24; 22 for the paper's default at 15x15) |
-//! | factor `R_i` | `i32` | `Q(p_i)`, entries below 2^30, `p_i <= 40` per axis |
-//! | row pass `T = x R2ᵀ` | `i32` | `Q(f)` (i64 accumulator, rounded) |
-//! | embedding `E = R1 T` | `i32` | `Q(f - s)` (i64 accumulator, rounded), `‖E‖_F < 2^30`, `s >= 0` per configuration |
-//! | squared distance | `i64` | `Q(2(f - s))` (square kernels: `s = 0`) |
+//! | folded count `v = a[l] ± a[J2-1-l]` | `i32` | counts, exact, `\|v\| <= 2 * 65535` |
+//! | input `y` | `i32` | `Q(f)`: normalised `y = round((v << k) * m / 2^32) ≈ v 2^f / S` (`S' = S << k` in `[2^30, 2^31)`, `m = floor(2^(32+f) / S')`, error below 1), raw `y = v 2^f` (error at most 1/2 for `f < -1`); `f = 28` normalised, `11` raw unless a bound below fails |
+//! | factor blocks `R'` of axis `i` | `i32` | `Q(p_i)`, entries below `2^31 - 1` in magnitude, `p_i <= 62` |
+//! | row pass `T = y R2'ᵀ` | `i32` | `Q(f + p2 - 32)`: one `round(r y / 2^32)` per term (`SMMLAR`) |
+//! | `T` folded along axis 1 | `i32` | same, exact sums and differences |
+//! | embedding `E = R1' T` | `i32` | `Q(e)`, `e = f + p1 + p2 - 64`, one rounding per term, `‖E‖_F < 2^30` |
+//! | squared distance | `i64` | `Q(2e)` (square kernels: `Q(2f)`) |
 //! | score (gradient component, magnitude) | `u32` | `Q(q)`: real value = `s / 2^q` |
 //!
 //! # Why nothing overflows
 //!
-//! [`Scorer::new`] picks the largest `f` (at most 24) for which these bounds
-//! hold and refuses the configuration if none does. With `X` the largest
-//! possible `Σ x` (`2^f + N/2` normalised, bounded by `2^f + N`, `N * 65535 * 2^f` raw) and `R̂` the
-//! dequantised factors:
+//! [`Scorer::new`] takes the finest `f` and, for it, the finest `p1` for
+//! which every bound below holds (`p2` is the finest that fits `i32`), and
+//! refuses the configuration ([`ConfigError::Range`]) if none does. Let
+//! `ε = 8 / 2 = 4` bound the rounding error of a sum of at most 8 rounded
+//! terms, `r2max`, `r1max` the largest coefficient magnitudes and `‖R'q‖_F`
+//! the Frobenius norms of the block-diagonal integer factors (at least their
+//! spectral norms).
 //!
-//! * `|x| <= 2^f` (normalised) or `65535 * 2^f` (raw), below 2^31;
-//! * row pass accumulator: `|Σ x R2q| <= X * 2^30 < 2^62`; after rounding,
-//!   `|T| <= X max|R̂2| + 1/2 < 2^31`;
-//! * column pass accumulator: `|Σ R1q T| <= 2^30 Σ_l |T_lk| <= 2^30 (X max|R̂2| + J1) < 2^62`;
-//! * `‖E‖_F <= (‖R̂1‖_F ‖R̂2‖_F ‖x‖_F + √N ‖R̂1‖_∞/2) / 2^s + √N/2 < 2^30`, so every
-//!   entry and every difference of two entries fits `i32`, and the squared
-//!   distance `‖E1 - E2‖²_F < 2^62` fits `i64`;
-//! * square kernels: `|SAT| <= 2X < 2^31` and `(K+1) N (2X)² < 2^63` (`u64` accumulator).
+//! * Conversion: normalised `|v| <= S`, so `|v << k| <= S' < 2^31` and
+//!   `m <= 2^(2+f) <= 2^30`; raw `|v << (f+2)| < 2^17 2^13 = 2^30`. A product
+//!   of two `i32` always fits the 64-bit product of `SMMULR`/`SMMLAR`.
+//! * Each sample lies in one entry of each block, so over one block of one
+//!   row `Σ|y| <= Yrow = 2^f + 8` (raw: `J2 65535 2^f + 8`), and over one
+//!   block of all rows `Σ|y| <= Yall = 2^f + 128` (raw: `N 65535 2^f + 128`).
+//! * Row pass: every partial sum is at most `Yrow r2max / 2^32 + ε < 2^31`.
+//! * Fold along axis 1: over one block, `Σ|T folded| <= Σ_i |T_ik| <=
+//!   Tcol = Yall r2max / 2^32 + 16 ε < 2^31`, which bounds every folded value.
+//! * Column pass: every partial sum is at most `Tcol r1max / 2^32 + ε < 2^31`.
+//! * `‖F1 y‖_F <= 2 2^f + 32` (raw `2 √N 65535 2^f + 32`; folding both axes
+//!   doubles the Euclidean norm, and `‖x‖_F <= ‖x‖_1 = 1`), so
+//!   `‖E‖_F <= ‖R1'q‖_F ‖R2'q‖_F ‖F1 y‖_F / 2^64 + ‖R1'q‖_F √(2N) ε / 2^32 +
+//!   √N ε < 2^30`: every entry and every difference of two entries fits
+//!   `i32`, and the squared distance `‖E1 - E2‖²_F < 2^62` fits `i64`.
+//! * Square kernels: `|x| <= 2^f`, `|SAT| <= 2X < 2^31` with `X = 2^f + N`
+//!   (raw `N (65535 2^f + 1)`) and `(K+1) N (2X)² < 2^63` (`u64` accumulator).
 //!
 //! The score format `q` is the largest with `D_max * 2^q <= 2^31 - 1`, where
 //! `D_max = N * Σ_b w(b)` bounds the distance of normalised maps (every LCD
@@ -83,11 +114,8 @@ const MAX_FRAC: i32 = 24;
 /// multiplier `2^(32+f) / S'` (`S' >= 2^30`) must stay below `2^31`.
 const MAX_FRAC_NORM: i32 = 28;
 /// Finest input format of raw maps with paper kernels: `v << (f + 2)` of a
-/// folded count `|v| < 2^18` must stay below `2^31`.
+/// folded count `|v| < 2^17` stays below `2^31`.
 const MAX_FRAC_RAW: i32 = 11;
-/// Relative error bound of the `f32` per-map multiplier (two roundings and
-/// a truncation, each below `2^-23` relative... with margin).
-const SCALE_SLACK: f64 = 1.0 / 1048576.0; // 2^-20
 const I31: f64 = 2147483647.0;
 const LIMIT_E: f64 = 1073741823.0; // 2^30 - 1
 /// `2^63`: the `i64`/`u64` accumulators.
@@ -498,8 +526,7 @@ const fn paper_formats(
         // all rows, and on ‖F1 y‖_F, for the converted map y folded along
         // axis 2 (F1 y: also folded along axis 1).
         let (yrow, yhalf, yfro) = if cfg.normalise {
-            let s = scale * (1.0 + SCALE_SLACK);
-            (s + 8.0, s + 128.0, 2.0 * s + 32.0)
+            (scale + 8.0, scale + 128.0, 2.0 * scale + 32.0)
         } else {
             let c = 65535.0 * scale;
             (j2 as f64 * c + 8.0, n * c + 128.0, 2.0 * sqrt(n) * c + 32.0)
