@@ -231,11 +231,11 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
             // Last row: the missing lower neighbour is the map itself.
             let pb = (p % 2) as usize;
             for c in 0..self.cols {
-                let own = self.meta[pb][c];
+                let meta = |b: usize| self.meta[b].get(c).copied().unwrap_or(flags::NO_DATA);
+                let (own, above) = (meta(pb), meta(1 - pb));
                 if own & flags::NO_DATA != 0 {
                     continue;
                 }
-                let above = self.meta[1 - pb][c];
                 let g1 = if above & flags::NO_DATA == 0 {
                     let (a, b) = (self.slot(1 - pb, c), self.slot(pb, c));
                     self.scorer.distance(a, b)

@@ -439,7 +439,9 @@ pub fn embed(
     let Some(e) = e.get_mut(..j1 * (f2.h + f2.g)) else {
         return 0;
     };
-    let (ee, eo) = e.split_at_mut(j1 * f2.h);
+    let Some((ee, eo)) = e.split_at_mut_checked(j1 * f2.h) else {
+        return 0;
+    };
     macro_rules! both {
         ($h:literal, $g:literal) => {
             if diff {
