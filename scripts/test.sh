@@ -32,3 +32,11 @@ trap 'rm -f "$log"' EXIT
 # last of which is often an empty doc-test run).
 awk '/^test result:/ { for (i = 1; i <= NF; i++) { if ($(i+1) ~ /^passed/) p += $i; if ($(i+1) ~ /^failed/) f += $i } }
      END { printf "\ntests: %d passed, %d failed\n", p, f }' "$log"
+
+step "panic-free per-beam path (link-time check)"
+# TODO: enable once cvm-core/src/stream.rs has no reachable panic left;
+# `bash scripts/nopanic.sh` lists the call sites (README, Reliability).
+# bash scripts/nopanic.sh
+
+step "fuzz: every target for 20 s (the long runs: README, Reliability)"
+bash scripts/fuzz.sh 20
