@@ -8,8 +8,9 @@
 //! `v[l] = x[l] - x[J-1-l]`, the middle cell in `u`) splits it into an even
 //! and an odd block of at most 8 x 8 that do not interact; the factors `R'`
 //! are the Cholesky factors of those blocks (module `embed`). A map costs
-//! about `J1 J2 (J1 + J2) / 4` multiply-adds instead of `J1 J2 (J1 + J2) / 2`,
-//! and every block size has its own fully unrolled code.
+//! about `J1 J2 (J1 + J2 + 4) / 4` multiply-adds instead of
+//! `J1 J2 (J1 + J2 + 2) / 2` (450 instead of 810 at 9x9), and every block
+//! size has its own fully unrolled code.
 //!
 //! Per map: the sample sum `S` (and the saturation flag) first; then the row
 //! pass folds each detector row along axis 2, converts it to `Q(f)` and
