@@ -105,7 +105,7 @@ pub struct Scorer {
 
 mod embed;
 
-pub use embed::{Factor, MAX_H, TRI};
+use embed::{Factor, MAX_H, TRI};
 use embed::{RealFactor, precision, quantise, real_factor, saturation_offset};
 
 /// Finest input format tried for square kernels; `2^(32+f)` must fit the

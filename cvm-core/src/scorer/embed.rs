@@ -212,38 +212,6 @@ const fn pack(r: &Mat, n: usize, p: u32) -> [i32; TRI] {
     out
 }
 
-impl Factor {
-    /// Largest coefficient magnitude.
-    pub const fn max(&self) -> f64 {
-        let mut m = 0.0;
-        let mut i = 0;
-        while i < TRI {
-            let (a, b) = (abs(self.even[i] as f64), abs(self.odd[i] as f64));
-            if a > m {
-                m = a;
-            }
-            if b > m {
-                m = b;
-            }
-            i += 1;
-        }
-        m
-    }
-
-    /// Frobenius norm of the block-diagonal coefficient matrix (at least its
-    /// spectral norm).
-    pub const fn frobenius(&self) -> f64 {
-        let mut s = 0.0;
-        let mut i = 0;
-        while i < TRI {
-            let (a, b) = (self.even[i] as f64, self.odd[i] as f64);
-            s += a * a + b * b;
-            i += 1;
-        }
-        sqrt(s)
-    }
-}
-
 /// The sum of all samples of a frame and the OR of `a + off` over all
 /// samples (bit 16 set iff a sample reached the full scale, see
 /// [`saturation_offset`]): the only per-map quantities needed before the
