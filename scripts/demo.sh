@@ -14,6 +14,8 @@ bash scripts/setup.sh
 
 echo "== building the host tools and the emulated firmware" >&2
 (cd host-tests && cargo build --release -q -p dmap)
+cargo build --release -q --no-default-features --features emulated --target-dir target/emulated
+elf=$root/target/emulated/thumbv7em-none-eabihf/release/cvm-fw
 dmap=$root/host-tests/target/x86_64-unknown-linux-gnu/release/dmap
 [ -x "$dmap" ] || dmap=$(find "$root/host-tests/target" -path '*/release/dmap' -type f | head -n 1)
 mkdir -p "$out"
@@ -23,7 +25,10 @@ echo "== simulating the prototype part: 39x39 beams, 9x9 detector, two surface d
 
 echo "== scoring on the emulated firmware (QEMU mps2-an386)" >&2
 t0=$(date +%s.%N)
-"$dmap" emulate "$out/scan.npy" --scores --threshold "$threshold" > "$out/uart.txt"
+# -icount: QEMU counts instructions, and the firmware reports them per beam.
+"$dmap" emulate "$out/scan.npy" --scores --threshold "$threshold" --elf "$elf" --icount \
+    > "$out/uart.txt" 2> "$out/firmware.log"
+cat "$out/firmware.log" >&2
 t1=$(date +%s.%N)
 
 echo "== decoding the UART lines" >&2
@@ -40,6 +45,7 @@ echo "-------"
 sed -n '1,2p;/totals:/p;/line errors/p' "$out/listen.txt"
 echo "planted defects vs the firmware's scores (threshold $threshold):"
 "$dmap" eval "$out/scores.npy" --truth "$out/truth.npy" --threshold "$threshold" | sed -n '/^defect/,$p'
+sed -n 's/.*beams=\([0-9]*\).*instructions_per_beam=\([0-9]*\).*/emulated Cortex-M4: \1 beams, \2 instructions per beam (normalise, embed, gradient, decide, encode)/p' "$out/firmware.log"
 awk -v b="$(wc -c < "$out/uart.txt")" -v t="$t1" -v s="$t0" -v same="$same" \
     'BEGIN { printf "emulated firmware: %d UART bytes in %.1f s; host pipeline output: %s\n", b, t - s, same }'
 echo "defect map: $out/defects.png   (score image: $out/scores.npy, lines: $out/uart.txt)"
