@@ -34,10 +34,7 @@ awk '/^test result:/ { for (i = 1; i <= NF; i++) { if ($(i+1) ~ /^passed/) p += 
      END { printf "\ntests: %d passed, %d failed\n", p, f }' "$log"
 
 step "panic-free per-beam path (link-time check)"
-# TODO: enable once cvm-core/src/stream.rs (Engine::finish) and
-# cvm-core/src/scorer/embed.rs (embed) have no reachable panic left;
-# `bash scripts/nopanic.sh` lists the call sites (README, Reliability).
-# bash scripts/nopanic.sh
+bash scripts/nopanic.sh
 
 step "fuzz: every target for 20 s (the long runs: README, Reliability)"
 bash scripts/fuzz.sh 20
