@@ -28,13 +28,13 @@ log=$(mktemp)
 trap 'rm -f "$log"' EXIT
 (cd host-tests && cargo test --workspace 2>&1) | tee "$log"
 
-# One closing line over every test binary (cargo prints one per binary, the
-# last of which is often an empty doc-test run).
-awk '/^test result:/ { for (i = 1; i <= NF; i++) { if ($(i+1) ~ /^passed/) p += $i; if ($(i+1) ~ /^failed/) f += $i } }
-     END { printf "\ntests: %d passed, %d failed\n", p, f }' "$log"
-
 step "panic-free per-beam path (link-time check)"
 bash scripts/nopanic.sh
 
 step "fuzz: every target for 20 s (the long runs: README, Reliability)"
 bash scripts/fuzz.sh 20
+
+# The last line: one count over every host test binary (cargo prints one
+# line per binary, the last of which is often an empty doc-test run).
+awk '/^test result:/ { for (i = 1; i <= NF; i++) { if ($(i+1) ~ /^passed/) p += $i; if ($(i+1) ~ /^failed/) f += $i } }
+     END { printf "\ntests: %d passed, %d failed\n", p, f }' "$log"
