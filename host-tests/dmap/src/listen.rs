@@ -522,6 +522,9 @@ pub fn summary_json(dec: &Decoder) -> Vec<serde_json::Value> {
         .collect()
 }
 
+/// Largest score image `dmap listen -o` writes (about 800 MB of f64).
+pub const MAX_IMAGE_POSITIONS: usize = 1 << 25;
+
 pub fn run(args: &ListenArgs) -> Result<()> {
     let dec = match (&args.input, &args.port) {
         (Some(p), _) if p == "-" => decode(std::io::stdin().lock(), 0)?,
@@ -546,6 +549,20 @@ pub fn run(args: &ListenArgs) -> Result<()> {
             );
         }
         for (k, s) in dec.scans.iter().enumerate() {
+            // The size comes from what the stream claims: refuse an image
+            // no scan of this product can have rather than exhaust memory.
+            let positions = s
+                .n_rows()
+                .checked_mul(s.cols)
+                .filter(|&p| p <= MAX_IMAGE_POSITIONS);
+            if positions.is_none() {
+                bail!(
+                    "scan {} claims {} rows x {} columns, more than the {MAX_IMAGE_POSITIONS} positions an image may hold; nothing written",
+                    k + 1,
+                    s.n_rows(),
+                    s.cols
+                );
+            }
             write_gradient(&output_path(out, k), s.n_rows(), s.cols, &s.image())?;
         }
     }

@@ -419,3 +419,34 @@ fn absurd_geometry_in_valid_lines_costs_no_memory() {
         "no row line for 3999999999 row(s): 0-1, 3-3999999999"
     );
 }
+
+/// A stream that claims an absurd scan size gets a one-line refusal, not an
+/// attempt to allocate it.
+#[test]
+fn absurd_claimed_size_is_refused() {
+    let mut sink = dmap::stream::VecSink::default();
+    let scorer = ScoringArgs::default().scorer(9, 9).unwrap();
+    let h = cvm_core::protocol::HeaderInfo::new(&scorer, 4_000_000, 1, true, "0.1.0");
+    cvm_core::protocol::encode_header(&h, &mut sink);
+    let t = cvm_core::Totals {
+        rows: 4_000_000,
+        ..Default::default()
+    };
+    cvm_core::protocol::encode_end(&t, 0, &mut sink);
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("absurd");
+    std::fs::create_dir_all(&dir).unwrap();
+    let input = dir.join("lines.txt");
+    std::fs::write(&input, &sink.0).unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_dmap"))
+        .args(["listen", "--input"])
+        .arg(&input)
+        .arg("-o")
+        .arg(dir.join("img.npy"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(err.contains("4000000 rows x 4000000 columns"), "{err}");
+    assert!(!dir.join("img.npy").exists());
+}
