@@ -10,7 +10,9 @@ step() { printf '\n== %s\n' "$*" >&2; }
 
 step "format"
 cargo fmt --all -- --check
-(cd host-tests && cargo fmt --all -- --check)
+for crate in host-tests host-tests/fuzz nopanic; do
+    (cd "$crate" && cargo fmt --all -- --check)
+done
 
 step "firmware: NUCLEO-H743ZI2 build and lints"
 cargo build --release
