@@ -92,21 +92,13 @@ pub const fn sqrt(x: f64) -> f64 {
 }
 
 /// Upper-triangular `R` with `Rᵀ R = K` for a positive semi-definite `K`.
-/// A pivot that vanishes (relative to the largest diagonal entry) gives a
-/// zero row: that direction carries no distance, e.g. an axis of exactly two
-/// cells with paper kernels, where every box covers the whole axis.
-pub const fn cholesky_psd(k: &Mat, n: usize) -> Mat {
+/// A pivot at or below `tol` gives a zero row: that direction carries no
+/// distance, e.g. an axis of exactly two cells with paper kernels, where
+/// every box covers the whole axis. Callers pass a tolerance relative to
+/// the largest diagonal entry of the whole kernel ([`pivot_tolerance`]).
+pub const fn cholesky_psd(k: &Mat, n: usize, tol: f64) -> Mat {
     let mut r = [[0.0; MAX_J]; MAX_J];
-    let mut dmax = 0.0;
     let mut i = 0;
-    while i < n {
-        if k[i][i] > dmax {
-            dmax = k[i][i];
-        }
-        i += 1;
-    }
-    let tol = dmax * 1e-12;
-    i = 0;
     while i < n {
         let mut s = k[i][i];
         let mut m = 0;
@@ -132,6 +124,19 @@ pub const fn cholesky_psd(k: &Mat, n: usize) -> Mat {
         i += 1;
     }
     r
+}
+
+/// Pivots below `1e-12` of the largest diagonal entry of `K` count as zero.
+pub const fn pivot_tolerance(k: &Mat, n: usize) -> f64 {
+    let mut dmax = 0.0;
+    let mut i = 0;
+    while i < n {
+        if k[i][i] > dmax {
+            dmax = k[i][i];
+        }
+        i += 1;
+    }
+    dmax * 1e-12
 }
 
 pub const fn abs(x: f64) -> f64 {

@@ -12,7 +12,7 @@
 //! most 8 x 8, so each block size gets its own fully unrolled code.
 
 use crate::config::MAX_J;
-use crate::tables::{Mat, abs, pow2, round, sqrt};
+use crate::tables::{Mat, abs, cholesky_psd, pivot_tolerance, pow2, round};
 
 /// Largest block of a folded axis (`ceil(16 / 2)`).
 pub const MAX_H: usize = MAX_J.div_ceil(2);
@@ -70,17 +70,9 @@ pub const fn real_factor(k: &Mat, j: usize) -> RealFactor {
     }
     // A pivot is zero relative to the whole kernel, not to its block: the
     // odd block of a 2-cell axis with paper kernels vanishes entirely.
-    let mut dmax = 0.0;
-    let mut i = 0;
-    while i < j {
-        if k[i][i] > dmax {
-            dmax = k[i][i];
-        }
-        i += 1;
-    }
-    let tol = dmax * 1e-12;
-    let even = cholesky(&ke, h, tol);
-    let odd = cholesky(&ko, g, tol);
+    let tol = pivot_tolerance(k, j);
+    let even = cholesky_psd(&ke, h, tol);
+    let odd = cholesky_psd(&ko, g, tol);
     let me = max_abs(&even, h);
     let mo = max_abs(&odd, g);
     RealFactor {
@@ -122,38 +114,6 @@ const fn column(j: usize, a: usize) -> (usize, f64) {
     } else {
         (2, 0.5)
     }
-}
-
-/// Upper-triangular `R` with `Rᵀ R = K` (semi-definite; a pivot at or below
-/// `tol` gives a zero row).
-const fn cholesky(k: &Mat, n: usize, tol: f64) -> Mat {
-    let mut r = [[0.0; MAX_J]; MAX_J];
-    let mut i = 0;
-    while i < n {
-        let mut s = k[i][i];
-        let mut m = 0;
-        while m < i {
-            s -= r[m][i] * r[m][i];
-            m += 1;
-        }
-        if s > tol {
-            let d = sqrt(s);
-            r[i][i] = d;
-            let mut l = i + 1;
-            while l < n {
-                let mut t = k[i][l];
-                let mut m = 0;
-                while m < i {
-                    t -= r[m][i] * r[m][l];
-                    m += 1;
-                }
-                r[i][l] = t / d;
-                l += 1;
-            }
-        }
-        i += 1;
-    }
-    r
 }
 
 const fn max_abs(r: &Mat, n: usize) -> f64 {
