@@ -50,7 +50,7 @@ step "decode and account (dmap listen)"
 dmap listen --input "$work/firmware.lines" -o "$work/image.npy" | tee "$work/summary.txt" >&2
 want="scores: 90000 positions with data, 0 without data"
 grep -q "$want" "$work/summary.txt" || { echo "soak: FAILED: expected '$want'" >&2; exit 1; }
-grep -q "totals: rows 300 frames 90000 missing 0 .* rejected 0 extra 0 bad 0 clipped 0 dropped 0" \
+grep -q "totals: rows 300 frames 90000 missing 0 .* rejected 0 extra 0 bad 0 clipped 0 misplaced 0 dropped 0" \
     "$work/summary.txt" || { echo "soak: FAILED: end-of-scan totals" >&2; exit 1; }
 grep -q "^line errors: 0$" "$work/summary.txt" || { echo "soak: FAILED: damaged lines" >&2; exit 1; }
 if grep -q "^  problem" "$work/summary.txt"; then

@@ -67,6 +67,11 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
             .mark_missing(pos, &mut |row| encode_row(row, md, sc, sink))
     }
 
+    /// See [`Engine::count_misplaced`].
+    pub fn count_misplaced(&mut self, n: u32) {
+        self.engine.count_misplaced(n);
+    }
+
     /// Ends the scan: remaining rows, then the end line with `lines_dropped`
     /// (score lines the output could not carry). Returns the scan's totals.
     pub fn finish(&mut self, lines_dropped: u32, sink: &mut impl LineSink) -> Totals {

@@ -11,7 +11,7 @@ use crate::scorer::Scorer;
 use crate::stream::{PositionScore, RowSummary, RowView, Totals};
 
 /// Protocol version written in the header.
-pub const VERSION: u32 = 1;
+pub const VERSION: u32 = 2;
 /// Upper bound on the length of any line, newline included.
 pub const MAX_LINE: usize = 256;
 /// Positions per score (`S`) line.
@@ -265,7 +265,7 @@ impl<'s> HeaderInfo<'s> {
     }
 }
 
-/// `H,v=1,fw=..,j=15x15,cols=300,k=P,b=0,w=uniform,norm=1,fs=65535,thr=..,q=23,scores=0`
+/// `H,v=2,fw=..,j=15x15,cols=300,k=P,b=0,w=uniform,norm=1,fs=65535,thr=..,q=23,scores=0`
 pub fn encode_header(h: &HeaderInfo, sink: &mut impl LineSink) {
     let mut l = LineBuf::new(b'H');
     l.kv_u64(b"v", h.version as u64);
@@ -351,7 +351,7 @@ pub fn encode_row(view: &RowView, max_defects: u16, scores: bool, sink: &mut imp
     }
 }
 
-/// `E,rows=..,frames=..,missing=..,dark=..,sat=..,defects=..,rejected=..,extra=..,bad=..,clipped=..,dropped=..`
+/// `E,rows=..,frames=..,missing=..,dark=..,sat=..,defects=..,rejected=..,extra=..,bad=..,clipped=..,misplaced=..,dropped=..`
 pub fn encode_end(t: &Totals, dropped: u32, sink: &mut impl LineSink) {
     let mut l = LineBuf::new(b'E');
     for (k, v) in end_fields(t, dropped) {
@@ -360,7 +360,7 @@ pub fn encode_end(t: &Totals, dropped: u32, sink: &mut impl LineSink) {
     sink.line(l.finish(), Priority::Keep);
 }
 
-fn end_fields(t: &Totals, dropped: u32) -> [(&'static [u8], u32); 11] {
+fn end_fields(t: &Totals, dropped: u32) -> [(&'static [u8], u32); 12] {
     [
         (b"rows", t.rows),
         (b"frames", t.frames),
@@ -372,6 +372,7 @@ fn end_fields(t: &Totals, dropped: u32) -> [(&'static [u8], u32); 11] {
         (b"extra", t.extra),
         (b"bad", t.bad),
         (b"clipped", t.clipped),
+        (b"misplaced", t.misplaced),
         (b"dropped", dropped),
     ]
 }
@@ -584,7 +585,7 @@ pub fn parse(line: &[u8]) -> Result<Line<'_>, ParseError> {
             Ok(Line::Scores { row, col0, chars })
         }
         b"E" => {
-            let mut vals = [0u32; 11];
+            let mut vals = [0u32; 12];
             for (slot, (key, _)) in vals.iter_mut().zip(end_fields(&Totals::default(), 0)) {
                 *slot = parse_u32(kv(it.next(), key).ok_or(f)?).ok_or(f)?;
             }
@@ -602,6 +603,7 @@ pub fn parse(line: &[u8]) -> Result<Line<'_>, ParseError> {
                 extra,
                 bad,
                 clipped,
+                misplaced,
                 dropped,
             ] = vals;
             Ok(Line::End(EndInfo {
@@ -616,6 +618,7 @@ pub fn parse(line: &[u8]) -> Result<Line<'_>, ParseError> {
                     extra,
                     bad,
                     clipped,
+                    misplaced,
                 },
                 dropped,
             }))

@@ -92,6 +92,10 @@ pub struct Totals {
     pub bad: u32,
     /// Scores that hit the top of their range.
     pub clipped: u32,
+    /// Frames the caller placed at a wrong position and found out too late
+    /// to move (see [`Engine::count_misplaced`]); the engine itself never
+    /// misplaces a frame.
+    pub misplaced: u32,
 }
 
 /// Why an engine could not be set up.
@@ -213,6 +217,14 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
         out: &mut impl FnMut(&RowView),
     ) -> PushOutcome {
         self.place(pos, Some(frame), out)
+    }
+
+    /// Counts `n` frames already pushed that the caller has since found to
+    /// belong to other positions (the firmware's beam sequencer, after a
+    /// short row). Their scores are out, so they can only be reported: the
+    /// end line carries the count.
+    pub fn count_misplaced(&mut self, n: u32) {
+        self.totals.misplaced = self.totals.misplaced.saturating_add(n);
     }
 
     /// Records that `pos` will receive no frame (e.g. a detector overrun).

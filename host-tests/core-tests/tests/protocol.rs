@@ -107,12 +107,12 @@ proptest! {
     }
 
     #[test]
-    fn end_line_round_trips(v in prop::collection::vec(any::<u32>(), 11)) {
-        let t = Totals { rows: v[0], frames: v[1], missing: v[2], dark: v[3], saturated: v[4], defects: v[5], rejected: v[6], extra: v[7], bad: v[8], clipped: v[9] };
+    fn end_line_round_trips(v in prop::collection::vec(any::<u32>(), 12)) {
+        let t = Totals { rows: v[0], frames: v[1], missing: v[2], dark: v[3], saturated: v[4], defects: v[5], rejected: v[6], extra: v[7], bad: v[8], clipped: v[9], misplaced: v[10] };
         let mut s = Lines::default();
-        encode_end(&t, v[10], &mut s);
+        encode_end(&t, v[11], &mut s);
         prop_assert!(s.0[0].0.len() <= MAX_LINE);
-        prop_assert_eq!(protocol::parse(&s.0[0].0), Ok(Line::End(protocol::EndInfo { totals: t, dropped: v[10] })));
+        prop_assert_eq!(protocol::parse(&s.0[0].0), Ok(Line::End(protocol::EndInfo { totals: t, dropped: v[11] })));
     }
 
     /// Changing any one byte of a line (its newline aside, which delimits
@@ -196,6 +196,7 @@ fn worst_case_lines_fit() {
         extra: u32::MAX,
         bad: u32::MAX,
         clipped: u32::MAX,
+        misplaced: u32::MAX,
     };
     encode_end(&t, u32::MAX, &mut s);
     for (line, _) in &s.0 {

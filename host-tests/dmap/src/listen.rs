@@ -326,6 +326,16 @@ impl Decoder {
                 ),
             });
         }
+        let misplaced = s.end.map_or(0, |e| e.totals.misplaced);
+        if misplaced > 0 {
+            s.problems.push(LineError {
+                line: self.line_no,
+                what: format!(
+                    "{misplaced} map(s) were scored at a wrong position (a short row: beams without DRDY); \
+                     scores next to the short row are unreliable"
+                ),
+            });
+        }
         if s.scores_enabled {
             let dropped = s.end.map_or(0, |e| e.dropped);
             let expected = rows as usize * s.cols;
@@ -465,7 +475,7 @@ pub fn summary_text(dec: &Decoder) -> String {
                 let t = &e.totals;
                 let _ = writeln!(
                     o,
-                    "  totals: rows {} frames {} missing {} dark {} saturated {} defects {} rejected {} extra {} bad {} clipped {} dropped {}",
+                    "  totals: rows {} frames {} missing {} dark {} saturated {} defects {} rejected {} extra {} bad {} clipped {} misplaced {} dropped {}",
                     t.rows,
                     t.frames,
                     t.missing,
@@ -476,6 +486,7 @@ pub fn summary_text(dec: &Decoder) -> String {
                     t.extra,
                     t.bad,
                     t.clipped,
+                    t.misplaced,
                     e.dropped
                 );
             }
@@ -505,7 +516,7 @@ pub fn summary_json(dec: &Decoder) -> Vec<serde_json::Value> {
                 let t = e.totals;
                 serde_json::json!({"rows": t.rows, "frames": t.frames, "missing": t.missing, "dark": t.dark,
                     "saturated": t.saturated, "defects": t.defects, "rejected": t.rejected, "extra": t.extra,
-                    "bad": t.bad, "clipped": t.clipped, "dropped": e.dropped})
+                    "bad": t.bad, "clipped": t.clipped, "misplaced": t.misplaced, "dropped": e.dropped})
             });
             serde_json::json!({
                 "firmware": s.firmware,

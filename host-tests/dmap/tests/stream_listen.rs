@@ -397,10 +397,10 @@ fn absurd_geometry_in_valid_lines_costs_no_memory() {
     // keeps only the scores that arrived.
     let mut dec = Decoder::new();
     for body in [
-        "H,v=1,fw=x,j=3x3,cols=4000000000,k=P,b=0,w=uniform,norm=1,fs=65535,thr=1,q=20,scores=1",
+        "H,v=2,fw=x,j=3x3,cols=4000000000,k=P,b=0,w=uniform,norm=1,fs=65535,thr=1,q=20,scores=1",
         "R,2,0,-,0,0,1,0,0",
         "S,2,3999999999,AAAAAB",
-        "E,rows=4000000000,frames=0,missing=0,dark=0,sat=0,defects=0,rejected=0,extra=0,bad=0,clipped=0,dropped=0",
+        "E,rows=4000000000,frames=0,missing=0,dark=0,sat=0,defects=0,rejected=0,extra=0,bad=0,clipped=0,misplaced=0,dropped=0",
     ] {
         dec.feed(&line_with_crc(body));
     }
@@ -449,4 +449,30 @@ fn absurd_claimed_size_is_refused() {
     assert_eq!(err.lines().count(), 1, "{err}");
     assert!(err.contains("4000000 rows x 4000000 columns"), "{err}");
     assert!(!dir.join("img.npy").exists());
+}
+
+/// The example lines of docs/protocol.md are real lines of the current
+/// version: each parses (CRC included) and the header carries `VERSION`.
+#[test]
+fn protocol_document_examples_parse() {
+    let doc = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../docs/protocol.md"
+    ))
+    .unwrap();
+    let examples: Vec<&str> = doc
+        .lines()
+        .filter(|l| l.contains('*') && (l.starts_with("H,v=") || l.starts_with("E,rows=")))
+        .collect();
+    assert_eq!(examples.len(), 2, "{examples:?}");
+    for l in examples {
+        let line = format!("{l}\n");
+        match cvm_core::protocol::parse(line.as_bytes()) {
+            Ok(cvm_core::protocol::Line::Header(h)) => {
+                assert_eq!(h.version, cvm_core::protocol::VERSION)
+            }
+            Ok(cvm_core::protocol::Line::End(e)) => assert_eq!(e.totals.frames, 90_000),
+            other => panic!("{l}: {other:?}"),
+        }
+    }
 }

@@ -319,6 +319,7 @@ impl Run<'_> {
                         "positions lost"
                     );
                     assert_eq!((t.bad, t.rejected, t.extra), (m.bad, m.rejected, m.extra));
+                    assert_eq!(t.misplaced, 0, "the engine misplaced a frame");
                     if self.scores {
                         assert_eq!(
                             (t.dark, t.saturated, t.defects),

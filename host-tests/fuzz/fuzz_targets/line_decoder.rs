@@ -71,6 +71,7 @@ fn totals(u: &mut Unstructured) -> Result<Totals> {
         extra: u.arbitrary()?,
         bad: u.arbitrary()?,
         clipped: u.arbitrary()?,
+        misplaced: u.arbitrary()?,
     })
 }
 
