@@ -180,6 +180,7 @@ fn apply<const MAX_COLS: usize, F: FrameStore, S: CountingSink>(
             let _ = pipeline.mark_missing(pos, sink);
         }
         Action::Discard(buf) => frames.release(buf),
+        Action::Misplaced(n) => pipeline.count_misplaced(n),
         Action::Finish => {
             let dropped = sink.dropped().wrapping_sub(*dropped_at_begin);
             // The last rows' score lines go out as keep lines, so that no

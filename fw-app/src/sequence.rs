@@ -1,31 +1,59 @@
 //! Numbering beams into scan positions.
 //!
 //! Every DRDY edge is one beam, whether its frame was read or lost, so the
-//! beam count is what keeps positions from shifting; LINE_SYNC (sampled at
-//! the DRDY edge) marks the first beam of a row and re-anchors the count.
+//! beam count is what places beams; LINE_SYNC (sampled at the DRDY edge)
+//! marks the first beam of a row and is checked against the count. When the
+//! two disagree, one of them is wrong, and the count is trusted until the
+//! LINE_SYNC line has proved it wrong.
 //!
 //! Rules, in the order they are applied to a beam:
 //!
-//! 1. **Inside a row** (fewer than `cols` beams so far): a beam without
-//!    LINE_SYNC takes the next column. A beam *with* LINE_SYNC while the row
-//!    has already started ends it early (a *short row*, its remaining
-//!    positions reported without data by the engine) and starts the next
-//!    row at column 0.
-//! 2. **After a full row**, a beam with LINE_SYNC starts the next row. A beam
-//!    *without* it is ambiguous: either the row's LINE_SYNC was lost, or it
-//!    is an extra beam (a spurious DRDY). It is *held* until the next beam
-//!    decides: if that one carries LINE_SYNC the held beam was extra (it is
-//!    discarded and counted), otherwise the held beam was the first of the
-//!    next row (a missing LINE_SYNC, counted) and both are placed.
+//! 1. **Inside a row** (fewer than `cols` beams so far), a beam takes the
+//!    next column. If it carries LINE_SYNC while the row has already
+//!    started, that LINE_SYNC is a *suspect*: either a glitch on the line,
+//!    or the start of the next row after a row whose last beams raised no
+//!    DRDY (a *short row*). The two cannot be told apart yet, so the beam
+//!    is placed by the count and the suspect remembered.
+//! 2. **After a full row**, the next beam settles any suspect:
+//!    - with LINE_SYNC, the count was right: the beam starts the next row
+//!      and the row's suspects were glitches (counted `sync_extra`). With
+//!      a glitch, no position is lost or moved.
+//!    - without LINE_SYNC, when the row had a suspect at column `s` (the
+//!      last one if there were several): the count was wrong, the suspect
+//!      began the next row, and this beam is
+//!      that row's column `cols - s`. The count re-anchors there. The
+//!      `cols - s` beams after the suspect were placed at the end of the
+//!      short row but belonged to the head of the next row; their scores
+//!      are out, so they are counted as *misplaced* (in the scan's end line)
+//!      and the head of the next row is reported without data.
+//!    - without LINE_SYNC and without a suspect, the beam is ambiguous:
+//!      either the row's LINE_SYNC was lost, or it is an extra beam (a
+//!      spurious DRDY). It is *held* until the next beam decides: if that
+//!      one carries LINE_SYNC the held beam was extra (it is discarded and
+//!      counted), otherwise the held beam was the first of the next row (a
+//!      missing LINE_SYNC, counted) and both are placed.
 //! 3. **Scans**: after `rows` full rows the scan ends at once (the end line
-//!    goes out without waiting for another beam); the next beam begins a new
-//!    scan under the same rules (one without LINE_SYNC is held as above).
+//!    goes out without waiting for another beam), unless its last row has a
+//!    suspect: then the next beam settles it first, so that misplaced beams
+//!    are counted in the scan they were placed in. The next beam begins a
+//!    new scan under the same rules (one without LINE_SYNC is held as
+//!    above).
 //! 4. A beam whose frame was lost (overrun, SPI error) still takes its
 //!    position, which is reported missing.
 //!
-//! Only the LINE_SYNC-less beam after a full row is ever held, so normal
-//! operation never delays a frame; the held frame keeps its buffer, which
-//! the acquisition side accounts for like any frame being scored.
+//! So a LINE_SYNC glitch costs nothing, a missing LINE_SYNC or an extra
+//! beam after a row costs nothing, and a short row of `cols - s` beams
+//! costs the `cols - s` positions of the next row's head (reported missing)
+//! plus as many misplaced maps in its own tail (counted). Whatever the
+//! faults, the count re-locks onto LINE_SYNC within a row of clean beams.
+//! Nothing here can tell rows apart, though: a whole row without any DRDY
+//! shifts the row numbers until the data stops long enough for the board
+//! to end the scan (`end_of_data`).
+//!
+//! Only the LINE_SYNC-less beam after a full row without suspect is ever
+//! held, so normal operation never delays a frame; the held frame keeps its
+//! buffer, which the acquisition side accounts for like any frame being
+//! scored.
 
 use cvm_core::stream::Position;
 
@@ -48,6 +76,9 @@ pub enum Action<H> {
     Missing(Position),
     /// An extra frame: free it without scoring.
     Discard(H),
+    /// This many frames already placed in the open scan belonged to other
+    /// positions (a short row): count them.
+    Misplaced(u32),
     /// The scan is over (flush and emit its end line).
     Finish,
 }
@@ -61,9 +92,15 @@ pub struct SequenceCounts {
     pub placed: u32,
     /// Positions whose beam arrived but whose frame was lost.
     pub lost: u32,
-    /// Rows ended early by LINE_SYNC, and the positions they left empty.
+    /// Rows that LINE_SYNC proved short (rule 2), and the positions of the
+    /// following rows' heads reported without data because of them.
     pub short_rows: u32,
     pub short_positions: u32,
+    /// Frames placed at the end of a short row that belonged to the next
+    /// row's head.
+    pub misplaced: u32,
+    /// LINE_SYNCs inside a row that the beam count proved spurious.
+    pub sync_extra: u32,
     /// Beams after a full row that turned out to be extra.
     pub extra: u32,
     /// Rows whose first beam came without LINE_SYNC.
@@ -75,12 +112,27 @@ pub struct SequenceCounts {
     pub unfinished_positions: u32,
 }
 
+/// LINE_SYNCs inside the open row that the count has not settled yet
+/// (rule 1): the last one's column and how many there were. The last one
+/// is taken because after any burst of faults the newest LINE_SYNC is the
+/// one the clean beams that follow agree with, which is what re-locks the
+/// count within a row.
+#[derive(Clone, Copy, Debug)]
+struct Suspect {
+    col: u32,
+    count: u32,
+}
+
 #[derive(Clone, Copy, Debug)]
 enum State<H> {
     /// No scan open: the next beam begins one.
     Between,
     /// A scan is open; `col` beams of `row` placed so far (`col <= cols`).
-    Open { row: u32, col: u32 },
+    Open {
+        row: u32,
+        col: u32,
+        suspect: Option<Suspect>,
+    },
     /// A LINE_SYNC-less beam after full row `next_row - 1` (or, when
     /// `!begun`, between scans) awaits the next beam's verdict.
     Hold {
@@ -137,7 +189,7 @@ impl<H: Copy> Sequencer<H> {
             State::Between => {
                 if sync {
                     self.begin(act);
-                    self.state = State::Open { row: 0, col: 0 };
+                    self.open(0, 0);
                     self.place(payload, act);
                 } else {
                     self.state = State::Hold {
@@ -147,38 +199,54 @@ impl<H: Copy> Sequencer<H> {
                     };
                 }
             }
-            State::Open { row, col } if col < self.cols => {
-                if sync && col > 0 {
-                    self.counts.short_rows += 1;
-                    self.counts.short_positions += self.cols - col;
-                    if row + 1 >= self.rows {
-                        // The short row was the scan's last: the beam opens the next scan.
-                        self.finish(act);
-                        self.begin(act);
-                        self.state = State::Open { row: 0, col: 0 };
-                    } else {
-                        self.state = State::Open {
-                            row: row + 1,
-                            col: 0,
-                        };
-                    }
-                }
+            State::Open { row, col, suspect } if col < self.cols => {
+                let suspect = match suspect {
+                    Some(s) if sync => Some(Suspect {
+                        col,
+                        count: s.count.saturating_add(1),
+                    }),
+                    None if sync && col > 0 => Some(Suspect { col, count: 1 }),
+                    s => s,
+                };
+                self.state = State::Open { row, col, suspect };
                 self.place(payload, act);
             }
-            State::Open { row, .. } => {
-                // Full row, and not the scan's last (that one finishes at once).
-                if sync {
-                    self.state = State::Open {
-                        row: row + 1,
-                        col: 0,
-                    };
-                    self.place(payload, act);
-                } else {
-                    self.state = State::Hold {
-                        next_row: row + 1,
-                        begun: true,
-                        held: payload,
-                    };
+            State::Open { row, suspect, .. } => {
+                // A full row: the scan's last only while a suspect is open.
+                let last = row + 1 >= self.rows;
+                match (sync, suspect) {
+                    (true, suspect) => {
+                        if let Some(s) = suspect {
+                            self.counts.sync_extra = self.counts.sync_extra.wrapping_add(s.count);
+                        }
+                        self.next_row(row, 0, act);
+                        self.place(payload, act);
+                    }
+                    (false, Some(s)) => {
+                        // The suspect began a row: this beam is its column
+                        // `cols - s.col` (`s.col` is in 1..cols).
+                        let head = self.cols - s.col;
+                        let c = &mut self.counts;
+                        c.short_rows = c.short_rows.wrapping_add(1);
+                        c.short_positions = c.short_positions.wrapping_add(head);
+                        c.misplaced = c.misplaced.wrapping_add(head);
+                        c.sync_extra = c.sync_extra.wrapping_add(s.count - 1);
+                        act(Action::Misplaced(head));
+                        self.next_row(row, head, act);
+                        self.place(payload, act);
+                    }
+                    (false, None) if last => {
+                        // Not reached: such a row finished the scan at once.
+                        self.finish(act);
+                        self.step(sync, payload, act);
+                    }
+                    (false, None) => {
+                        self.state = State::Hold {
+                            next_row: row + 1,
+                            begun: true,
+                            held: payload,
+                        };
+                    }
                 }
             }
             State::Hold {
@@ -194,20 +262,14 @@ impl<H: Copy> Sequencer<H> {
                     if !begun {
                         self.begin(act);
                     }
-                    self.state = State::Open {
-                        row: next_row,
-                        col: 0,
-                    };
+                    self.open(next_row, 0);
                     self.place(payload, act);
                 } else {
                     self.counts.sync_missing += 1;
                     if !begun {
                         self.begin(act);
                     }
-                    self.state = State::Open {
-                        row: next_row,
-                        col: 0,
-                    };
+                    self.open(next_row, 0);
                     self.place(held, act);
                     // The current beam now follows the normal rules
                     // (it may complete a one-column row or the scan).
@@ -219,10 +281,10 @@ impl<H: Copy> Sequencer<H> {
 
     /// The data stopped (end of input, or no beam for a long time): the
     /// open scan is brought to its end. A held beam between scans is extra;
-    /// one after a full row is taken as that row's successor. Positions no
-    /// beam reached are reported missing, one row per call so that the
-    /// caller can check its output room in between: call again while it
-    /// returns true.
+    /// one after a full row is taken as that row's successor; a suspect
+    /// LINE_SYNC stays unsettled. Positions no beam reached are reported
+    /// missing, one row per call so that the caller can check its output
+    /// room in between: call again while it returns true.
     pub fn end_of_data(&mut self, act: &mut impl FnMut(Action<H>)) -> bool {
         match self.state {
             State::Between => false,
@@ -242,14 +304,11 @@ impl<H: Copy> Sequencer<H> {
                 held,
             } => {
                 self.counts.sync_missing += 1;
-                self.state = State::Open {
-                    row: next_row,
-                    col: 0,
-                };
+                self.open(next_row, 0);
                 self.place(held, act);
                 !matches!(self.state, State::Between)
             }
-            State::Open { row, col } if col < self.cols => {
+            State::Open { row, col, .. } if col < self.cols => {
                 self.counts.unfinished_positions += self.cols - col;
                 // The engine reports every position it was not given as
                 // missing, up to the last one it hears of.
@@ -261,19 +320,18 @@ impl<H: Copy> Sequencer<H> {
                     self.finish(act);
                     false
                 } else {
-                    self.state = State::Open {
-                        row,
-                        col: self.cols,
-                    };
+                    self.open(row, self.cols);
                     true
                 }
             }
             State::Open { row, .. } => {
-                self.state = State::Open {
-                    row: row + 1,
-                    col: 0,
-                };
-                true
+                if row + 1 >= self.rows {
+                    self.finish(act);
+                    false
+                } else {
+                    self.open(row + 1, 0);
+                    true
+                }
             }
         }
     }
@@ -289,9 +347,29 @@ impl<H: Copy> Sequencer<H> {
         act(Action::Finish);
     }
 
+    fn open(&mut self, row: u32, col: u32) {
+        self.state = State::Open {
+            row,
+            col,
+            suspect: None,
+        };
+    }
+
+    /// After full row `row`: opens the next row at `col`, or, after the
+    /// scan's last row, ends the scan and opens the next one there.
+    fn next_row(&mut self, row: u32, col: u32, act: &mut impl FnMut(Action<H>)) {
+        if row + 1 >= self.rows {
+            self.finish(act);
+            self.begin(act);
+            self.open(0, col);
+        } else {
+            self.open(row + 1, col);
+        }
+    }
+
     /// Places `payload` at the next column of the open row (which has room).
     fn place(&mut self, payload: Payload<H>, act: &mut impl FnMut(Action<H>)) {
-        let State::Open { row, col } = self.state else {
+        let State::Open { row, col, suspect } = self.state else {
             return;
         };
         let pos = Position { row, col };
@@ -306,10 +384,10 @@ impl<H: Copy> Sequencer<H> {
             }
         }
         let col = col + 1;
-        if col == self.cols && row + 1 >= self.rows {
+        if col == self.cols && row + 1 >= self.rows && suspect.is_none() {
             self.finish(act);
         } else {
-            self.state = State::Open { row, col };
+            self.state = State::Open { row, col, suspect };
         }
     }
 }

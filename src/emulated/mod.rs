@@ -280,14 +280,16 @@ async fn scan_task(syst: cortex_m::peripheral::SYST) {
     let mut err = Stderr::new();
     let _ = writeln!(
         err,
-        "cvm-fw (emulated): beams={beam} scans={} placed={} lost={} extra={} sync_missing={} short_rows={} \
-         lines={} dropped={} scoring_instructions={instr} instructions_per_beam={per_beam}",
+        "cvm-fw (emulated): beams={beam} scans={} placed={} lost={} extra={} sync_missing={} sync_extra={} \
+         short_rows={} misplaced={} lines={} dropped={} scoring_instructions={instr} instructions_per_beam={per_beam}",
         seq.scans_finished,
         seq.placed,
         seq.lost,
         seq.extra,
         seq.sync_missing,
+        seq.sync_extra,
         seq.short_rows,
+        seq.misplaced,
         q.accepted,
         q.dropped_scores + q.dropped_keep,
     );

@@ -418,12 +418,29 @@ fn report_scan(driver: &ScanDriver<'static, MAX_COLS>) {
     let a = ACQ.lock(|a| *a.borrow().counts());
     let q = QUEUE.lock(|q| *q.borrow().counts());
     info!(
-        "scan done: rows {} frames {} missing {} defects {} dark {} sat {} rejected {} extra {} dropped lines {}",
-        t.rows, t.frames, t.missing, t.defects, t.dark, t.saturated, t.rejected, t.extra, dropped
+        "scan done: rows {} frames {} missing {} defects {} dark {} sat {} rejected {} extra {} misplaced {} dropped lines {}",
+        t.rows,
+        t.frames,
+        t.missing,
+        t.defects,
+        t.dark,
+        t.saturated,
+        t.rejected,
+        t.extra,
+        t.misplaced,
+        dropped
     );
     info!(
-        "since start: beams {} overruns {} spi errors {} short rows {} sync missing {} extra beams {} queue high water {} B",
-        a.drdy, a.overruns, a.spi_errors, s.short_rows, s.sync_missing, s.extra, q.high_water
+        "since start: beams {} overruns {} spi errors {} short rows {} misplaced {} sync missing {} sync extra {} extra beams {} queue high water {} B",
+        a.drdy,
+        a.overruns,
+        a.spi_errors,
+        s.short_rows,
+        s.misplaced,
+        s.sync_missing,
+        s.sync_extra,
+        s.extra,
+        q.high_water
     );
     if q.dropped_keep > 0 {
         error!(

@@ -5,13 +5,15 @@
 //! 2. The LINE_SYNC `Sequencer` on arbitrary beams (with or without
 //!    LINE_SYNC, read or lost) and end-of-data at any point: scans open and
 //!    close in turn, positions stay inside the scan and strictly increase in
-//!    raster order, every frame is placed or discarded exactly once, and the
-//!    beam counts add up.
+//!    raster order, every frame is placed or discarded exactly once, the
+//!    misplaced frames reported add up to the counter, and the beam counts
+//!    add up.
 //! 3. The whole board path (DRDY bookkeeping with two buffers and a small
 //!    beam log, SPI completions and errors, the scoring driver, the output
 //!    queue and a UART that stalls) on arbitrary event sequences: every line
 //!    sent parses, no keep line is dropped, each scan has all its rows in
-//!    order, and the end lines account for every beam and dropped line.
+//!    order, and the end lines account for every beam, misplaced frame and
+//!    dropped line.
 #![no_main]
 
 use cvm_core::protocol::{self, Line, SCORES_PER_LINE};
@@ -56,6 +58,7 @@ struct SeqCheck {
     open: bool,
     last: Option<Position>,
     seen: HashSet<u32>,
+    misplaced: u32,
 }
 
 impl SeqCheck {
@@ -82,6 +85,15 @@ impl SeqCheck {
                 self.last = Some(p);
             }
             Action::Discard(_) => {}
+            Action::Misplaced(n) => {
+                assert!(self.open, "misplaced frames outside a scan");
+                assert!(
+                    n > 0 && n < self.cols,
+                    "{n} misplaced of {} columns",
+                    self.cols
+                );
+                self.misplaced += n;
+            }
         }
         if let Action::Place(_, h) | Action::Discard(h) = a {
             assert!(self.seen.insert(h), "frame {h} used twice");
@@ -99,6 +111,7 @@ fn sequencer(u: &mut Unstructured) -> Result<()> {
         open: false,
         last: None,
         seen: HashSet::new(),
+        misplaced: 0,
     };
     let mut handles = 0u32;
     let mut frames = HashSet::new();
@@ -138,6 +151,8 @@ fn sequencer(u: &mut Unstructured) -> Result<()> {
         "beams unaccounted: {c:?}"
     );
     assert_eq!(c.scans_begun, c.scans_finished);
+    assert_eq!(c.misplaced, check.misplaced);
+    assert_eq!(c.short_positions, c.misplaced);
     Ok(())
 }
 
@@ -215,6 +230,7 @@ fn board(u: &mut Unstructured) -> Result<()> {
     // Scan by scan, from what the UART sent.
     let score_lines = (cols as usize).div_ceil(SCORES_PER_LINE) as u32;
     let (mut open, mut next_row, mut s_lines, mut scans, mut frames) = (false, 0, 0, 0, 0);
+    let mut misplaced = 0;
     for l in &board.uart.sent {
         match protocol::parse(l.as_bytes()).unwrap_or_else(|e| panic!("{e:?}: {l}")) {
             Line::Header(h) => {
@@ -248,6 +264,7 @@ fn board(u: &mut Unstructured) -> Result<()> {
                     "score lines unaccounted"
                 );
                 frames += t.frames;
+                misplaced += t.misplaced;
                 scans += 1;
                 open = false;
             }
@@ -256,6 +273,10 @@ fn board(u: &mut Unstructured) -> Result<()> {
     assert!(!open, "scan without its end line");
     assert_eq!(scans, sc.scans_finished);
     assert_eq!(frames, sc.placed, "frames placed but not scored");
+    assert_eq!(
+        misplaced, sc.misplaced,
+        "misplaced frames not in the end lines"
+    );
     Ok(())
 }
 

@@ -118,20 +118,48 @@ impl Lines {
 /// The reference: the core pipeline fed directly, one scan, with the given
 /// positions reported missing instead of scored.
 pub fn reference(scan: &Scan, scores: bool, missing: &[Position], dropped: u32) -> Vec<String> {
+    let placements: Vec<_> = (0..scan.frames.len())
+        .map(|beam| {
+            let pos = scan.pos(beam);
+            (pos, (!missing.contains(&pos)).then_some(beam))
+        })
+        .collect();
+    replay(scan, scores, &placements, 0, dropped)
+}
+
+/// The reference for explicit placements: the core pipeline fed, in this
+/// order, the frame of beam `b` at each `(pos, Some(b))` and nothing at
+/// each `(pos, None)` (reported missing), then `misplaced` counted and the
+/// scan finished. Positions not listed are gaps (missing, too).
+pub fn reference_placed(
+    scan: &Scan,
+    scores: bool,
+    placements: &[(Position, Option<usize>)],
+    misplaced: u32,
+) -> Vec<String> {
+    replay(scan, scores, placements, misplaced, 0)
+}
+
+fn replay(
+    scan: &Scan,
+    scores: bool,
+    placements: &[(Position, Option<usize>)],
+    misplaced: u32,
+    dropped: u32,
+) -> Vec<String> {
     let scorer = scan.scorer();
     let (mut a, mut b) = scan.row_buffers();
     let mut p =
         Pipeline::<MAX_COLS>::new(&scorer, scan.settings(&scorer, scores), &mut a, &mut b).unwrap();
     let mut out = Lines::default();
     p.begin(&mut out);
-    for beam in 0..scan.frames.len() {
-        let pos = scan.pos(beam);
-        if missing.contains(&pos) {
-            p.mark_missing(pos, &mut out);
-        } else {
-            p.push(pos, scan.frame(beam), &mut out);
-        }
+    for &(pos, beam) in placements {
+        match beam {
+            Some(b) => p.push(pos, scan.frame(b), &mut out),
+            None => p.mark_missing(pos, &mut out),
+        };
     }
+    p.count_misplaced(misplaced);
     p.finish(dropped, &mut out);
     out.text()
 }

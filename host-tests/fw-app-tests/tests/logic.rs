@@ -8,7 +8,7 @@ use cvm_fw_app::decode::{FrameSizeError, decode_frame, frame_bytes};
 use cvm_fw_app::emufile::{HeaderError, ScanHeader};
 use cvm_fw_app::queue::LineQueue;
 use cvm_fw_app::sequence::{Action, Payload, Sequencer};
-use cvm_fw_app_tests::{Board, Scan, reference};
+use cvm_fw_app_tests::{Board, Scan, reference, reference_placed};
 
 const BIG: usize = 1 << 16;
 
@@ -157,12 +157,13 @@ fn extra_frame_after_a_row_is_discarded_and_counted() {
 }
 
 #[test]
-fn short_row_is_reanchored_by_line_sync() {
+fn short_row_costs_the_next_rows_head_and_counts_the_misplaced_maps() {
     let scan = Scan::generate(4, 3, 8, 6, 5, (4, 6));
     let scorer = scan.scorer();
     let (mut a, mut b) = scan.row_buffers();
     let mut board = Board::<BIG>::new(&scan, &scorer, true, (&mut a, &mut b), 4096);
-    let gone = [Position { row: 1, col: 6 }, Position { row: 1, col: 7 }];
+    let p = |row, col| Position { row, col };
+    let gone = [p(1, 6), p(1, 7)];
     for beam in 0..scan.frames.len() {
         let pos = scan.pos(beam);
         if gone.contains(&pos) {
@@ -173,12 +174,66 @@ fn short_row_is_reanchored_by_line_sync() {
     }
     board.end();
     assert_consistent(&board);
-    assert_eq!(board.uart.sent, reference(&scan, true, &gone, 0));
+    // By hand, from the rules: the LINE_SYNC of (2,0) arrives at column 6
+    // of row 1 and is a suspect, so (2,0) and (2,1) land in (1,6) and
+    // (1,7); the next beam, (2,2), comes without LINE_SYNC after the full
+    // row, which proves row 1 short: it goes to (2,2), and (2,0), (2,1)
+    // have no data.
+    let placements: Vec<_> = (0..scan.frames.len())
+        .filter(|&beam| !gone.contains(&scan.pos(beam)))
+        .map(|beam| match scan.pos(beam) {
+            Position { row: 2, col } if col < 2 => (p(1, 6 + col), Some(beam)),
+            pos => (pos, Some(beam)),
+        })
+        .collect();
+    assert_eq!(
+        board.uart.sent,
+        reference_placed(&scan, true, &placements, 2)
+    );
     let c = board.driver.sequence_counts();
-    assert_eq!((c.short_rows, c.short_positions), (1, 2));
+    assert_eq!((c.short_rows, c.short_positions, c.misplaced), (1, 2, 2));
+    assert_eq!((c.sync_extra, c.sync_missing, c.extra), (0, 0, 0));
     assert_eq!(end_field(&board.uart.sent, "missing"), 2);
+    assert_eq!(end_field(&board.uart.sent, "misplaced"), 2);
+    // Rows 4 on are exactly the clean scan's (row 3's vertical component
+    // needs row 2's head).
+    assert_eq!(
+        rows_from(&board.uart.sent, 4),
+        rows_from(&reference(&scan, true, &gone, 0), 4)
+    );
 }
 
+#[test]
+fn short_last_row_is_settled_before_the_scan_ends() {
+    let scan = Scan::generate(3, 3, 6, 3, 15, (1, 2));
+    let scorer = scan.scorer();
+    let (mut a, mut b) = scan.row_buffers();
+    let mut board = Board::<BIG>::new(&scan, &scorer, true, (&mut a, &mut b), 4096);
+    let n = scan.frames.len();
+    let p = |row, col| Position { row, col };
+    // Two scans back to back; the first one's last row loses its last two
+    // beams (no DRDY).
+    let gone = [4 + 2 * 6, 5 + 2 * 6];
+    for beam in (0..2 * n).filter(|b| !gone.contains(b)) {
+        board.drdy(scan.pos(beam).col == 0, scan.frame(beam), true);
+        board.score(usize::MAX);
+    }
+    board.end();
+    assert_consistent(&board);
+    // The second scan's first two beams are placed at the end of the first
+    // scan (and counted there); the second scan starts at (0,2).
+    let first: Vec<_> = (0..n)
+        .filter(|b| !gone.contains(b))
+        .map(|b| (scan.pos(b), Some(b)))
+        .chain([(p(2, 4), Some(n)), (p(2, 5), Some(n + 1))])
+        .collect();
+    let second: Vec<_> = (n + 2..2 * n).map(|b| (scan.pos(b), Some(b))).collect();
+    let mut want = reference_placed(&scan, true, &first, 2);
+    want.extend(reference_placed(&scan, true, &second, 0));
+    assert_eq!(board.uart.sent, want);
+    let c = board.driver.sequence_counts();
+    assert_eq!((c.scans_finished, c.short_rows, c.misplaced), (2, 1, 2));
+}
 #[test]
 fn spi_errors_become_missing_positions() {
     let scan = Scan::generate(5, 5, 9, 5, 6, (1, 1));
@@ -603,22 +658,174 @@ fn uart_stalled_for_seconds_drops_only_counted_score_lines() {
 }
 
 #[test]
-#[ignore = "known gap: a LINE_SYNC glitch mid-row is taken for a short row and shifts every later row (see README, Reliability)"]
-fn extra_line_sync_mid_row_keeps_later_rows_in_place() {
+fn extra_line_sync_mid_row_keeps_every_position() {
     let scan = Scan::generate(3, 3, 6, 5, 4, (2, 2));
     let scorer = scan.scorer();
     let (mut a, mut b) = scan.row_buffers();
     let mut board = Board::<BIG>::new(&scan, &scorer, true, (&mut a, &mut b), 4096);
-    for beam in 0..scan.frames.len() {
+    // Glitches in rows 1 and 4 (the scan's last, whose end then waits for
+    // the next beam), two in row 3, and one on a lost beam in row 2; then a
+    // second, clean scan.
+    let glitch =
+        |pos: Position| [(1, 3), (2, 4), (3, 1), (3, 5), (4, 2)].contains(&(pos.row, pos.col));
+    let n = scan.frames.len();
+    for beam in 0..2 * n {
         let pos = scan.pos(beam);
-        let glitch = pos == (Position { row: 1, col: 3 });
-        board.drdy(pos.col == 0 || glitch, scan.frame(beam), true);
+        let sync = pos.col == 0 || (beam < n && glitch(pos));
+        let lost = beam < n && pos == (Position { row: 2, col: 4 });
+        board.drdy(sync, scan.frame(beam), !lost);
         board.score(usize::MAX);
     }
     board.end();
     assert_consistent(&board);
-    assert_eq!(
-        rows_from(&board.uart.sent, 3),
-        rows_from(&reference(&scan, true, &[], 0), 3)
+    let lost = [Position { row: 2, col: 4 }];
+    let mut want = reference(&scan, true, &lost, 0);
+    want.extend(reference(&scan, true, &[], 0));
+    assert_eq!(board.uart.sent, want);
+    let c = board.driver.sequence_counts();
+    assert_eq!((c.sync_extra, c.short_rows, c.misplaced), (5, 0, 0));
+    assert_eq!(c.scans_finished, 2);
+}
+
+#[test]
+fn sequencer_settles_a_suspect_line_sync_by_the_next_rows_start() {
+    let p = |row, col| Position { row, col };
+    let f = Payload::Frame;
+    // 4 columns, 2 rows. Glitch: LINE_SYNC on beam 2 of row 0, row 1 on time.
+    let mut seq = Sequencer::new(4, 2);
+    let acts = run(
+        &mut seq,
+        &[
+            (true, f(0)),
+            (false, f(1)),
+            (true, f(2)),
+            (false, f(3)),
+            (true, f(4)),
+        ],
     );
+    assert_eq!(
+        acts,
+        vec![
+            Action::Begin,
+            Action::Place(p(0, 0), 0),
+            Action::Place(p(0, 1), 1),
+            Action::Place(p(0, 2), 2),
+            Action::Place(p(0, 3), 3),
+            Action::Place(p(1, 0), 4),
+        ]
+    );
+    assert_eq!((seq.counts().sync_extra, seq.counts().short_rows), (1, 0));
+    // Short row: row 0 has two beams, row 1 starts with beam 2.
+    let mut seq = Sequencer::new(4, 2);
+    let acts = run(
+        &mut seq,
+        &[
+            (true, f(0)),
+            (false, f(1)),
+            (true, f(2)),
+            (false, f(3)),
+            (false, f(4)),
+            (false, f(5)),
+        ],
+    );
+    assert_eq!(
+        acts,
+        vec![
+            Action::Begin,
+            Action::Place(p(0, 0), 0),
+            Action::Place(p(0, 1), 1),
+            Action::Place(p(0, 2), 2),
+            Action::Place(p(0, 3), 3),
+            Action::Misplaced(2),
+            Action::Place(p(1, 2), 4),
+            Action::Place(p(1, 3), 5),
+            Action::Finish,
+        ]
+    );
+    let c = seq.counts();
+    assert_eq!((c.short_rows, c.short_positions, c.misplaced), (1, 2, 2));
+    // Data stopping with a suspect open leaves it unsettled.
+    let mut seq = Sequencer::new(4, 1);
+    let acts = run(&mut seq, &[(true, f(0)), (false, f(1)), (true, f(2))]);
+    assert_eq!(acts.len(), 4);
+    let mut tail = vec![];
+    while seq.end_of_data(&mut |a| tail.push(a)) {}
+    assert_eq!(tail, vec![Action::Missing(p(0, 3)), Action::Finish]);
+    assert_eq!((seq.counts().sync_extra, seq.counts().short_rows), (0, 0));
+}
+
+/// The column each beam of a scan gets: `Some(col)` per beam in order,
+/// from the Place and Missing actions of a sequencer fed `beams`.
+fn columns(seq: &mut Sequencer<u32>, beams: &[(bool, bool)]) -> Vec<Option<u32>> {
+    let mut cols = vec![None; beams.len()];
+    for (k, &(sync, read)) in beams.iter().enumerate() {
+        let payload = if read {
+            Payload::Frame(k as u32)
+        } else {
+            Payload::Lost
+        };
+        let mut lost_at = None;
+        seq.beam(sync, payload, &mut |a| match a {
+            Action::Place(pos, h) => cols[h as usize] = Some(pos.col),
+            Action::Missing(pos) => lost_at = Some(pos.col),
+            _ => {}
+        });
+        if !read {
+            cols[k] = lost_at;
+        }
+    }
+    cols
+}
+
+proptest::proptest! {
+    /// Whatever the beams before (any LINE_SYNCs, lost frames, short and
+    /// long rows), once clean rows start the count re-locks onto LINE_SYNC
+    /// within one row: every beam from the second clean row on gets its
+    /// true column.
+    #[test]
+    fn sequencer_relocks_within_a_row_of_clean_beams(
+        cols in 1u32..9,
+        rows in 1u32..5,
+        garbage in proptest::collection::vec((proptest::bool::weighted(0.3), proptest::bool::weighted(0.8)), 0..60),
+        clean_rows in 2usize..5,
+    ) {
+        let mut seq = Sequencer::new(cols, rows);
+        let clean: Vec<_> = (0..clean_rows * cols as usize)
+            .map(|k| (k % cols as usize == 0, true))
+            .collect();
+        let beams: Vec<_> = garbage.iter().copied().chain(clean).collect();
+        let got = columns(&mut seq, &beams);
+        let clean_got = &got[garbage.len()..];
+        for (k, &col) in clean_got.iter().enumerate().skip(cols as usize) {
+            let truth = (k % cols as usize) as u32;
+            proptest::prop_assert_eq!(col, Some(truth), "clean beam {} of {:?}", k, beams);
+        }
+    }
+
+    /// LINE_SYNC glitches (any number, anywhere but a row's first beam) and
+    /// lost frames never move a position.
+    #[test]
+    fn line_sync_glitches_cost_nothing(
+        cols in 2u32..9,
+        rows in 1u32..5,
+        faults in proptest::collection::vec((proptest::bool::weighted(0.2), proptest::bool::weighted(0.9)), 1..120),
+    ) {
+        let mut seq = Sequencer::new(cols, rows);
+        let beams: Vec<_> = faults
+            .iter()
+            .enumerate()
+            .map(|(k, &(glitch, read))| (k % cols as usize == 0 || glitch, read))
+            .collect();
+        let got = columns(&mut seq, &beams);
+        for (k, col) in got.iter().enumerate() {
+            proptest::prop_assert_eq!(*col, Some((k % cols as usize) as u32), "beam {}", k);
+        }
+        let c = seq.counts();
+        let glitches = beams.iter().enumerate().filter(|&(k, b)| b.0 && k % cols as usize != 0).count();
+        // The last row's suspects stay unsettled: no beam follows it.
+        let last_row = (beams.len() - 1) / cols as usize * cols as usize;
+        let unsettled = beams[last_row..].iter().skip(1).filter(|b| b.0).count();
+        proptest::prop_assert_eq!(c.sync_extra as usize + unsettled, glitches);
+        proptest::prop_assert_eq!((c.short_rows, c.misplaced), (0, 0));
+    }
 }
