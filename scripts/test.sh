@@ -36,6 +36,13 @@ bash scripts/nopanic.sh
 step "fuzz: every target for 20 s (the long runs: README, Reliability)"
 bash scripts/fuzz.sh 20
 
+step "link-check and fuzz crates: lints"
+(cd nopanic && cargo clippy --release --target thumbv7em-none-eabihf -- -D warnings)
+if ! rustup component list --toolchain nightly --installed | grep -q '^clippy'; then
+    rustup component add clippy --toolchain nightly
+fi
+(cd host-tests/fuzz && cargo +nightly clippy --all-targets -- -D warnings)
+
 # The last line: one count over every host test binary (cargo prints one
 # line per binary, the last of which is often an empty doc-test run).
 awk '/^test result:/ { for (i = 1; i <= NF; i++) { if ($(i+1) ~ /^passed/) p += $i; if ($(i+1) ~ /^failed/) f += $i } }
