@@ -92,12 +92,11 @@ pub struct SequenceCounts {
     pub placed: u32,
     /// Positions whose beam arrived but whose frame was lost.
     pub lost: u32,
-    /// Rows that LINE_SYNC proved short (rule 2), and the positions of the
-    /// following rows' heads reported without data because of them.
+    /// Rows that LINE_SYNC proved short (rule 2).
     pub short_rows: u32,
-    pub short_positions: u32,
     /// Frames placed at the end of a short row that belonged to the next
-    /// row's head.
+    /// row's head; as many positions of that head are reported without
+    /// data.
     pub misplaced: u32,
     /// LINE_SYNCs inside a row that the beam count proved spurious.
     pub sync_extra: u32,
@@ -228,7 +227,6 @@ impl<H: Copy> Sequencer<H> {
                         let head = self.cols - s.col;
                         let c = &mut self.counts;
                         c.short_rows = c.short_rows.wrapping_add(1);
-                        c.short_positions = c.short_positions.wrapping_add(head);
                         c.misplaced = c.misplaced.wrapping_add(head);
                         c.sync_extra = c.sync_extra.wrapping_add(s.count - 1);
                         act(Action::Misplaced(head));
