@@ -1,5 +1,5 @@
 //! What a scoring configuration is made of: detector geometry, kernel set,
-//! weights and normalisation (design.md §3).
+//! weights and normalisation (docs/method.md §3).
 
 /// Largest detector axis the core supports.
 pub const MAX_J: usize = 16;

@@ -3,7 +3,7 @@
 //!
 //! # The folded embedding (paper kernels)
 //!
-//! `d = ‖R1 D R2ᵀ‖²_F` with `Ki = Riᵀ Ri` (design.md §4). Each axis kernel
+//! `d = ‖R1 D R2ᵀ‖²_F` with `Ki = Riᵀ Ri` (docs/method.md §4). Each axis kernel
 //! is centrosymmetric, so folding an axis (`u[l] = x[l] + x[J-1-l]`,
 //! `v[l] = x[l] - x[J-1-l]`, the middle cell in `u`) splits it into an even
 //! and an odd block of at most 8 x 8 that do not interact; the factors `R'`

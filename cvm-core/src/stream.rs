@@ -20,7 +20,7 @@
 //! a row, a short row, a skipped row, an explicit [`Engine::mark_missing`])
 //! is reported with [`flags::NO_DATA`] and counted; its neighbours treat it
 //! like the scan border: the missing neighbour is replaced by the map itself
-//! (design.md §3). A frame for a position already passed (repeat, out of
+//! (docs/method.md §3). A frame for a position already passed (repeat, out of
 //! order) is rejected and counted, one beyond the last column is counted as
 //! extra; neither shifts any later position.
 

@@ -1,5 +1,5 @@
 //! Factor tables of the CVM quadratic form, built once per configuration
-//! (design.md §4), in f64 and `const`-evaluable so that a firmware can build
+//! (docs/method.md §4), in f64 and `const`-evaluable so that a firmware can build
 //! them at compile time and a bad configuration fails the build.
 //!
 //! With paper kernels and separable weights the distance is

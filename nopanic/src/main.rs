@@ -35,7 +35,7 @@ fn panic(_: &PanicInfo) -> ! {
     unsafe { cvm_panic_path_reachable() }
 }
 
-/// The firmware's geometry and capacity (design.md §5: 300 columns, 15x15).
+/// The firmware's geometry and capacity (docs/method.md §5: 300 columns, 15x15).
 const MAX_COLS: usize = 300;
 const WORDS: usize = row_words(MAX_COLS, MAX_J, MAX_J);
 const CELLS: usize = MAX_J * MAX_J;
