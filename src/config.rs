@@ -58,14 +58,22 @@ pub mod emulated {
 pub mod h743 {
     use cvm_core::{Config, Geometry, Kernels, Weights};
 
-    /// Detector geometry `J1 x J2`.
-    pub const J1: u8 = 15;
-    pub const J2: u8 = 15;
-    /// Beams per row, and the columns the row buffers are sized for.
-    pub const COLS: usize = 300;
+    // The scan configuration: J1, J2 (detector geometry), COLS (beams per
+    // row), ROWS (rows per scan: after this many the end line goes out),
+    // KERNELS, WEIGHTS, NORMALISE, THRESHOLD_UNITS (defect threshold on the
+    // gradient magnitude, in `dmap` units), SCORES (emit per-position score
+    // lines, dropped first when the UART lags), MAX_DEFECT_LINES_PER_ROW.
+    // Defaults: 15x15 maps, 300 x 200 beams, paper kernels, uniform weights,
+    // normalised, threshold 0.5, scores on, 16 defect lines per row; build.rs
+    // writes them, or the `CVM_H743_SCAN` override (docs/firmware.md).
+    include!(concat!(env!("OUT_DIR"), "/h743_scan.rs"));
+    const _: () = assert!(
+        MAX_DEFECT_LINES_PER_ROW <= super::MAX_DEFECT_LINES_PER_ROW,
+        "the queue reserve is sized for at most super::MAX_DEFECT_LINES_PER_ROW defect lines per row"
+    );
+
+    /// The columns the row buffers are sized for.
     pub const MAX_COLS: usize = COLS;
-    /// Rows per scan: after this many rows the end line goes out.
-    pub const ROWS: u32 = 200;
 
     /// Bytes of the output queue (about half a second of lines at 921600 baud).
     pub const QUEUE_BYTES: usize = 48 * 1024;
@@ -77,19 +85,14 @@ pub mod h743 {
         Err(_) => panic!("J1 and J2 must be 1..=16"),
     };
 
-    /// Kernels, weights and normalisation (design.md §3).
+    /// Kernels, weights and normalisation (docs/method.md §3).
     pub const CORE: Config = Config {
         geometry: GEOMETRY,
-        kernels: Kernels::Paper { bmax: 0 },
-        weights: Weights::Uniform,
-        normalise: true,
+        kernels: KERNELS,
+        weights: WEIGHTS,
+        normalise: NORMALISE,
         full_scale: u16::MAX,
     };
-
-    /// Defect threshold on the gradient magnitude, in `dmap` units.
-    pub const THRESHOLD_UNITS: f64 = 0.5;
-    /// Emit per-position score lines (dropped first when the UART lags).
-    pub const SCORES: bool = true;
 
     /// Core clock (PLL1 P) and the SPI kernel clock (PLL1 Q).
     pub const SYSCLK_HZ: u32 = 400_000_000;

@@ -48,10 +48,11 @@ use static_cell::StaticCell;
 use {defmt_rtt as _, panic_probe as _};
 
 use crate::config::h743::{
-    BAUD, COLS, CORE, FEED_MS, IDLE_END_MS, J1, J2, KEEP_RESERVE, MAX_COLS, QUEUE_BYTES, ROWS,
-    SCORES, SPI_HZ, SYSCLK_HZ, THRESHOLD_UNITS, WATCHDOG_US,
+    BAUD, COLS, CORE, FEED_MS, IDLE_END_MS, J1, J2, KEEP_RESERVE, MAX_COLS,
+    MAX_DEFECT_LINES_PER_ROW, QUEUE_BYTES, ROWS, SCORES, SPI_HZ, SYSCLK_HZ, THRESHOLD_UNITS,
+    WATCHDOG_US,
 };
-use crate::config::{BEAM_LOG, FIRMWARE_VERSION, FRAME_BUFFERS, MAX_DEFECT_LINES_PER_ROW};
+use crate::config::{BEAM_LOG, FIRMWARE_VERSION, FRAME_BUFFERS};
 use crate::frames::{Decoder, FrameBuffers};
 
 bind_interrupts!(struct Irqs {
@@ -101,6 +102,7 @@ type Acq = Acquisition<FRAME_BUFFERS, BEAM_LOG>;
 type Queue = LineQueue<QUEUE_BYTES>;
 
 static ACQ: Mutex<CriticalSectionRawMutex, RefCell<Acq>> = Mutex::new(RefCell::new(Acq::new()));
+#[unsafe(link_section = ".dma_buffers")]
 static FRAMES: FrameBuffers<FRAME_BUFFERS> = FrameBuffers::new();
 static QUEUE: Mutex<ThreadModeRawMutex, RefCell<Queue>> =
     Mutex::new(RefCell::new(Queue::new(KEEP_RESERVE)));
@@ -108,6 +110,7 @@ static QUEUE: Mutex<ThreadModeRawMutex, RefCell<Queue>> =
 struct TxLine(core::cell::UnsafeCell<[u8; MAX_LINE]>);
 // SAFETY: only the UART task touches it.
 unsafe impl Sync for TxLine {}
+#[unsafe(link_section = ".dma_buffers")]
 static TX_LINE: TxLine = TxLine(core::cell::UnsafeCell::new([0; MAX_LINE]));
 
 /// The DRDY line's EXTI mask and the LINE_SYNC input, for the interrupt.
