@@ -1,0 +1,66 @@
+"""Command line of the chip model: `python3 -m h743twin ELF [options]`.
+
+Prints the bytes the firmware sends on USART3 to stdout and the model's
+counters as one JSON object on stderr (last line)."""
+
+import argparse
+import json
+import sys
+
+from .core import CLOCK_HZ, Stop
+from .detector import Detector, Scan, parse_fault
+from .machine import Machine, cycles_of_ms
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(prog="h743twin", description=__doc__)
+    ap.add_argument("elf")
+    ap.add_argument("--scan", help="scan in the twin's format (written by `dmap twin`)")
+    ap.add_argument("--beam-us", type=float, default=200.0, help="DRDY period (default 200)")
+    ap.add_argument("--start-ms", type=float, default=20.0, help="first beam after reset (default 20)")
+    ap.add_argument("--fault", action="append", default=[], help="KIND@BEAM[:ARG...] (see detector.py)")
+    ap.add_argument("--settle-ms", type=float, default=1500.0,
+                    help="run at most this long after the last beam (default 1500)")
+    ap.add_argument("--run-ms", type=float, help="without --scan: run this long")
+    ap.add_argument("--debugger", action="store_true", help="a debugger is attached (DBGMCU freeze applies)")
+    ap.add_argument("--scans", type=int, default=1, help="end lines to wait for (default 1)")
+    args = ap.parse_args(argv)
+
+    try:
+        faults = [parse_fault(f) for f in args.fault]
+    except ValueError as e:
+        print(f"h743twin: {e}", file=sys.stderr)
+        return 2
+    m = Machine(args.elf, debugger=args.debugger)
+    status = "time"
+    error = None
+    try:
+        if args.scan:
+            scan = Scan.read_raw(args.scan)
+            det = Detector(m, scan, args.beam_us, args.start_ms, faults)
+            m.attach(det)
+            end = det.done_at + cycles_of_ms(args.settle_ms)
+
+            def done():
+                if m.core.cycles <= det.done_at:
+                    return False
+                out = bytes(b for b, _ in m.uart)
+                ends = out.count(b"\nE,") + (1 if out.startswith(b"E,") else 0)
+                return ends >= args.scans and out.endswith(b"\n") and not m.usart.shifting
+            status = m.run(end, done)
+        else:
+            status = m.run(cycles_of_ms(args.run_ms or 100.0))
+    except Stop as e:
+        error = str(e)
+    sys.stdout.buffer.write(bytes(b for b, _ in m.uart))
+    sys.stdout.flush()
+    stats = m.stats()
+    stats["status"] = "error" if error else status
+    if error:
+        stats["error"] = error
+    print(json.dumps(stats), file=sys.stderr)
+    return 3 if error else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

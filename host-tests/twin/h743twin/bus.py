@@ -1,0 +1,156 @@
+"""Memory map and peripheral dispatch of the STM32H743 (RM0433 §2.3).
+
+Memories are plain Unicorn memory. The private peripheral bus and the
+peripheral space are MMIO: every access goes to the model that owns the
+address, and an access that no model claims stops the run with the address
+and the PC, so the model never returns made-up values.
+"""
+
+import heapq
+import sys
+
+from unicorn.arm_const import UC_ARM_REG_PC
+
+from .core import Reset, Stop
+
+MEMORIES = (
+    ("ITCM", 0x0000_0000, 64 << 10),
+    ("FLASH", 0x0800_0000, 2 << 20),
+    ("DTCM", 0x2000_0000, 128 << 10),
+    ("AXI SRAM", 0x2400_0000, 512 << 10),
+    ("SRAM1-3", 0x3000_0000, 288 << 10),
+    ("SRAM4", 0x3800_0000, 64 << 10),
+    ("Backup SRAM", 0x3880_0000, 4 << 10),
+)
+PERIPH_BASE = 0x4000_0000
+PERIPH_SIZE = 0x2000_0000
+PPB_BASE = 0xE000_0000
+PPB_SIZE = 0x0010_0000
+
+
+class Unmodelled(Stop):
+    pass
+
+
+import os
+
+TRACE = int(os.environ.get("H743TWIN_TRACE", "0"))
+
+
+class Bus:
+    def __init__(self):
+        self.periphs = []  # (base, size, model)
+        self.core = None
+        self.error = None
+        self.events = []
+        self.seq = 0
+        self.accesses = 0
+
+    def add(self, base, size, model):
+        self.periphs.append((base, size, model))
+        return model
+
+    def attach(self, core):
+        self.core = core
+        uc = core.uc
+        for _, base, size in MEMORIES:
+            uc.mem_map(base, size)
+        uc.mmio_map(PERIPH_BASE, PERIPH_SIZE, self._read, PERIPH_BASE,
+                    self._write, PERIPH_BASE)
+        uc.mmio_map(PPB_BASE, PPB_SIZE, self._read, PPB_BASE, self._write, PPB_BASE)
+
+    # --- the model clock's event queue
+    def at(self, cycle, fn, owner="chip"):
+        """Calls fn() when the model clock reaches `cycle`. Events of the
+        chip are dropped at a reset; those of the world outside are not."""
+        self.seq += 1
+        heapq.heappush(self.events, (cycle, self.seq, fn, owner))
+        if self.core is not None and cycle < self.core.deadline:
+            self.core.deadline = cycle  # stops at the next block boundary
+
+    def next_event(self):
+        return self.events[0][0] if self.events else None
+
+    def fire_due(self):
+        while self.events and self.events[0][0] <= self.core.cycles:
+            _, _, fn, _ = heapq.heappop(self.events)
+            fn()
+
+    def drop_chip_events(self):
+        self.events = [e for e in self.events if e[3] != "chip"]
+        heapq.heapify(self.events)
+
+    # --- MMIO
+    def _find(self, addr):
+        for base, size, model in self.periphs:
+            if base <= addr < base + size:
+                return base, model
+        return None, None
+
+    def _read(self, uc, offset, size, region):
+        addr = region + offset
+        if TRACE and self.accesses < TRACE:
+            v = self._read_inner(uc, offset, size, region)
+            print(f"R {addr:#010x} -> {v:#x} pc {uc.reg_read(UC_ARM_REG_PC):#010x}", file=sys.stderr)
+            return v
+        return self._read_inner(uc, offset, size, region)
+
+    def _read_inner(self, uc, offset, size, region):
+        addr = region + offset
+        try:
+            self.accesses += 1
+            if region == PPB_BASE:
+                return self.core_read(addr, size)
+            base, model = self._find(addr)
+            if model is None:
+                raise KeyError
+            return model.read(addr - base, size) & ((1 << (8 * size)) - 1)
+        except KeyError:
+            self._fail(Unmodelled(f"read of unmodelled register {addr:#010x} "
+                                  f"({size} bytes) at pc {uc.reg_read(UC_ARM_REG_PC):#010x}"))
+        except (Stop, Reset) as e:
+            self._fail(e)
+        return 0
+
+    def _write(self, uc, offset, size, value, region):
+        addr = region + offset
+        if TRACE and self.accesses < TRACE:
+            print(f"W {addr:#010x} <- {value:#x} pc {uc.reg_read(UC_ARM_REG_PC):#010x}", file=sys.stderr)
+        try:
+            self.accesses += 1
+            if region == PPB_BASE:
+                self.core_write(addr, size, value)
+                return
+            base, model = self._find(addr)
+            if model is None:
+                raise KeyError
+            model.write(addr - base, size, value)
+        except KeyError:
+            self._fail(Unmodelled(f"write of {value:#x} to unmodelled register {addr:#010x} "
+                                  f"({size} bytes) at pc {uc.reg_read(UC_ARM_REG_PC):#010x}"))
+        except (Stop, Reset) as e:
+            self._fail(e)
+
+    def _fail(self, e):
+        if self.error is None:
+            self.error = e
+        self.core.deadline = 0
+
+    def core_read(self, addr, size):
+        off = addr - 0xE000_E000
+        if 0x100 <= off < 0x500:
+            return self.core.nvic.read(off, size)
+        if 0xD00 <= off < 0xF80:
+            return self.core.scb.read(off, size)
+        if off == 0x004:  # ICTR: interrupt lines in groups of 32
+            return 4
+        raise KeyError
+
+    def core_write(self, addr, size, value):
+        off = addr - 0xE000_E000
+        if 0x100 <= off < 0x500:
+            self.core.nvic.write(off, size, value)
+        elif 0xD00 <= off < 0xF80:
+            self.core.scb.write(off, size, value)
+        else:
+            raise KeyError

@@ -1,0 +1,214 @@
+"""The STM32H743 as the firmware sees it: core, memories, the peripherals
+of the board layer, and the detector wired to them; the run loop that
+advances the model clock from event to event."""
+
+import struct
+
+from elftools.elf.elffile import ELFFile
+from unicorn.arm_const import UC_ARM_REG_PC, UC_ARM_REG_PRIMASK
+
+from . import system
+from .bus import Bus
+from .core import CLOCK_HZ, Core, Reset, Stop
+from .dma import Dma, Dmamux
+from .serial import Spi, Usart
+
+# The embassy time driver runs on TIM12 (time-driver-any picks it on this chip).
+TIM12_IRQ = 43
+GPIO_PORTS = "ABCDEFGHIJK"
+# Pull-ups/downs and modes of the debug pins after reset (RM0433 §11.4).
+GPIO_RESET = {"A": {0x00: 0xABFF_FFFF, 0x08: 0x0C00_0000, 0x0C: 0x6400_0000},
+              "B": {0x00: 0xFFFF_FEBF, 0x08: 0x0000_00C0, 0x0C: 0x0000_0100}}
+WEDGE_ADDR = 0x0000_0000  # ITCM: unused by the firmware
+
+
+class Machine:
+    def __init__(self, elf_path, debugger=False):
+        self.debugger = debugger
+        self.bus = Bus()
+        self.core = Core(self.bus)
+        self.image, self.text = load_elf(elf_path)
+        self.core.load(self.image)
+        self.core.watch_opcodes(self.text)
+        self.uart = []          # (byte, cycle)
+        self.resets = []        # (cause, cycle)
+        self.detector = None
+        self.halted_until = 0
+        self.spi_rx_stream = 1
+        self._build(system.POWER_ON_FLAGS)
+        self.core.reset()
+
+    # --- the chip's peripherals, built anew at every reset
+    def _build(self, rsr):
+        bus, nvic = self.bus, self.core.nvic
+        bus.periphs = []
+        self.rcc = bus.add(0x5802_4400, 0x400, system.Rcc(rsr))
+        self.pwr = bus.add(0x5802_4800, 0x400, system.Pwr())
+        self.flash = bus.add(0x5200_2000, 0x1000, system.Flash())
+        self.syscfg = bus.add(0x5800_0400, 0x400, system.Syscfg())
+        self.exti = bus.add(0x5800_0000, 0x400, system.Exti(nvic))
+        self.dbgmcu = bus.add(0x5C00_1000, 0x400, system.Dbgmcu())
+        self.gpio = {}
+        for i, port in enumerate(GPIO_PORTS):
+            g = system.Gpio(port, GPIO_RESET.get(port))
+            self.gpio[port] = bus.add(0x5802_0000 + 0x400 * i, 0x400, g)
+        self.iwdg = bus.add(0x5800_4800, 0x400, system.Iwdg(bus, self.dbgmcu, self.debugger))
+        self.tim12 = bus.add(0x4000_1800, 0x400, system.Timer(
+            bus, nvic, TIM12_IRQ, self.rcc.apb1_timer_hz, bits=16))
+        self.dma = bus.add(0x4002_0000, 0x400, Dma(bus, nvic))
+        bus.add(0x4002_0800, 0x400, Dmamux(self.dma))
+        slave = self.detector if self.detector else NoSlave()
+        self.spi = bus.add(0x4001_3000, 0x400, Spi(bus, nvic, self.dma, self.rcc, slave))
+        self.usart = bus.add(0x4000_4800, 0x400, Usart(
+            bus, nvic, self.dma, self.rcc, lambda b, t: self.uart.append((b, t))))
+        self.gpio["D"].listeners.append(self._gpiod_changed)
+
+    def _gpiod_changed(self, pin, level):
+        if pin == 14 and self.detector:
+            self.detector.chip_select(level)
+
+    def attach(self, detector):
+        self.detector = detector
+        self.spi.slave = detector
+        detector.start()
+
+    # --- pins driven from outside
+    def pin(self, port, pin, level):
+        g = self.gpio[port]
+        old = g.inputs >> pin & 1
+        g.drive(pin, level)
+        if old != level and self.syscfg.exti_port(pin) == GPIO_PORTS.index(port):
+            self.exti.edge(pin, rising=bool(level))
+
+    # --- faults that act on the core
+    def halt(self, cycles):
+        """A debugger halts the core; the watchdog keeps counting unless
+        DBGMCU freezes it."""
+        self.halted_until = self.core.cycles + cycles
+        if self.dbgmcu.iwdg1_frozen():
+            self.iwdg.pause(self.halted_until)
+
+    def wedge(self):
+        self.core.uc.mem_write(WEDGE_ADDR, struct.pack("<H", 0xE7FE))
+        self.core.uc.reg_write(UC_ARM_REG_PRIMASK, 1)
+        self.core.pc = WEDGE_ADDR | 1
+        self.core.uc.reg_write(UC_ARM_REG_PC, self.core.pc)
+        self.core.sleeping = False
+
+    def dma_stall(self, stream):
+        self.dma.stalled.add(stream)
+
+    # --- reset
+    def reset(self, cause):
+        self.resets.append((cause, self.core.cycles))
+        flags = system.RSR_PIN | (system.RSR_IWDG1 if cause == "watchdog" else system.RSR_SFT)
+        self.bus.drop_chip_events()
+        self.bus.error = None
+        self.halted_until = 0
+        self._build(flags)
+        self.core.reset()
+
+    # --- running
+    def run(self, until_cycles, done=None):
+        """Runs until the model clock reaches `until_cycles` or done()."""
+        core, bus = self.core, self.bus
+        while core.cycles < until_cycles:
+            if done is not None and done():
+                return "done"
+            try:
+                bus.fire_due()
+                if bus.error:
+                    raise bus.error
+                if self.halted_until > core.cycles:
+                    nxt = bus.next_event()
+                    core.cycles = min(self.halted_until, nxt if nxt is not None else self.halted_until)
+                    continue
+                if core.sleeping:
+                    if core.wake_if_pending():
+                        pass
+                    elif core.sleeping == "wfe" and core.event:
+                        core.event = False
+                        core.sleeping = False
+                    else:
+                        nxt = bus.next_event()
+                        if nxt is None:
+                            return "idle"
+                        core.cycles = max(core.cycles, min(nxt, until_cycles))
+                        continue
+                else:
+                    core.wake_if_pending()
+                nxt = bus.next_event()
+                core.run_until(min(nxt, until_cycles) if nxt is not None else until_cycles)
+                if bus.error:
+                    raise bus.error
+            except Reset as r:
+                self.reset(r.cause)
+        return "time"
+
+
+class NoSlave:
+    def exchange(self, out, bits):
+        return (1 << bits) - 1
+
+    def chip_select(self, level):
+        pass
+
+    def unread(self):
+        pass
+
+
+def load_elf(path):
+    """PT_LOAD segments at their load (physical) addresses, and the
+    executable ones' bytes for the opcode scan."""
+    image, text = [], []
+    with open(path, "rb") as f:
+        elf = ELFFile(f)
+        for seg in elf.iter_segments():
+            if seg["p_type"] != "PT_LOAD" or not seg["p_filesz"]:
+                continue
+            data = seg.data()
+            image.append((seg["p_paddr"], data))
+            if seg["p_flags"] & 1:
+                text.append((seg["p_paddr"], data))
+    return image, text
+
+
+def cycles_of_ms(ms):
+    return round(ms * CLOCK_HZ / 1e3)
+
+
+__all__ = ["Machine", "Stop", "cycles_of_ms"]
+
+
+def _stats(self):
+    core = self.core
+    det = self.detector
+    s = {
+        "clock_hz": CLOCK_HZ,
+        "cycles": core.cycles,
+        "instructions": core.instructions,
+        "pc": core.pc,
+        "interrupts": core.irq_entries,
+        "irq_counts": {str(i): n for i, n in enumerate(core.nvic.taken) if n},
+        "wfe": core.wfe,
+        "dma_transfers": self.dma.transfers,
+        "dma_errors": self.dma.errors,
+        "spi_frames": self.spi.frames,
+        "spi_overruns": self.spi.overruns,
+        "uart_bytes": len(self.uart),
+        "watchdog_feeds": self.iwdg.feeds,
+        "watchdog_running": self.iwdg.running,
+        "iwdg_frozen_in_debug": self.dbgmcu.iwdg1_frozen(),
+        "resets": [{"cause": c, "ms": round(t * 1e3 / CLOCK_HZ, 3)} for c, t in self.resets],
+        "exti_edges": self.exti.edges,
+        "sysclk_hz": self.rcc.sysclk_hz(),
+        "fault": core.fault,
+    }
+    if det is not None:
+        s["beams"] = det.sent
+        s["faults_injected"] = det.injected
+        s["spi_reads_without_cs"] = det.reads_without_cs
+    return s
+
+
+Machine.stats = _stats

@@ -1,0 +1,345 @@
+"""SPI1 (RM0433 §50, the H7 SPI with FIFOs, TSIZE and CSTART) as a master,
+and USART3 (RM0433 §48) as a transmitter.
+
+SPI1: frames of DSIZE+1 bits take (DSIZE+1) SCK periods, SCK being the
+kernel clock (PLL1 Q through D2CCIP1R) divided by 2^(MBR+1). Full duplex
+shifts a frame when the TX FIFO holds one; receive-only (COMM = 10) shifts
+until TSIZE frames are in. A frame that finds the RX FIFO full is lost with
+OVR, unless MASRX is set, which suspends the clock (SUSP) until CSTART.
+The slave's answer comes from the detector model.
+
+USART3: a byte written to TDR (or by DMA while DMAT is set) moves to the
+shift register when it is free and leaves it ten bit times later (8N1 at
+the kernel clock divided by BRR); every byte is captured with its time.
+"""
+
+from .core import CLOCK_HZ, Stop
+from .dma import REQ_SPI1_RX, REQ_SPI1_TX, REQ_USART3_TX
+
+SPI1_IRQ = 35
+USART3_IRQ = 39
+
+
+class Spi:
+    FIFO_BYTES = 16
+
+    def __init__(self, bus, nvic, dma, rcc, slave):
+        self.bus = bus
+        self.nvic = nvic
+        self.dma = dma
+        self.rcc = rcc
+        self.slave = slave  # .exchange(tx, bits) -> rx
+        self.cr1 = 0
+        self.cr2 = 0
+        self.cfg1 = 0x0007_0007
+        self.cfg2 = 0
+        self.ier = 0
+        self.flags = 0  # EOT, TXTF, UDR, OVR, CRCE, TIFRE, MODF, TSERF, SUSP
+        self.i2scfgr = 0
+        self.crcpoly = 0x107
+        self.tx = []
+        self.rx = []
+        self.active = False
+        self.suspended = False
+        self.done = 0
+        self.busy_until = None
+        self.gen = 0
+        self.frames = 0
+        self.overruns = 0
+        self.force_overrun = 0  # frames to lose with OVR (fault injection)
+        dma.register(REQ_SPI1_RX, self.rx_request)
+        dma.register(REQ_SPI1_TX, self.tx_request)
+
+    # --- geometry of a frame
+    def bits(self):
+        return (self.cfg1 & 0x1F) + 1
+
+    def frame_bytes(self):
+        b = self.bits()
+        return 1 if b <= 8 else 2 if b <= 16 else 4
+
+    def fifo_frames(self):
+        return self.FIFO_BYTES // self.frame_bytes()
+
+    def threshold(self):
+        return ((self.cfg1 >> 5) & 0xF) + 1
+
+    def sck_hz(self):
+        return self.rcc.spi123_kernel_hz() / (2 << ((self.cfg1 >> 28) & 7))
+
+    def comm(self):
+        return (self.cfg2 >> 17) & 3
+
+    def tsize(self):
+        return self.cr2 & 0xFFFF
+
+    # --- DMA request lines
+    def rx_request(self):
+        return bool(self.cfg1 >> 14 & 1) and len(self.rx) >= self.threshold()
+
+    def tx_request(self):
+        return bool(self.cfg1 >> 15 & 1) and self.txp()
+
+    def txp(self):
+        if not self.cr1 & 1:
+            return False
+        if self.tsize() and len(self.tx) + self.done >= self.tsize():
+            return False
+        return len(self.tx) < self.fifo_frames()
+
+    # --- status
+    def sr(self):
+        sr = self.flags
+        if len(self.rx) >= self.threshold():
+            sr |= 1  # RXP
+        if self.txp():
+            sr |= 2  # TXP
+        if sr & 3 == 3:
+            sr |= 4  # DXP
+        if not self.active and not self.tx:
+            sr |= 1 << 12  # TXC
+        if self.rx:
+            lvl = min(len(self.rx), 3)
+            sr |= lvl << 13
+        if self.tsize():
+            sr |= max(self.tsize() - self.done, 0) << 16
+        return sr
+
+    def update(self):
+        self.nvic.set_line(SPI1_IRQ, bool(self.sr() & self.ier & 0x3FF))
+        self.dma.poll(REQ_SPI1_RX)
+        self.dma.poll(REQ_SPI1_TX)
+        self.kick()
+
+    # --- shifting
+    def can_shift(self):
+        if not (self.active and self.cr1 & 1) or self.suspended:
+            return False
+        if self.tsize() and self.done >= self.tsize():
+            return False
+        return self.comm() == 2 or bool(self.tx)
+
+    def kick(self):
+        if self.busy_until is not None or not self.can_shift():
+            return
+        cycles = max(1, round(self.bits() * CLOCK_HZ / self.sck_hz()))
+        self.busy_until = self.bus.core.cycles + cycles
+        self.gen += 1
+        gen = self.gen
+        self.bus.at(self.busy_until, lambda: self.shifted(gen))
+
+    def shifted(self, gen):
+        if gen != self.gen:
+            return
+        self.busy_until = None
+        if not self.can_shift():
+            return
+        out = self.tx.pop(0) if self.comm() != 2 and self.tx else 0
+        value = self.slave.exchange(out, self.bits()) & ((1 << self.bits()) - 1)
+        self.frames += 1
+        self.done += 1
+        if self.force_overrun:
+            self.force_overrun -= 1
+            self.flags |= 1 << 6
+            self.overruns += 1
+        elif len(self.rx) < self.fifo_frames():
+            self.rx.append(value)
+        elif self.cr1 >> 8 & 1:  # MASRX: suspend instead of losing data
+            self.done -= 1
+            self.slave.unread()
+            self.suspended = True
+            self.flags |= 1 << 11
+        else:
+            self.flags |= 1 << 6  # OVR
+            self.overruns += 1
+        if self.tsize() and self.done >= self.tsize():
+            self.flags |= (1 << 3) | (1 << 4)  # EOT, TXTF
+            self.active = False
+        self.update()
+
+    def stop(self):
+        self.active = False
+        self.suspended = False
+        self.gen += 1
+        self.busy_until = None
+
+    # --- registers
+    def read(self, off, size):
+        if off == 0x00:
+            return self.cr1 | (0x200 if self.active else 0)
+        if off == 0x04:
+            return self.cr2
+        if off == 0x08:
+            return self.cfg1
+        if off == 0x0C:
+            return self.cfg2
+        if off == 0x10:
+            return self.ier
+        if off == 0x14:
+            return self.sr()
+        if 0x30 <= off < 0x34:
+            value = self.rx.pop(0) if self.rx else 0
+            self.update()
+            return value
+        if off == 0x40:
+            return self.crcpoly
+        if off in (0x44, 0x48, 0x4C):
+            return 0
+        if off == 0x50:
+            return self.i2scfgr
+        raise KeyError
+
+    def write(self, off, size, value):
+        if off == 0x00:
+            was_on = self.cr1 & 1
+            self.cr1 = value & ~(0x200 | 0x400)
+            if was_on and not value & 1:  # SPE cleared: FIFOs flushed
+                self.stop()
+                self.tx.clear()
+                self.rx.clear()
+                self.flags &= ~((1 << 11))
+                self.done = 0
+            if value & 1 and not was_on:
+                self.done = 0
+            if value & 0x400:  # CSUSP
+                self.stop()
+                self.flags |= 1 << 11
+            if value & 0x200 and value & 1:  # CSTART
+                if not self.cfg2 >> 22 & 1:
+                    raise Stop("SPI1 as a slave is not modelled")
+                self.active = True
+                self.suspended = False
+        elif off == 0x04:
+            self.cr2 = value
+        elif off == 0x08:
+            self._config_write("CFG1")
+            self.cfg1 = value
+        elif off == 0x0C:
+            self._config_write("CFG2")
+            self.cfg2 = value
+        elif off == 0x10:
+            self.ier = value
+        elif off == 0x18:
+            self.flags &= ~(value & 0xFF8)
+        elif 0x20 <= off < 0x24:
+            if len(self.tx) < self.fifo_frames():
+                self.tx.append(value)
+        elif off == 0x40:
+            self.crcpoly = value
+        elif off == 0x50:
+            self.i2scfgr = value
+        else:
+            raise KeyError
+        self.update()
+
+    def _config_write(self, name):
+        if self.cr1 & 1:
+            # RM0433: CFG1/CFG2 are write-protected while SPE = 1.
+            raise Stop(f"SPI1 {name} written while SPE = 1 (ignored by the chip)")
+
+
+class Usart:
+    def __init__(self, bus, nvic, dma, rcc, on_byte):
+        self.bus = bus
+        self.nvic = nvic
+        self.dma = dma
+        self.rcc = rcc
+        self.on_byte = on_byte  # fn(byte, cycle)
+        self.r = {0x00: 0, 0x04: 0, 0x08: 0, 0x0C: 0, 0x10: 0, 0x14: 0, 0x2C: 0}
+        self.fifo = []       # bytes waiting (TDR, or the TX FIFO when FIFOEN)
+        self.shifting = False
+        self.tc = True
+        self.busy_until = 0  # fault injection: the line is held until then
+        self.bytes = 0
+        dma.register(REQ_USART3_TX, self.tx_request)
+
+    def enabled(self):
+        return self.r[0] & 1 and self.r[0] >> 3 & 1
+
+    def capacity(self):
+        return 16 if self.r[0] >> 29 & 1 else 1
+
+    def txe(self):
+        """TXE, or TXFNF in FIFO mode: room for one more byte."""
+        return len(self.fifo) < self.capacity()
+
+    def tx_request(self):
+        return bool(self.r[0x08] >> 7 & 1) and self.enabled() and self.txe()
+
+    def isr(self):
+        v = 0
+        if self.txe():
+            v |= 1 << 7
+        if not self.fifo:
+            v |= 1 << 23  # TXFE
+        if self.tc:
+            v |= 1 << 6
+        v |= (1 << 21) | (1 << 22) if self.enabled() else 0  # TEACK, REACK
+        return v
+
+    def byte_cycles(self):
+        brr = self.r[0x0C]
+        if brr < 16:
+            raise Stop(f"USART3 BRR {brr} is not a valid divider")
+        if self.r[0] >> 15 & 1:
+            raise Stop("USART3 oversampling by 8 is not modelled")
+        baud = self.rcc.usart234578_kernel_hz() / brr
+        return round(10 * CLOCK_HZ / baud)
+
+    def start_shift(self):
+        if self.shifting or not self.fifo or not self.enabled():
+            return
+        now = self.bus.core.cycles
+        if now < self.busy_until:
+            self.bus.at(self.busy_until, self.start_shift)
+            return
+        byte = self.fifo.pop(0)
+        self.shifting = True
+        self.tc = False
+        end = now + self.byte_cycles()
+
+        def done():
+            self.shifting = False
+            self.bytes += 1
+            self.on_byte(byte, end)
+            if not self.fifo:
+                self.tc = True
+            self.start_shift()
+            self.update()
+
+        self.bus.at(end, done)
+        self.update()
+
+    def update(self):
+        cr1 = self.r[0]
+        irq = (cr1 >> 7 & 1 and self.txe()) or (cr1 >> 6 & 1 and self.tc)
+        self.nvic.set_line(USART3_IRQ, bool(irq))
+        self.dma.poll(REQ_USART3_TX)
+
+    def read(self, off, size):
+        if off == 0x1C:
+            return self.isr()
+        if off in (0x18, 0x20, 0x24, 0x28):
+            return 0
+        if off in self.r:
+            return self.r[off]
+        raise KeyError
+
+    def write(self, off, size, value):
+        if off == 0x28:
+            if not self.enabled():
+                raise Stop("USART3 TDR written while the transmitter is off")
+            if self.txe():
+                self.fifo.append(value & 0xFF)
+            self.start_shift()
+        elif off == 0x20:  # ICR
+            if value >> 6 & 1:
+                self.tc = False
+        elif off == 0x18:
+            pass  # RQR
+        elif off in self.r:
+            self.r[off] = value
+            self.start_shift()
+        else:
+            raise KeyError
+        self.update()
