@@ -97,8 +97,28 @@ pub mod h743 {
     /// Core clock (PLL1 P) and the SPI kernel clock (PLL1 Q).
     pub const SYSCLK_HZ: u32 = 400_000_000;
     pub const SPI_KERNEL_HZ: u32 = 200_000_000;
-    /// SPI clock to the detector (the kernel clock divided by a power of two).
-    pub const SPI_HZ: u32 = 50_000_000;
+    /// SPI clock to the detector (the kernel clock divided by a power of
+    /// two). 25 MHz leaves 20 ns of the 40 ns SCK period for the detector's
+    /// output delay, the wiring and the input set-up; 50 MHz only 10 ns
+    /// (docs/firmware.md, bring-up).
+    pub const SPI_HZ: u32 = 25_000_000;
+    /// SPI1's `CFG1.MBR` divider for [`SPI_HZ`].
+    pub const SPI_DIV: embassy_stm32::pac::spi::vals::Mbr = match SPI_KERNEL_HZ / SPI_HZ {
+        2 => embassy_stm32::pac::spi::vals::Mbr::DIV2,
+        4 => embassy_stm32::pac::spi::vals::Mbr::DIV4,
+        8 => embassy_stm32::pac::spi::vals::Mbr::DIV8,
+        16 => embassy_stm32::pac::spi::vals::Mbr::DIV16,
+        32 => embassy_stm32::pac::spi::vals::Mbr::DIV32,
+        64 => embassy_stm32::pac::spi::vals::Mbr::DIV64,
+        128 => embassy_stm32::pac::spi::vals::Mbr::DIV128,
+        _ => embassy_stm32::pac::spi::vals::Mbr::DIV256,
+    };
+    /// A frame read that has not finished after twice its bus time plus
+    /// 100 us is a lost beam (a 15x15 frame takes 144 us at 25 MHz).
+    pub const READ_TIMEOUT_US: u64 =
+        2 * (GEOMETRY.cells() as u64 * 16 * 1_000_000).div_ceil(SPI_HZ as u64) + 100;
+    /// Beams scored between two yields of the scoring task.
+    pub const SCORE_BURST: u32 = 8;
     const _: () = assert!(
         SPI_KERNEL_HZ.is_multiple_of(SPI_HZ)
             && (SPI_KERNEL_HZ / SPI_HZ).is_power_of_two()
@@ -124,10 +144,7 @@ pub mod h743 {
                 spi: $p.SPI1,
                 sck: $p.PA5,  // D13
                 miso: $p.PA6, // D12
-                mosi: $p.PB5, // D11
                 cs: $p.PD14,  // D10
-                spi_tx_dma: $p.DMA1_CH0,
-                spi_rx_dma: $p.DMA1_CH1,
                 drdy: $p.PE9, // D6, EXTI9 (EXTI9_5 interrupt)
                 drdy_exti: $p.EXTI9,
                 line_sync: $p.PE11, // D5

@@ -7,28 +7,34 @@
 //!   SPI idle, tells the acquisition task which buffer to fill. Every edge is
 //!   counted here, even while the SPI or the scoring side is busy.
 //! - **Acquisition task** (interrupt executor on the otherwise unused UART4
-//!   vector): CS low, SPI1 read with DMA into the buffer, CS high, result
-//!   (or SPI/DMA error) into the log.
+//!   vector): CS low, SPI1 read with DMA into the buffer (`frame_reader`),
+//!   CS high, result (or overrun, DMA error, timeout) into the log.
 //! - **Thread mode**: the scoring task (sequencing, `cvm_core::Pipeline`,
 //!   lines into the bounded queue, watchdog feeding, idle end of scan) and
-//!   the UART task (USART3 TX with DMA from the queue).
+//!   the UART task (USART3 TX with DMA from the queue). The scoring task
+//!   yields every few beams, so the UART task and the watchdog feed never
+//!   wait for a backlog to be scored.
 //!
 //! D-cache: left disabled (only the I-cache is enabled), so DMA buffers in
 //! AXI SRAM need no cache maintenance. DMA only touches statics in AXI SRAM
 //! (frame buffers, the UART line buffer), never the DTCM stack.
 
+mod clocks;
+mod frame_reader;
+mod resets;
+
 use core::cell::RefCell;
 
 use cortex_m_rt::entry;
+use cvm_core::Scorer;
 use cvm_core::pipeline::{Pipeline, Settings};
 use cvm_core::protocol::{LineSink, MAX_LINE, Priority};
 use cvm_core::stream::row_words;
-use cvm_core::{MAX_CELLS, Scorer};
 use cvm_fw_app::acquire::Acquisition;
-use cvm_fw_app::decode::frame_bytes;
 use cvm_fw_app::driver::{CountingSink, ScanDriver};
 use cvm_fw_app::queue::LineQueue;
 use defmt::{error, info, warn};
+use defmt_rtt as _;
 use embassy_executor::{Executor, InterruptExecutor};
 use embassy_stm32::exti::blocking::ExtiGroupMask;
 use embassy_stm32::exti::{ExtiInput, TriggerEdge};
@@ -44,32 +50,28 @@ use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::{CriticalSectionRawMutex, ThreadModeRawMutex};
 use embassy_sync::signal::Signal;
 use embassy_time::{Duration, Instant, with_timeout};
+use frame_reader::FrameReader;
 use static_cell::StaticCell;
-use {defmt_rtt as _, panic_probe as _};
 
 use crate::config::h743::{
     BAUD, COLS, CORE, FEED_MS, IDLE_END_MS, J1, J2, KEEP_RESERVE, MAX_COLS,
-    MAX_DEFECT_LINES_PER_ROW, QUEUE_BYTES, ROWS, SCORES, SPI_HZ, SYSCLK_HZ, THRESHOLD_UNITS,
-    WATCHDOG_US,
+    MAX_DEFECT_LINES_PER_ROW, QUEUE_BYTES, READ_TIMEOUT_US, ROWS, SCORE_BURST, SCORES, SPI_DIV,
+    SPI_HZ, SYSCLK_HZ, THRESHOLD_UNITS, WATCHDOG_US,
 };
 use crate::config::{BEAM_LOG, FIRMWARE_VERSION, FRAME_BUFFERS};
-use crate::frames::{Decoder, FrameBuffers};
+use crate::frames::{SampleBuffers, Samples};
 
 bind_interrupts!(struct Irqs {
-    DMA1_STREAM0 => dma::InterruptHandler<peripherals::DMA1_CH0>;
-    DMA1_STREAM1 => dma::InterruptHandler<peripherals::DMA1_CH1>;
     DMA1_STREAM2 => dma::InterruptHandler<peripherals::DMA1_CH2>;
 });
 
 /// The peripherals the board uses; `crate::pins!` (config.rs) fills it.
+/// (SPI1's RX DMA, DMA1 stream 1, is driven by `frame_reader` directly.)
 pub struct Pins {
     pub spi: Peri<'static, peripherals::SPI1>,
     pub sck: Peri<'static, peripherals::PA5>,
     pub miso: Peri<'static, peripherals::PA6>,
-    pub mosi: Peri<'static, peripherals::PB5>,
     pub cs: Peri<'static, peripherals::PD14>,
-    pub spi_tx_dma: Peri<'static, peripherals::DMA1_CH0>,
-    pub spi_rx_dma: Peri<'static, peripherals::DMA1_CH1>,
     pub drdy: Peri<'static, peripherals::PE9>,
     pub drdy_exti: Peri<'static, peripherals::EXTI9>,
     pub line_sync: Peri<'static, peripherals::PE11>,
@@ -80,7 +82,6 @@ pub struct Pins {
 }
 
 const CELLS: usize = CORE.geometry.cells();
-const FRAME_LEN: usize = frame_bytes(CELLS);
 const ROW_WORDS: usize = row_words(MAX_COLS, J1 as usize, J2 as usize);
 
 /// Scoring tables, built by the compiler.
@@ -103,7 +104,7 @@ type Queue = LineQueue<QUEUE_BYTES>;
 
 static ACQ: Mutex<CriticalSectionRawMutex, RefCell<Acq>> = Mutex::new(RefCell::new(Acq::new()));
 #[unsafe(link_section = ".dma_buffers")]
-static FRAMES: FrameBuffers<FRAME_BUFFERS> = FrameBuffers::new();
+static FRAMES: SampleBuffers<FRAME_BUFFERS> = SampleBuffers::new();
 static QUEUE: Mutex<ThreadModeRawMutex, RefCell<Queue>> =
     Mutex::new(RefCell::new(Queue::new(KEEP_RESERVE)));
 /// The DMA source of the line being sent (AXI SRAM, not the DTCM stack).
@@ -121,6 +122,8 @@ struct DrdyIo {
 }
 static DRDY_IO: Mutex<CriticalSectionRawMutex, RefCell<Option<DrdyIo>>> =
     Mutex::new(RefCell::new(None));
+/// DRDY is PE9: EXTI line 9.
+const DRDY_LINE: usize = 9;
 
 /// DRDY interrupt -> acquisition task: the buffer to fill.
 static START: Signal<CriticalSectionRawMutex, usize> = Signal::new();
@@ -135,6 +138,11 @@ static EXECUTOR: StaticCell<Executor> = StaticCell::new();
 
 #[interrupt]
 fn EXTI9_5() {
+    // Clear DRDY's pending bit first, whatever happens next: a pending bit
+    // left set re-enters this handler for ever.
+    embassy_stm32::pac::EXTI
+        .pr(0)
+        .write(|w| w.set_line(DRDY_LINE, true));
     DRDY_IO.lock(|io| {
         let io = io.borrow();
         let Some(io) = io.as_ref() else { return };
@@ -152,38 +160,17 @@ unsafe fn UART4() {
     unsafe { EXECUTOR_ACQ.on_interrupt() }
 }
 
-fn clocks() -> embassy_stm32::Config {
-    use embassy_stm32::rcc::*;
-    let mut config = embassy_stm32::Config::default();
-    // HSI 64 MHz / 4 * 50 = 800 MHz VCO; P / 2 = 400 MHz core; Q / 4 = 200 MHz
-    // SPI1 kernel clock (50 MHz SCK = Q / 4).
-    config.rcc.hsi = Some(HSIPrescaler::DIV1);
-    config.rcc.csi = true;
-    config.rcc.pll1 = Some(Pll {
-        source: PllSource::HSI,
-        prediv: PllPreDiv::DIV4,
-        mul: PllMul::MUL50,
-        fracn: None,
-        divp: Some(PllDiv::DIV2),
-        divq: Some(PllDiv::DIV4),
-        divr: None,
-    });
-    config.rcc.sys = Sysclk::PLL1_P;
-    config.rcc.ahb_pre = AHBPrescaler::DIV2;
-    config.rcc.apb1_pre = APBPrescaler::DIV2;
-    config.rcc.apb2_pre = APBPrescaler::DIV2;
-    config.rcc.apb3_pre = APBPrescaler::DIV2;
-    config.rcc.apb4_pre = APBPrescaler::DIV2;
-    config.rcc.voltage_scale = VoltageScale::Scale1;
-    config
-}
-
 #[entry]
 fn main() -> ! {
     let mut core = cortex_m::Peripherals::take()
         .unwrap_or_else(|| defmt::panic!("core peripherals taken twice"));
     core.SCB.enable_icache();
-    let p = embassy_stm32::init(clocks());
+    let p = embassy_stm32::init(clocks::config());
+    // init enables EXTI9_5 in the NVIC; DRDY must not interrupt before
+    // DRDY_IO is set (enabled again at the end of this function).
+    interrupt::EXTI9_5.disable();
+    resets::freeze_watchdog_in_debug();
+    let cause = resets::take_cause();
     // SRAM1..3 hold row buffer B; their clocks are off after reset.
     embassy_stm32::pac::RCC.ahb2enr().modify(|w| {
         w.set_sram1en(true);
@@ -192,6 +179,7 @@ fn main() -> ! {
     });
     let pins = crate::pins!(p);
 
+    info!("reset cause: {}", cause);
     info!(
         "{} start: {}x{} maps, {} cols x {} rows, kernels {}, threshold {} units, scores {}, SPI {} Hz, UART {} baud, core {} Hz",
         FIRMWARE_VERSION,
@@ -210,18 +198,13 @@ fn main() -> ! {
         SYSCLK_HZ
     );
 
+    // embassy sets up SPI1's pins, bus and kernel clocks; the transfers are
+    // frame_reader's.
     let mut spi_cfg = spi::Config::default();
     spi_cfg.frequency = Hertz(SPI_HZ);
-    let spi = spi::Spi::new(
-        pins.spi,
-        pins.sck,
-        pins.mosi,
-        pins.miso,
-        pins.spi_tx_dma,
-        pins.spi_rx_dma,
-        Irqs,
-        spi_cfg,
-    );
+    let spi = spi::Spi::new_blocking_rxonly(pins.spi, pins.sck, pins.miso, spi_cfg);
+    core::mem::forget(spi);
+    let reader = FrameReader::new(SPI_DIV);
     let cs = Output::new(pins.cs, Level::High, Speed::VeryHigh);
 
     let mut uart_cfg = usart::Config::default();
@@ -264,7 +247,7 @@ fn main() -> ! {
 
     interrupt::UART4.set_priority(IrqPriority::P6);
     let acq_spawner = EXECUTOR_ACQ.start(interrupt::UART4);
-    match acquire_task(spi, cs) {
+    match acquire_task(reader, cs) {
         Ok(t) => acq_spawner.spawn(t),
         Err(_) => defmt::panic!("acquisition task already running"),
     }
@@ -284,19 +267,20 @@ fn main() -> ! {
 
 /// Reads one frame per START into the buffer it names.
 #[embassy_executor::task]
-async fn acquire_task(
-    mut spi: spi::Spi<'static, Async, spi::mode::Master>,
-    mut cs: Output<'static>,
-) {
+async fn acquire_task(mut reader: FrameReader, mut cs: Output<'static>) {
+    let timeout = Duration::from_micros(READ_TIMEOUT_US);
     loop {
         let buf = START.wait().await;
         // SAFETY: `buf` is Filling: this task owns it until `read_done`.
-        let bytes = unsafe { FRAMES.buffer(buf) };
+        let samples = unsafe { FRAMES.buffer(buf) };
         cs.set_low();
-        let ok = spi.read(&mut bytes[..FRAME_LEN]).await.is_ok();
+        let result = reader.read(&mut samples[..CELLS], timeout).await;
         cs.set_high();
-        ACQ.lock(|a| a.borrow_mut().read_done(buf, ok));
+        ACQ.lock(|a| a.borrow_mut().read_done(buf, result.is_ok()));
         BEAMS.signal(());
+        if let Err(e) = result {
+            warn!("frame lost: {} ({})", e, reader.counts());
+        }
     }
 }
 
@@ -342,12 +326,12 @@ async fn score_task(
     mut driver: ScanDriver<'static, MAX_COLS>,
     mut wdg: IndependentWatchdog<'static, IWDG1>,
 ) {
-    let mut frames = Decoder {
+    let mut frames = Samples {
         bufs: &FRAMES,
         cells: CELLS,
-        samples: [0; MAX_CELLS],
         release: |b: usize| ACQ.lock(|a| a.borrow_mut().release(b)),
     };
+    let mut burst = 0u32;
     let mut sink = QueueSink;
     let mut last_beam = Instant::now();
     let mut idle_ended = true;
@@ -379,6 +363,14 @@ async fn score_task(
                 report_scan(&driver);
             }
             KICK.signal(());
+            // A backlog of beams must not keep the UART task and the
+            // watchdog feed waiting: yield every SCORE_BURST steps.
+            burst += 1;
+            if burst >= SCORE_BURST {
+                burst = 0;
+                wdg.pet();
+                embassy_futures::yield_now().await;
+            }
         }
 
         if !idle_ended && last_beam.elapsed() >= Duration::from_millis(IDLE_END_MS) {
