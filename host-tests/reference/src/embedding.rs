@@ -1,5 +1,5 @@
 //! The CVM distance as a squared Euclidean distance of per-map embeddings
-//! (design.md §4).
+//! (docs/method.md §4).
 
 use crate::kernels::{CvmConfig, KernelFamily};
 use crate::linalg::{axis_gram, cholesky_psd};

@@ -26,7 +26,7 @@ impl Ground {
     }
 }
 
-/// The distance between a dark map (no light, design.md §3) and a lit one,
+/// The distance between a dark map (no light, docs/method.md §3) and a lit one,
 /// for EMD and mean deflection: the grid's diameter (largest ground distance
 /// between two cells), but at least one cell.
 ///

@@ -3,7 +3,7 @@
 use std::fmt;
 
 /// Size of the detector array: `J1` cells on the first axis, `J2` on the
-/// second, each in `1..=16` (the firmware's limit, design.md §2).
+/// second, each in `1..=16` (the firmware's limit, docs/method.md §2).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct Geometry {
     j1: usize,

@@ -1,4 +1,4 @@
-//! Kernel sets and weights of the CVM distance (design.md §3).
+//! Kernel sets and weights of the CVM distance (docs/method.md §3).
 
 use crate::geometry::Geometry;
 use std::fmt;
@@ -118,7 +118,7 @@ pub struct CvmConfig {
 }
 
 impl CvmConfig {
-    /// Paper kernels (design.md §3) with `b_i in 1..=min(J_i, bmax)`
+    /// Paper kernels (docs/method.md §3) with `b_i in 1..=min(J_i, bmax)`
     /// (`bmax = None`: no cap), normalised maps.
     pub fn paper(
         geometry: Geometry,

@@ -1,6 +1,6 @@
 //! Normalisation of a raw map to a distribution (Eq. 5).
 
-/// A map divided by its total, with the dark flag of design.md §3.
+/// A map divided by its total, with the dark flag of docs/method.md §3.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Normalised {
     /// `ã(j) = a(j) / sum_i a(i)`, or all zeros for a dark map.

@@ -1,6 +1,6 @@
 //! The three CVM implementations (brute force, summed-area tables,
 //! embedding) agree with each other and with hand-computed values, and the
-//! distance has the properties design.md §3 asks for.
+//! distance has the properties docs/method.md §3 asks for.
 
 mod common;
 
@@ -60,7 +60,7 @@ fn hand_computed_1x3() {
 
 /// With paper kernels every box on a 2-cell axis covers the whole axis, so
 /// normalised maps that differ only along that axis are at distance 0 (the
-/// semi-definite case of design.md §4); the embedding must agree.
+/// semi-definite case of docs/method.md §4); the embedding must agree.
 #[test]
 fn two_cell_axis_is_blind_with_paper_kernels() {
     let g = Geometry::new(2, 3).unwrap();

@@ -4,7 +4,7 @@
 use cvm_reference::Geometry;
 use proptest::prelude::*;
 
-/// Geometries the agreement tests sweep (design.md §3 edge cases included:
+/// Geometries the agreement tests sweep (docs/method.md §3 edge cases included:
 /// 1x1, 2-cell axes, non-square, the paper's 9x9 and 15x15, the 16x16 limit).
 pub const GEOMETRIES: &[(usize, usize)] = &[
     (1, 1),
