@@ -159,3 +159,44 @@ pub fn random_scan(rng: &mut impl Rng, rows: usize, cols: usize, j1: usize, j2: 
     }
     data
 }
+
+/// The `DARK` and `SATURATED` flags a frame must get, from its samples
+/// (docs/method.md §3): dark when every sample is zero, saturated when any
+/// sample is at or above `full_scale`.
+pub fn frame_flags(frame: &[u16], full_scale: u16) -> u8 {
+    let mut f = 0;
+    if frame.iter().all(|&a| a == 0) {
+        f |= cvm_core::flags::DARK;
+    }
+    if frame.iter().any(|&a| a >= full_scale) {
+        f |= cvm_core::flags::SATURATED;
+    }
+    f
+}
+
+/// The summary of row `row` recomputed from its positions' scores: the
+/// largest magnitude among positions with data and the first column
+/// reaching it, the positions at or above `threshold`, and the counts of
+/// positions without data, dark and saturated.
+pub fn row_summary_of(row: u32, scores: &[PositionScore], threshold: u32) -> RowSummary {
+    use cvm_core::flags;
+    let data: Vec<(usize, &PositionScore)> = scores
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| s.flags & flags::NO_DATA == 0)
+        .collect();
+    let max = data.iter().map(|(_, s)| s.mag).max().unwrap_or(0);
+    let count = |bit: u8| data.iter().filter(|(_, s)| s.flags & bit != 0).count() as u32;
+    RowSummary {
+        row,
+        max,
+        argmax: data
+            .iter()
+            .find(|(_, s)| s.mag == max)
+            .map(|(c, _)| *c as u32),
+        defects: data.iter().filter(|(_, s)| s.mag >= threshold).count() as u32,
+        no_data: (scores.len() - data.len()) as u32,
+        dark: count(flags::DARK),
+        saturated: count(flags::SATURATED),
+    }
+}

@@ -2,7 +2,7 @@
 //! (`dmap score --distance cvm-fixed`), and its handling of damaged input.
 
 use cvm_core::{Position, PositionScore, Scorer, flags};
-use cvm_core_tests::{random_scan, rng, run_engine, variants};
+use cvm_core_tests::{frame_flags, random_scan, rng, row_summary_of, run_engine, variants};
 use dmap::fixed::score_scan;
 use proptest::prelude::*;
 
@@ -106,6 +106,15 @@ proptest! {
                 prop_assert_eq!(sum.row as usize, k);
             }
             prop_assert_eq!(&flatten(&out), &batch);
+            // Flags from the frames, summaries recomputed from the scores.
+            for (i, s) in batch.iter().enumerate() {
+                let want = frame_flags(&data[i * n..(i + 1) * n], u16::MAX);
+                prop_assert_eq!(s.flags & (flags::DARK | flags::SATURATED), want);
+            }
+            for (k, (sum, _)) in out.iter().enumerate() {
+                let want = row_summary_of(k as u32, &batch[k * cols..(k + 1) * cols], thr);
+                prop_assert_eq!(*sum, want);
+            }
             prop_assert_eq!(totals.frames as usize, rows * cols);
             prop_assert_eq!(totals.missing, 0);
             let defects = batch.iter().filter(|s| s.mag >= thr).count();
@@ -121,13 +130,16 @@ proptest! {
     /// are reported as no-data positions and counted; every other position
     /// is scored at its own place with the border rule around the gaps.
     #[test]
-    fn gaps_do_not_shift_positions(rows in 1usize..7, cols in 1usize..9, seed in any::<u64>(), holes in prop::collection::vec(any::<bool>(), 64)) {
+    fn gaps_do_not_shift_positions(rows in 1usize..7, cols in 1usize..9, seed in any::<u64>(), holes in prop::collection::vec(prop::bool::weighted(0.3), 48), forced in any::<prop::sample::Index>()) {
         let (j1, j2) = (5, 4);
         let n = j1 * j2;
         let mut r = rng(seed);
         let data = random_scan(&mut r, rows, cols, j1, j2);
         let scorer = dmap::options::ScoringArgs::default().scorer(j1, j2).unwrap();
-        let present: Vec<bool> = (0..rows * cols).map(|i| !(holes[i % 64] && (i / 64 + seed as usize).is_multiple_of(2))).collect();
+        // One hole per position drawn independently (a scan has at most 48
+        // positions), plus one forced hole: every case has a gap.
+        let forced = forced.index(rows * cols);
+        let present: Vec<bool> = (0..rows * cols).map(|i| !holes[i] && i != forced).collect();
         let mut frames = Vec::new();
         for (i, f) in clean_frames(rows, cols, n, &data).into_iter().enumerate() {
             if present[i] {
@@ -144,6 +156,9 @@ proptest! {
         let last_row = (0..rows * cols).rev().find(|&i| present[i] || i.is_multiple_of(3)).map_or(0, |i| i / cols + 1);
         prop_assert_eq!(out.len(), last_row);
         prop_assert_eq!(&flatten(&out)[..], &want[..last_row * cols]);
+        for (k, (sum, _)) in out.iter().enumerate() {
+            prop_assert_eq!(*sum, row_summary_of(k as u32, &want[k * cols..(k + 1) * cols], 1));
+        }
         let missing = want[..last_row * cols].iter().filter(|s| s.flags & flags::NO_DATA != 0).count();
         prop_assert_eq!(totals.missing as usize, missing);
         prop_assert_eq!(totals.frames as usize + missing, last_row * cols);
