@@ -8,11 +8,19 @@
 //! * raw maps: `|d_fixed - d| <= 1e-5 M + step`, and `<= 1e-3 d` wherever
 //!   `d >= 1e-3 M` and `d >= 1000 step` (a raw score's step is set by the
 //!   largest distance raw counts can reach, so it is coarse for dim maps).
+//!
+//! Checked here as well, relative to each distance rather than to `M`:
+//! `|d_fixed - d| <= 1e-4 d + 2 step` (normalised) and `<= 1e-3 d + 2 step`
+//! (raw), so that a score stuck at 0 or cut short fails wherever the exact
+//! distance exceeds two steps, dim raw maps included.
 
 use cvm_core::Scorer;
 use cvm_core_tests::{GEOMETRIES, perturb, random_map, rng, to_f64, variants};
 use cvm_reference::{CvmConfig, cvm_brute};
 use dmap::options::{KernelArg, ScoringArgs, WeightArg};
+
+/// Score steps allowed on top of the relative bound of each distance.
+const PER_DISTANCE_STEPS: f64 = 2.0;
 
 fn fixed(scorer: &Scorer, a: &[u16], b: &[u16]) -> (f64, u32) {
     let n = scorer.cells();
@@ -33,7 +41,7 @@ fn check(
     reference: &CvmConfig,
     raw: bool,
     pairs: &[(Vec<u16>, Vec<u16>)],
-) -> Result<(), String> {
+) -> Result<f64, String> {
     let samples: Vec<(f64, f64, u32)> = pairs
         .iter()
         .map(|(a, b)| {
@@ -65,8 +73,20 @@ fn check(
                 err / e
             ));
         }
+        // Relative to each distance, whatever the sample's maximum: a
+        // score is the distance rounded to the nearest step, so below one
+        // step only the step bounds the error, above it the relative
+        // bound does. (A score stuck at 0 fails wherever `d > 2 step`.)
+        let each = if raw { 1e-3 } else { 1e-4 };
+        if err > each * e + PER_DISTANCE_STEPS * step {
+            return Err(format!(
+                "exact {e} fixed {f}: error {err:.3e} > {each:.0e} * d + {PER_DISTANCE_STEPS} * {step:.1e}"
+            ));
+        }
     }
-    Ok(())
+    // The share of the sample the per-distance bound constrains tightly.
+    let big = samples.iter().filter(|s| s.0 > 10.0 * step).count();
+    Ok(big as f64 / samples.len().max(1) as f64)
 }
 
 #[test]
@@ -90,8 +110,14 @@ fn fixed_point_matches_f64_on_random_maps() {
                     (a, b)
                 })
                 .collect();
-            if let Err(e) = check(&scorer, &reference, args.raw, &pairs) {
-                failures.push(format!("{j1}x{j2} {args:?}: {e}"));
+            match check(&scorer, &reference, args.raw, &pairs) {
+                Err(e) => failures.push(format!("{j1}x{j2} {args:?}: {e}")),
+                // Raw maps: most of the sample lies well above one step,
+                // where the per-distance bound is tight.
+                Ok(share) if args.raw && share < 0.5 => failures.push(format!(
+                    "{j1}x{j2} {args:?}: only {share:.2} of the raw distances above 10 steps"
+                )),
+                Ok(_) => {}
             }
         }
     }
@@ -150,7 +176,7 @@ fn extreme_inputs_at_16x16_do_not_overflow() {
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
 
-/// Hand-computed cases (design.md §3 conventions, 1-based in the comments).
+/// Hand-computed cases (docs/method.md §3 conventions, 1-based in the comments).
 #[test]
 fn hand_computed_distances() {
     let uniform = ScoringArgs {
