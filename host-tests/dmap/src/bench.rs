@@ -474,16 +474,22 @@ pub fn measure(kernels: &Kernels, imp: Implementation, budget: Duration) -> Resu
     let repeats = (wanted / (rows * cols)).clamp(1, 100_000);
     let scan = synthetic_scan(j1, j2, rows, cols, SEED);
     let maps = (scan.maps() * repeats) as f64;
-    let mut rates = Vec::with_capacity(RUNS);
-    for i in 0..=RUNS {
+    // As many timed runs as the budget holds, one at least.
+    let one_run = per_map * (scan.maps() * repeats) as f64;
+    let runs = ((per_run * RUNS as f64 / one_run) as usize).clamp(1, RUNS);
+    let mut rates = Vec::with_capacity(runs);
+    for i in 0..=runs {
         let t = timed(|| {
             for _ in 0..repeats {
                 pass(&scan)?;
             }
             Ok(())
         })?;
-        if i > 0 {
+        if i > 0 || runs == 1 {
             rates.push(maps / t.max(1e-12));
+        }
+        if runs == 1 {
+            break;
         }
     }
     rates.sort_by(f64::total_cmp);
@@ -609,7 +615,7 @@ impl Report {
         let mut s = String::new();
         let _ = writeln!(
             s,
-            "{}x{} maps, one thread, {cpu} ({nproc} logical CPUs); median of {RUNS} runs",
+            "{}x{} maps, one thread, {cpu} ({nproc} logical CPUs); median of up to {RUNS} runs",
             self.geometry.0, self.geometry.1
         );
         let _ = writeln!(
@@ -655,6 +661,11 @@ pub fn bench(args: &BenchArgs) -> Result<Report> {
         bail!("--seconds must be in (0, 3600], got {}", args.seconds);
     }
     let (j1, j2) = args.geometry;
+    // A configuration blind to an axis scores the bench maps (nearly) 0,
+    // and there is nothing to compare or time.
+    if let Some(w) = args.scoring.warnings(j1, j2)?.first() {
+        bail!("--geometry {j1}x{j2}: {w}; nothing to benchmark");
+    }
     let kernels = Kernels::new(&args.scoring, j1, j2)?;
     // The top-left block of every timed scan (at least 2x2 positions).
     let sample = synthetic_scan(j1, j2, 2, 3, SEED);
@@ -685,11 +696,20 @@ pub fn bench(args: &BenchArgs) -> Result<Report> {
 }
 
 pub fn run(args: &BenchArgs) -> Result<()> {
+    let start = Instant::now();
     let report = bench(args)?;
-    if args.json {
-        println!("{}", report.json(args));
-    } else {
-        print!("{}", report.text());
+    let took = start.elapsed().as_secs_f64();
+    // The smallest timed run of each implementation, and the check before
+    // them, cost what they cost: say so when that exceeds the budget.
+    if took > 1.5 * args.seconds + 0.5 {
+        crate::out::warn(&format!(
+            "the run took {took:.1} s, more than --seconds {}: the check of the implementations and one run of each on the smallest scan take that long here",
+            crate::stream::fmt_num(args.seconds)
+        ));
     }
-    Ok(())
+    if args.json {
+        crate::out::stdout(format!("{}\n", report.json(args)).as_bytes())
+    } else {
+        crate::out::stdout(report.text().as_bytes())
+    }
 }

@@ -7,13 +7,14 @@
 
 use crate::npy::read_scan;
 use crate::options::ScoringArgs;
-use crate::stream::OutputArgs;
+use crate::stream::{OutputArgs, configure};
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use cvm_fw_app::emufile::ScanHeader;
-use std::io::{Read, Write};
+use std::io::Read;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
+use std::process::{Child, Command, Stdio};
+use std::sync::{Arc, Mutex};
 
 /// Most columns the emulated board's row buffers hold.
 pub const MAX_COLS: usize = 1024;
@@ -70,13 +71,24 @@ pub fn build_elf() -> Result<PathBuf> {
     Ok(target_dir.join("thumbv7em-none-eabihf/release/cvm-fw"))
 }
 
-/// The scan file the emulated board reads.
+/// The scan file the emulated board reads; the warnings about the
+/// configuration (as `dmap stream` gives them) go to stderr.
 pub fn scan_file(args: &EmulateArgs) -> Result<Vec<u8>> {
+    let (file, warnings) = scan_file_and_warnings(args)?;
+    for w in &warnings {
+        crate::out::warn(w);
+    }
+    Ok(file)
+}
+
+/// [`scan_file`], with the warnings returned instead of printed, for the
+/// caller to print once the run has succeeded.
+pub fn scan_file_and_warnings(args: &EmulateArgs) -> Result<(Vec<u8>, Vec<String>)> {
     let scan = read_scan(&args.scan)?;
     let (j1, j2) = (scan.geometry.j1(), scan.geometry.j2());
-    let scorer = args.scoring.scorer(j1, j2)?;
-    // Same validation and settings as `dmap stream`.
-    let settings = args.output.settings(&scorer, scan.cols)?;
+    // Same validation, settings and warnings as `dmap stream`.
+    let (_, settings, mut warnings) = configure(&args.scoring, &args.output, j1, j2, scan.cols)?;
+    warnings.extend(crate::score::flat_scan_warnings(scan.rows, scan.cols));
     if scan.cols > MAX_COLS {
         bail!(
             "scan has {} columns; the emulated board holds at most {MAX_COLS}",
@@ -96,7 +108,7 @@ pub fn scan_file(args: &EmulateArgs) -> Result<Vec<u8>> {
         config: args.scoring.core_config(j1, j2)?,
         cols: settings.cols,
         rows: scan.rows as u32,
-        threshold_units: args.output.threshold,
+        threshold_units: args.output.threshold_units(&args.scoring)?,
         scores: settings.scores,
         max_defect_lines_per_row: settings.max_defect_lines_per_row,
         version_len: version.len() as u8,
@@ -110,11 +122,63 @@ pub fn scan_file(args: &EmulateArgs) -> Result<Vec<u8>> {
     for s in data {
         out.extend_from_slice(&s.to_be_bytes());
     }
-    Ok(out)
+    Ok((out, warnings))
 }
 
-/// Runs QEMU on `elf` with `scan_path`, copying the UART to `out`.
-pub fn run_qemu(elf: &Path, scan_path: &Path, icount: bool, out: &mut impl Write) -> Result<()> {
+/// A running QEMU and the directory of the scan file it reads. Dropping it
+/// kills QEMU if it still runs, reaps it, and only then removes the
+/// directory (fields drop after `drop`).
+struct Running {
+    child: Child,
+    _dir: Option<tempfile::TempDir>,
+}
+
+impl Drop for Running {
+    fn drop(&mut self) {
+        if let Ok(None) = self.child.try_wait() {
+            let _ = self.child.kill();
+        }
+        let _ = self.child.wait();
+    }
+}
+
+/// The child of a run, shared with the thread that handles termination
+/// signals: whoever takes it out ends it.
+type Shared = Arc<Mutex<Option<Running>>>;
+
+fn lock(shared: &Shared) -> std::sync::MutexGuard<'_, Option<Running>> {
+    shared.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// On SIGINT, SIGTERM or SIGHUP while QEMU runs: kill and reap it, remove
+/// its scan file, then die of the signal as if it had not been caught.
+fn watch_signals(shared: Shared) -> Result<signal_hook::iterator::Handle> {
+    use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
+    let mut signals = signal_hook::iterator::Signals::new([SIGINT, SIGTERM, SIGHUP])
+        .context("installing signal handlers")?;
+    let handle = signals.handle();
+    std::thread::spawn(move || {
+        if let Some(sig) = signals.forever().next() {
+            drop(lock(&shared).take());
+            let _ = signal_hook::low_level::emulate_default_handler(sig);
+            std::process::exit(128 + sig);
+        }
+    });
+    Ok(handle)
+}
+
+/// Runs QEMU on `elf` with `scan_path`, copying the UART to `out`
+/// (standard output if `None`). `dir`, if given, is removed once QEMU is
+/// gone. QEMU never outlives the call: on every way out (an error writing
+/// the output, a closed pipe, a panic, a termination signal) it is killed
+/// and reaped.
+pub fn run_qemu(
+    elf: &Path,
+    scan_path: &Path,
+    icount: bool,
+    dir: Option<tempfile::TempDir>,
+    out: &mut dyn FnMut(&[u8]) -> Result<()>,
+) -> Result<()> {
     let path = scan_path.to_str().context("scan file path is not UTF-8")?;
     if path.contains(' ') {
         bail!(
@@ -145,28 +209,52 @@ pub fn run_qemu(elf: &Path, scan_path: &Path, icount: bool, out: &mut impl Write
     if icount {
         cmd.args(["-icount", "shift=0"]);
     }
-    let mut child = cmd
-        .spawn()
-        .context("starting qemu-system-arm (install it: apt-get install -y qemu-system-arm)")?;
-    let mut stdout = child.stdout.take().context("qemu stdout")?;
+    let shared: Shared = Arc::new(Mutex::new(None));
+    let signals = watch_signals(shared.clone())?;
+    let result = (|| {
+        let mut child = cmd
+            .spawn()
+            .context("starting qemu-system-arm (install it: apt-get install -y qemu-system-arm)")?;
+        let stdout = child.stdout.take().context("qemu stdout")?;
+        *lock(&shared) = Some(Running { child, _dir: dir });
+        copy_uart(stdout, out)?;
+        // The UART closed: wait for QEMU's status, without holding the
+        // child away from the signal thread.
+        let status = loop {
+            // `None`: taken by the signal thread, which ends the process.
+            if let Some(r) = lock(&shared).as_mut()
+                && let Some(status) = r.child.try_wait().context("waiting for qemu-system-arm")?
+            {
+                break status;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        };
+        if !status.success() {
+            bail!("the emulated firmware failed ({status}); its message, if any, is above");
+        }
+        Ok(())
+    })();
+    // Kills QEMU if still running, reaps it, then removes its scan file.
+    drop(lock(&shared).take());
+    signals.close();
+    result
+}
+
+fn copy_uart(mut uart: impl Read, out: &mut dyn FnMut(&[u8]) -> Result<()>) -> Result<()> {
     let mut buf = [0u8; 8192];
     loop {
-        let n = stdout.read(&mut buf).context("reading the emulated UART")?;
-        if n == 0 {
-            break;
-        }
-        out.write_all(&buf[..n]).context("writing to stdout")?;
+        let n = match uart.read(&mut buf) {
+            Ok(0) => return Ok(()),
+            Ok(n) => n,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+            Err(e) => return Err(e).context("reading the emulated UART"),
+        };
+        out(&buf[..n])?;
     }
-    out.flush().context("writing to stdout")?;
-    let status = child.wait().context("waiting for qemu-system-arm")?;
-    if !status.success() {
-        bail!("the emulated firmware failed ({status}); its message, if any, is above");
-    }
-    Ok(())
 }
 
 pub fn run(args: &EmulateArgs) -> Result<()> {
-    let file = scan_file(args)?;
+    let (file, warnings) = scan_file_and_warnings(args)?;
     let elf = match &args.elf {
         Some(p) => p.clone(),
         None => build_elf()?,
@@ -174,12 +262,18 @@ pub fn run(args: &EmulateArgs) -> Result<()> {
     if !elf.is_file() {
         bail!("firmware ELF {} not found", elf.display());
     }
-    let dir = std::env::temp_dir().join(format!("dmap-emulate-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
-    let scan_path = dir.join("scan.cvmscan");
+    let dir = tempfile::Builder::new()
+        .prefix("dmap-emulate-")
+        .tempdir()
+        .context("creating a temporary directory")?;
+    let scan_path = dir.path().join("scan.cvmscan");
     std::fs::write(&scan_path, &file)
         .with_context(|| format!("writing {}", scan_path.display()))?;
-    let result = run_qemu(&elf, &scan_path, args.icount, &mut std::io::stdout().lock());
-    let _ = std::fs::remove_dir_all(&dir);
-    result
+    run_qemu(&elf, &scan_path, args.icount, Some(dir), &mut |bytes| {
+        crate::out::stdout(bytes)
+    })?;
+    for w in &warnings {
+        crate::out::warn(w);
+    }
+    Ok(())
 }

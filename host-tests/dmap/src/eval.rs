@@ -1,10 +1,12 @@
-//! `dmap eval`: the paper's detection metrics (design.md §3) and per-defect
+//! `dmap eval`: the paper's detection metrics (docs/method.md §3) and per-defect
 //! size estimates of a gradient image against a ground-truth mask.
 
 use std::path::{Path, PathBuf};
 
+use crate::stream::fmt_num;
 use anyhow::{Result, bail};
 use clap::Args;
+use std::fmt::Write;
 
 #[derive(Args, Clone, Debug)]
 pub struct EvalArgs {
@@ -175,8 +177,9 @@ pub fn defect_sizes(
         .map(|comp| {
             let mut near = vec![false; values.len()];
             for &(r, c) in &comp {
-                for nr in r.saturating_sub(dilate)..=(r + dilate).min(rows - 1) {
-                    for nc in c.saturating_sub(dilate)..=(c + dilate).min(cols - 1) {
+                // Saturating: a dilation wider than the image covers it all.
+                for nr in r.saturating_sub(dilate)..=r.saturating_add(dilate).min(rows - 1) {
+                    for nc in c.saturating_sub(dilate)..=c.saturating_add(dilate).min(cols - 1) {
                         near[nr * cols + nc] = true;
                     }
                 }
@@ -214,8 +217,10 @@ fn json_num(v: f64) -> serde_json::Value {
 }
 
 fn fmt(v: f64) -> String {
-    if v.is_finite() {
+    if v.is_finite() && (v == 0.0 || (1e-4..1e9).contains(&v.abs())) {
         format!("{v:.4}")
+    } else if v.is_finite() {
+        format!("{v:.4e}")
     } else {
         "n/a".into()
     }
@@ -223,7 +228,7 @@ fn fmt(v: f64) -> String {
 
 pub fn run(a: &EvalArgs) -> Result<()> {
     if !(a.pitch_um.is_finite() && a.pitch_um > 0.0) {
-        bail!("--pitch-um must be positive, got {}", a.pitch_um);
+        bail!("--pitch-um must be positive, got {}", fmt_num(a.pitch_um));
     }
     if !a.k.is_finite() {
         bail!("--k must be finite");
@@ -274,8 +279,14 @@ pub fn run(a: &EvalArgs) -> Result<()> {
             "threshold": json_num(threshold),
             "defects": defects,
         });
-        println!("{obj}");
-        return Ok(());
+        return crate::out::stdout(format!("{obj}\n").as_bytes());
+    }
+    let mut o = String::new();
+    // Writing to a String cannot fail.
+    macro_rules! println {
+        ($($t:tt)*) => {{
+            let _ = writeln!(o, $($t)*);
+        }};
     }
     println!("SNR   {}", fmt(m.snr));
     println!("PSNR  {}", fmt(m.psnr));
@@ -296,8 +307,14 @@ pub fn run(a: &EvalArgs) -> Result<()> {
         );
     }
     println!(
-        "threshold {threshold:.6} ({rule}); sizes from positions above it within {} of each defect, pitch {} um",
-        a.dilate, a.pitch_um
+        "threshold {} ({rule}); sizes from positions above it within {} of each defect, pitch {} um",
+        if threshold.abs() < 1e9 {
+            format!("{threshold:.6}")
+        } else {
+            fmt_num(threshold)
+        },
+        a.dilate,
+        fmt_num(a.pitch_um)
     );
     println!(
         "{:<7}{:<14}{:<18}{:<18}{:<7}{:<12}(peak-mean)/std",
@@ -315,7 +332,7 @@ pub fn run(a: &EvalArgs) -> Result<()> {
             fmt((d.peak - m.mean_free) / m.std_free)
         );
     }
-    Ok(())
+    crate::out::stdout(o.as_bytes())
 }
 
 #[cfg(test)]

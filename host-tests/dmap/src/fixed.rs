@@ -6,7 +6,7 @@
 use cvm_core::{PositionScore, Scorer, flags, magnitude};
 
 /// Scores every position of a `rows x cols` scan of `u16` maps (raster
-/// order, `cells` samples per map), with the border rule of design.md §3.
+/// order, `cells` samples per map), with the border rule of docs/method.md §3.
 ///
 /// # Panics
 /// If `data` does not hold `rows * cols` maps: callers pass a scan that
@@ -62,7 +62,7 @@ pub fn score_scan(scorer: &Scorer, rows: usize, cols: usize, data: &[u16]) -> Ve
     out
 }
 
-/// The gradient image of design.md §2 (`rows x cols x 3`, distance units).
+/// The gradient image of docs/method.md §2 (`rows x cols x 3`, distance units).
 pub fn to_image(scorer: &Scorer, scores: &[PositionScore]) -> Vec<f64> {
     scores
         .iter()

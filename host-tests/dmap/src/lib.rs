@@ -9,6 +9,7 @@ pub mod font;
 pub mod listen;
 pub mod npy;
 pub mod options;
+pub mod out;
 pub mod render;
 pub mod score;
 pub mod simulate;

@@ -3,6 +3,7 @@
 //! keeps going, and rebuilds each scan's score image and summary.
 
 use crate::npy::write_gradient;
+use crate::stream::fmt_num;
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use cvm_core::flags;
@@ -30,10 +31,14 @@ pub struct ListenArgs {
     /// With --port: stop after this many scans have ended (0 = run until interrupted)
     #[arg(long, default_value_t = 1)]
     pub scans: usize,
-    /// Write the score image of design.md §2 (magnitude in [..., 2], NaN where no
+    /// Write the score image of docs/method.md §2 (magnitude in [..., 2], NaN where no
     /// score arrived); a second scan goes to OUT_2.npy, and so on
     #[arg(short, long, value_name = "OUT.npy")]
     pub output: Option<PathBuf>,
+    /// Decode at most this many scans in one run; later scans are reported, not kept
+    #[arg(long, default_value_t = DEFAULT_MAX_SCANS, value_name = "N",
+          value_parser = clap::value_parser!(u32).range(1..=MAX_SCANS as i64))]
+    pub max_scans: u32,
     /// Print the summary as one JSON object per scan instead of text
     #[arg(long)]
     pub json: bool,
@@ -77,11 +82,42 @@ pub struct ScanResult {
     /// Defects counted by row lines but not listed (per-row cap).
     pub unlisted_defects: u64,
     pub end: Option<EndInfo>,
-    /// Problems found while decoding this scan (beyond damaged lines).
+    /// Problems found while decoding this scan (beyond damaged lines; the
+    /// first [`MAX_PROBLEMS`]).
     pub problems: Vec<LineError>,
+    /// Problems beyond [`MAX_PROBLEMS`], counted only.
+    pub problems_not_listed: usize,
+    /// Scores held in `scores`.
+    pub n_scores: usize,
 }
 
 impl ScanResult {
+    fn add_problem(&mut self, e: LineError) {
+        if self.problems.len() < MAX_PROBLEMS {
+            self.problems.push(e);
+        } else {
+            self.problems_not_listed += 1;
+        }
+    }
+
+    /// Problems in all, listed or not.
+    pub fn problem_count(&self) -> usize {
+        self.problems.len() + self.problems_not_listed
+    }
+
+    /// Distinct rows of which a row line or a score arrived: what the
+    /// stream shows of the scan's size, beyond what its header and end line
+    /// claim.
+    pub fn rows_arrived(&self) -> usize {
+        let mut n = self.rows.len();
+        n += self
+            .scores
+            .keys()
+            .filter(|r| !self.rows.contains_key(r))
+            .count();
+        n
+    }
+
     fn units(&self, s: u32) -> f64 {
         s as f64 * (-(self.q as f64)).exp2()
     }
@@ -100,7 +136,7 @@ impl ScanResult {
         }
     }
 
-    /// The image of design.md §2: only the magnitude travels over the link,
+    /// The image of docs/method.md §2: only the magnitude travels over the link,
     /// so components 0 and 1 are NaN; NaN also where no score arrived or
     /// the position had no data.
     pub fn image(&self) -> Vec<f64> {
@@ -143,19 +179,94 @@ impl ScanResult {
     }
 }
 
-/// The stream decoder: feed it lines, collect scans and errors.
-#[derive(Default)]
+/// Scans one run decodes by default, and at most (`--max-scans`).
+pub const DEFAULT_MAX_SCANS: u32 = 64;
+pub const MAX_SCANS: u32 = 4096;
+
+/// Line errors kept (and listed); beyond, they are only counted.
+pub const MAX_ERRORS: usize = 1000;
+/// Problems kept per scan; beyond, they are only counted.
+pub const MAX_PROBLEMS: usize = 1000;
+/// Defect lines kept per scan (a scan of the largest image with a defect
+/// listed at every position).
+pub const MAX_DEFECTS: usize = MAX_IMAGE_POSITIONS;
+
+/// The stream decoder: feed it lines, collect scans and errors. Memory is
+/// bounded whatever the stream: at most `max_scans` scans, each with at
+/// most [`MAX_IMAGE_POSITIONS`] scores and [`MAX_DEFECTS`] defects, and
+/// [`MAX_ERRORS`] errors listed.
 pub struct Decoder {
     line_no: usize,
     current: Option<ScanResult>,
     pub scans: Vec<ScanResult>,
-    /// Damaged lines and lines outside any scan.
+    /// Damaged lines and lines outside any scan (the first [`MAX_ERRORS`]).
     pub errors: Vec<LineError>,
+    /// Errors beyond [`MAX_ERRORS`], counted only.
+    pub errors_not_listed: usize,
+    /// Scans beyond `max_scans`, whose lines were skipped.
+    pub scans_skipped: usize,
+    skipping: bool,
+    max_scans: usize,
+}
+
+impl Default for Decoder {
+    fn default() -> Self {
+        Self::with_max_scans(DEFAULT_MAX_SCANS as usize)
+    }
 }
 
 impl Decoder {
     pub fn new() -> Self {
         Self::default()
+    }
+
+    /// A decoder that keeps at most `max_scans` scans (at least one).
+    pub fn with_max_scans(max_scans: usize) -> Self {
+        Decoder {
+            line_no: 0,
+            current: None,
+            scans: Vec::new(),
+            errors: Vec::new(),
+            errors_not_listed: 0,
+            scans_skipped: 0,
+            skipping: false,
+            max_scans: max_scans.max(1),
+        }
+    }
+
+    /// Line errors in all, listed or not.
+    pub fn error_count(&self) -> usize {
+        self.errors.len() + self.errors_not_listed
+    }
+
+    /// One line per kind of damage seen in the stream (none: the stream
+    /// arrived whole): line errors, problems of scans, skipped scans.
+    pub fn damage(&self) -> Vec<String> {
+        let mut out = Vec::new();
+        if self.error_count() > 0 {
+            out.push(format!("{} line error(s)", self.error_count()));
+        }
+        for (k, s) in self.scans.iter().enumerate() {
+            if s.problem_count() > 0 {
+                out.push(format!("scan {}: {} problem(s)", k + 1, s.problem_count()));
+            }
+        }
+        if self.scans_skipped > 0 {
+            out.push(format!(
+                "{} scan(s) beyond --max-scans {} skipped",
+                self.scans_skipped, self.max_scans
+            ));
+        }
+        out
+    }
+
+    /// A line too long for the protocol, of which only the length is known.
+    pub fn feed_too_long(&mut self, len: usize) {
+        self.line_no += 1;
+        self.error(format!(
+            "line of {len} bytes is longer than the protocol's {} (garbage or a lost newline)",
+            protocol::MAX_LINE
+        ));
     }
 
     /// Scans that have ended (an end line arrived).
@@ -164,10 +275,14 @@ impl Decoder {
     }
 
     fn error(&mut self, what: impl Into<String>) {
-        self.errors.push(LineError {
-            line: self.line_no,
-            what: what.into(),
-        });
+        if self.errors.len() < MAX_ERRORS {
+            self.errors.push(LineError {
+                line: self.line_no,
+                what: what.into(),
+            });
+        } else {
+            self.errors_not_listed += 1;
+        }
     }
 
     fn problem(&mut self, what: impl Into<String>) {
@@ -176,8 +291,8 @@ impl Decoder {
             what: what.into(),
         };
         match &mut self.current {
-            Some(s) => s.problems.push(e),
-            None => self.errors.push(e),
+            Some(s) => s.add_problem(e),
+            None => self.error(e.what),
         }
     }
 
@@ -189,10 +304,19 @@ impl Decoder {
         if trimmed.is_empty() {
             return;
         }
-        if trimmed.len() > protocol::MAX_LINE {
+        if self.skipping && !trimmed.starts_with(b"H,") {
+            // A scan beyond --max-scans: its lines are counted, not kept.
+            if trimmed.starts_with(b"E,") {
+                self.skipping = false;
+            }
+            return;
+        }
+        // MAX_LINE counts the newline.
+        if trimmed.len() >= protocol::MAX_LINE {
             self.error(format!(
-                "line of {} bytes is longer than any valid line",
-                trimmed.len()
+                "line of {} bytes is longer than the protocol's {} (garbage or a lost newline)",
+                trimmed.len() + 1,
+                protocol::MAX_LINE
             ));
             return;
         }
@@ -211,12 +335,21 @@ impl Decoder {
         };
         match line {
             Line::Header(h) => {
+                self.skipping = false;
                 if let Some(prev) = self.current.take() {
-                    self.errors.push(LineError {
-                        line: self.line_no,
-                        what: "new scan header before the previous scan's end line".into(),
-                    });
+                    self.error("new scan header before the previous scan's end line");
                     self.scans.push(prev);
+                }
+                if self.scans.len() >= self.max_scans {
+                    self.scans_skipped += 1;
+                    self.skipping = true;
+                    if self.scans_skipped == 1 {
+                        self.error(format!(
+                            "more than {} scans in one run: this scan and later ones are skipped (--max-scans)",
+                            self.max_scans
+                        ));
+                    }
+                    return;
                 }
                 let mut s = ScanResult {
                     firmware: h.firmware.to_string(),
@@ -246,6 +379,9 @@ impl Decoder {
                 if s.rows.contains_key(&summary.row) {
                     return self.problem(format!("row {} reported twice", summary.row));
                 }
+                if s.rows.len() >= MAX_IMAGE_POSITIONS {
+                    return self.problem("more row lines than an image can hold; the rest ignored");
+                }
                 s.unlisted_defects += (summary.defects - listed.min(summary.defects)) as u64;
                 s.rows.insert(summary.row, summary);
             }
@@ -258,6 +394,10 @@ impl Decoder {
                 let Some(s) = self.current.as_mut() else {
                     return self.error("defect line outside a scan (header lost?)");
                 };
+                if s.defects.len() >= MAX_DEFECTS {
+                    return self
+                        .problem("more defect lines than an image can hold; the rest ignored");
+                }
                 let score = s.units(mag);
                 s.defects.push(Defect {
                     row,
@@ -276,14 +416,21 @@ impl Decoder {
                     return self
                         .problem(format!("score line for row {row} runs past column {cols}"));
                 }
+                if s.n_scores + n > MAX_IMAGE_POSITIONS {
+                    return self.problem("more scores than an image can hold; the rest ignored");
+                }
+                let mut added = 0;
                 let line = s.scores.entry(row).or_default();
                 let mut dup = false;
                 for (k, c) in chars.chunks(protocol::SCORE_CHARS).enumerate() {
                     // In range: `col0 + n <= cols` was checked above.
                     if let Some(v) = protocol::decode_score(c) {
-                        dup |= line.insert(col0 + k as u32, v).is_some();
+                        let again = line.insert(col0 + k as u32, v).is_some();
+                        dup |= again;
+                        added += usize::from(!again);
                     }
                 }
+                s.n_scores += added;
                 if dup {
                     self.problem(format!(
                         "scores of row {row} from column {col0} received twice"
@@ -310,7 +457,7 @@ impl Decoder {
         let missing = gaps(s.rows.keys().copied(), rows);
         let count: u64 = missing.iter().map(|&(a, b)| u64::from(b - a) + 1).sum();
         if count > 0 {
-            s.problems.push(LineError {
+            s.add_problem(LineError {
                 line: self.line_no,
                 what: format!("no row line for {count} row(s): {}", ranges(&missing)),
             });
@@ -318,7 +465,7 @@ impl Decoder {
         let listed: u64 =
             s.rows.values().map(|r| r.defects as u64).sum::<u64>() - s.unlisted_defects;
         if listed != s.defects.len() as u64 {
-            s.problems.push(LineError {
+            s.add_problem(LineError {
                 line: self.line_no,
                 what: format!(
                     "row lines list {listed} defect line(s), {} arrived",
@@ -328,7 +475,7 @@ impl Decoder {
         }
         let misplaced = s.end.map_or(0, |e| e.totals.misplaced);
         if misplaced > 0 {
-            s.problems.push(LineError {
+            s.add_problem(LineError {
                 line: self.line_no,
                 what: format!(
                     "{misplaced} map(s) were scored at a wrong position (a short row: beams without DRDY); \
@@ -341,7 +488,7 @@ impl Decoder {
             let expected = rows as usize * s.cols;
             let (with, without) = s.coverage();
             if with + without < expected {
-                s.problems.push(LineError {
+                s.add_problem(LineError {
                     line: self.line_no,
                     what: format!(
                         "{} of {expected} positions have no score ({dropped} score line(s) reported dropped by the firmware)",
@@ -355,10 +502,7 @@ impl Decoder {
     /// Ends the stream: a scan without its end line is kept and reported.
     pub fn finish(&mut self) {
         if let Some(s) = self.current.take() {
-            self.errors.push(LineError {
-                line: self.line_no,
-                what: "stream ended before the scan's end line".into(),
-            });
+            self.error("stream ended before the scan's end line");
             self.scans.push(s);
         }
     }
@@ -399,30 +543,94 @@ fn ranges(v: &[(u32, u32)]) -> String {
     out.join(", ")
 }
 
-/// Decodes every line of `reader`, stopping early after `stop_after` ended
-/// scans (0: read to the end).
-pub fn decode(reader: impl Read, stop_after: usize) -> Result<Decoder> {
-    let mut dec = Decoder::new();
-    let mut r = BufReader::new(reader);
-    let mut buf = Vec::new();
+/// What [`next_line`] found.
+#[derive(Debug, PartialEq, Eq)]
+pub enum NextLine {
+    /// A line (with its newline, unless the stream ended without one) in the buffer.
+    Line,
+    /// A line longer than the limit, of this many bytes, discarded as it came.
+    TooLong(usize),
+    /// The end of the stream.
+    End,
+}
+
+/// Reads the next line into `buf`, holding at most `max` bytes of it: a
+/// longer line is read to its end and dropped, never buffered. A timeout
+/// (an idle serial port) keeps the partial line and waits on.
+pub fn next_line(r: &mut impl BufRead, buf: &mut Vec<u8>, max: usize) -> std::io::Result<NextLine> {
+    buf.clear();
+    let (mut total, mut too_long) = (0usize, false);
     loop {
-        buf.clear();
-        let n = match r.read_until(b'\n', &mut buf) {
-            Ok(n) => n,
-            Err(e) if e.kind() == std::io::ErrorKind::TimedOut => continue,
-            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
-            Err(e) => return Err(e).context("reading the result stream"),
+        let avail = match r.fill_buf() {
+            Ok(b) => b,
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::Interrupted | std::io::ErrorKind::TimedOut
+                ) =>
+            {
+                continue;
+            }
+            Err(e) => return Err(e),
         };
-        if n == 0 {
-            break;
+        if avail.is_empty() {
+            return Ok(match (total, too_long) {
+                (0, _) => NextLine::End,
+                (_, true) => NextLine::TooLong(total),
+                _ => NextLine::Line,
+            });
         }
-        dec.feed(&buf);
+        let (len, done) = match avail.iter().position(|&b| b == b'\n') {
+            Some(i) => (i + 1, true),
+            None => (avail.len(), false),
+        };
+        total = total.saturating_add(len);
+        if !too_long {
+            if buf.len() + len > max {
+                too_long = true;
+                buf.clear();
+            } else {
+                buf.extend_from_slice(&avail[..len]);
+            }
+        }
+        r.consume(len);
+        if done {
+            return Ok(if too_long {
+                NextLine::TooLong(total)
+            } else {
+                NextLine::Line
+            });
+        }
+    }
+}
+
+/// Longest line held: the protocol's `MAX_LINE` (newline included), and a
+/// carriage return before the newline.
+pub const LINE_BUFFER: usize = protocol::MAX_LINE + 1;
+
+/// Decodes every line of `reader`, stopping early after `stop_after` ended
+/// scans (0: read to the end), keeping at most `max_scans` scans.
+pub fn decode_with(reader: impl Read, stop_after: usize, max_scans: usize) -> Result<Decoder> {
+    let mut dec = Decoder::with_max_scans(max_scans);
+    let mut r = BufReader::new(reader);
+    let mut buf = Vec::with_capacity(LINE_BUFFER);
+    loop {
+        match next_line(&mut r, &mut buf, LINE_BUFFER).context("reading the result stream")? {
+            NextLine::End => break,
+            NextLine::Line => dec.feed(&buf),
+            NextLine::TooLong(n) => dec.feed_too_long(n),
+        }
         if stop_after > 0 && dec.ended() >= stop_after {
             break;
         }
     }
     dec.finish();
     Ok(dec)
+}
+
+/// [`decode_with`] with the default cap on scans.
+pub fn decode(reader: impl Read, stop_after: usize) -> Result<Decoder> {
+    decode_with(reader, stop_after, DEFAULT_MAX_SCANS as usize)
 }
 
 fn output_path(base: &Path, k: usize) -> PathBuf {
@@ -443,14 +651,14 @@ pub fn summary_text(dec: &Decoder) -> String {
         let (with, without) = s.coverage();
         let _ = writeln!(
             o,
-            "scan {}: firmware {}, {}x{} maps, {} rows x {} cols, threshold {:.6}",
+            "scan {}: firmware {}, {}x{} maps, {} rows x {} cols, threshold {}",
             k + 1,
             s.firmware,
             s.geometry.0,
             s.geometry.1,
             s.n_rows(),
             s.cols,
-            s.threshold
+            fmt_num(s.threshold)
         );
         let total: u64 = s.rows.values().map(|r| r.defects as u64).sum();
         let _ = writeln!(o, "  defects: {total} ({} listed)", s.defects.len());
@@ -494,21 +702,53 @@ pub fn summary_text(dec: &Decoder) -> String {
                 let _ = writeln!(o, "  totals: none (no end line)");
             }
         }
-        for p in &s.problems {
+        for p in s.problems.iter().take(50) {
             let _ = writeln!(o, "  problem at line {}: {}", p.line, p.what);
         }
+        if s.problem_count() > 50 {
+            let _ = writeln!(o, "  ... {} more problems", s.problem_count() - 50);
+        }
     }
-    let _ = writeln!(o, "line errors: {}", dec.errors.len());
+    if dec.scans.is_empty() {
+        let _ = writeln!(o, "no scan in the stream (no header line decoded)");
+    }
+    if dec.scans_skipped > 0 {
+        let _ = writeln!(
+            o,
+            "scans skipped (beyond --max-scans): {}",
+            dec.scans_skipped
+        );
+    }
+    let _ = writeln!(o, "line errors: {}", dec.error_count());
     for e in dec.errors.iter().take(50) {
         let _ = writeln!(o, "  line {}: {}", e.line, e.what);
     }
-    if dec.errors.len() > 50 {
-        let _ = writeln!(o, "  ... {} more", dec.errors.len() - 50);
+    if dec.error_count() > 50 {
+        let _ = writeln!(o, "  ... {} more", dec.error_count() - 50);
     }
     o
 }
 
+/// One JSON object per scan (each with the stream's line errors and
+/// whether the stream was damaged); a stream without any scan still gets
+/// one object, with `"firmware": null`, so that its damage is never silent.
 pub fn summary_json(dec: &Decoder) -> Vec<serde_json::Value> {
+    let line_errors: Vec<serde_json::Value> = dec
+        .errors
+        .iter()
+        .map(|p| serde_json::json!({"line": p.line, "what": p.what}))
+        .collect();
+    let damaged = !dec.damage().is_empty();
+    if dec.scans.is_empty() {
+        return vec![serde_json::json!({
+            "firmware": null,
+            "problems": [],
+            "line_errors": line_errors,
+            "line_error_count": dec.error_count(),
+            "scans_skipped": dec.scans_skipped,
+            "damaged": damaged,
+        })];
+    }
     dec.scans
         .iter()
         .map(|s| {
@@ -527,7 +767,11 @@ pub fn summary_json(dec: &Decoder) -> Vec<serde_json::Value> {
                 "defects": s.defects.iter().map(|d| serde_json::json!({"row": d.row, "col": d.col, "score": d.score})).collect::<Vec<_>>(),
                 "totals": end,
                 "problems": s.problems.iter().map(|p| serde_json::json!({"line": p.line, "what": p.what})).collect::<Vec<_>>(),
-                "line_errors": dec.errors.iter().map(|p| serde_json::json!({"line": p.line, "what": p.what})).collect::<Vec<_>>(),
+                "problem_count": s.problem_count(),
+                "line_errors": line_errors,
+                "line_error_count": dec.error_count(),
+                "scans_skipped": dec.scans_skipped,
+                "damaged": damaged,
             })
         })
         .collect()
@@ -536,53 +780,104 @@ pub fn summary_json(dec: &Decoder) -> Vec<serde_json::Value> {
 /// Largest score image `dmap listen -o` writes (about 800 MB of f64).
 pub const MAX_IMAGE_POSITIONS: usize = 1 << 25;
 
+/// Why the image of `s` is not written, if it is not: larger than
+/// [`MAX_IMAGE_POSITIONS`], or claiming (by its header, end line or a row
+/// number) at least twice the rows that arrived.
+pub fn image_refusal(s: &ScanResult) -> Option<String> {
+    let (rows, cols) = (s.n_rows(), s.cols);
+    if rows
+        .checked_mul(cols)
+        .is_none_or(|p| p > MAX_IMAGE_POSITIONS)
+    {
+        return Some(format!(
+            "claims {rows} rows x {cols} columns, more than the {MAX_IMAGE_POSITIONS} positions an image may hold"
+        ));
+    }
+    let arrived = s.rows_arrived();
+    if rows > 2 * arrived {
+        return Some(format!(
+            "claims {rows} rows but only {arrived} arrived (row or score lines): an image of what did not arrive is not worth {} MB",
+            rows * cols * 24 / 1_000_000
+        ));
+    }
+    None
+}
+
 pub fn run(args: &ListenArgs) -> Result<()> {
+    let max_scans = args.max_scans as usize;
+    if args.port.is_some() && args.scans > max_scans {
+        bail!(
+            "--scans {} is more than --max-scans {max_scans}",
+            args.scans
+        );
+    }
+    if let Some(out) = &args.output {
+        if out.as_os_str() == "-" {
+            bail!("-o -: standard output carries the summary; give the image a file name");
+        }
+        // Every name this run may write (OUT.npy, OUT_2.npy, ...) against the input.
+        if let Some(input) = &args.input {
+            for k in 0..max_scans {
+                crate::out::refuse_inputs(&output_path(out, k), &[Path::new(input)])?;
+            }
+        }
+    }
     let dec = match (&args.input, &args.port) {
-        (Some(p), _) if p == "-" => decode(std::io::stdin().lock(), 0)?,
+        (Some(p), _) if p == "-" => decode_with(std::io::stdin().lock(), 0, max_scans)?,
         (Some(p), _) => {
             let f = std::fs::File::open(p).with_context(|| format!("cannot open {p}"))?;
-            decode(f, 0)?
+            decode_with(f, 0, max_scans)?
         }
         (None, Some(dev)) => {
             let port = serialport::new(dev, args.baud)
                 .timeout(std::time::Duration::from_secs(3600))
                 .open()
                 .with_context(|| format!("cannot open serial port {dev} at {} baud", args.baud))?;
-            decode(port, args.scans)?
+            decode_with(port, args.scans, max_scans)?
         }
         (None, None) => bail!("give --input FILE (or -) or --port DEV"),
     };
+    let mut failures = Vec::new();
     if let Some(out) = &args.output {
         if dec.scans.is_empty() {
-            bail!(
+            failures.push(format!(
                 "no scan in the stream (no header line decoded); nothing written to {}",
                 out.display()
-            );
+            ));
         }
         for (k, s) in dec.scans.iter().enumerate() {
+            let path = output_path(out, k);
             // The size comes from what the stream claims: refuse an image
-            // no scan of this product can have rather than exhaust memory.
-            let positions = s
-                .n_rows()
-                .checked_mul(s.cols)
-                .filter(|&p| p <= MAX_IMAGE_POSITIONS);
-            if positions.is_none() {
-                bail!(
-                    "scan {} claims {} rows x {} columns, more than the {MAX_IMAGE_POSITIONS} positions an image may hold; nothing written",
+            // that what arrived does not justify rather than exhaust
+            // memory and disk.
+            match image_refusal(s) {
+                Some(why) => failures.push(format!(
+                    "scan {} {why}; {} not written",
                     k + 1,
-                    s.n_rows(),
-                    s.cols
-                );
+                    path.display()
+                )),
+                None => write_gradient(&path, s.n_rows(), s.cols, &s.image())?,
             }
-            write_gradient(&output_path(out, k), s.n_rows(), s.cols, &s.image())?;
         }
     }
-    if args.json {
-        for v in summary_json(&dec) {
-            println!("{v}");
-        }
+    let text = if args.json {
+        summary_json(&dec)
+            .iter()
+            .map(|v| format!("{v}\n"))
+            .collect::<String>()
     } else {
-        print!("{}", summary_text(&dec));
+        summary_text(&dec)
+    };
+    crate::out::stdout(text.as_bytes())?;
+    let damage = dec.damage();
+    if !damage.is_empty() {
+        failures.push(format!(
+            "the stream was damaged ({}; details in the summary)",
+            damage.join(", ")
+        ));
+    }
+    if !failures.is_empty() {
+        bail!("{}", failures.join("; "));
     }
     Ok(())
 }

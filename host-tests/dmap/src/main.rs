@@ -2,6 +2,7 @@
 //! and one module of the library; this file only parses and dispatches.
 
 use clap::{Parser, Subcommand};
+use std::io::Write;
 
 #[derive(Parser)]
 #[command(
@@ -56,7 +57,11 @@ fn main() {
                 .map(|l| l.trim().trim_start_matches("error: "))
                 .filter(|l| !l.is_empty())
                 .collect();
-            eprintln!("dmap: error: {} (see dmap --help)", what.join(" "));
+            let _ = writeln!(
+                std::io::stderr(),
+                "dmap: error: {} (see dmap --help)",
+                what.join(" ")
+            );
             std::process::exit(2);
         }
     };
@@ -71,8 +76,13 @@ fn main() {
         Command::Bench(args) => dmap::bench::run(&args),
     };
     if let Err(e) = result {
+        // A reader that closed the pipe (`dmap ... | head`) got what it
+        // wanted: quiet, with the status of a tool killed by SIGPIPE.
+        if dmap::out::is_stdout_closed(&e) {
+            std::process::exit(dmap::out::EXIT_STDOUT_CLOSED);
+        }
         // One line, no backtrace: users read this in a terminal or a CI log.
-        eprintln!("dmap: error: {e:#}");
+        let _ = writeln!(std::io::stderr(), "dmap: error: {e:#}");
         std::process::exit(1);
     }
 }

@@ -1,4 +1,4 @@
-//! NumPy `.npy` files in the layouts of design.md §2: scans
+//! NumPy `.npy` files in the layouts of docs/method.md §2: scans
 //! `scan[row, col, j1, j2]`, gradient images `(rows, cols, 3)` float64 and
 //! boolean masks `(rows, cols)`.
 //!
@@ -8,8 +8,8 @@
 use anyhow::{Context, Result, anyhow, bail};
 use cvm_reference::Geometry;
 use npyz::{DType, NpyFile, Order, TypeChar, WriterBuilder};
-use std::io::{BufWriter, Write};
-use std::path::Path;
+use std::io::Write;
+use std::path::{Path, PathBuf};
 
 /// Element type a scan was stored with.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -113,9 +113,13 @@ fn open_npy<'a>(path: &Path, bytes: &'a [u8]) -> Result<NpyFile<&'a [u8]>> {
     }
     // The header's length field is checked against the file before the
     // parser sizes a buffer by it: a corrupt field must not ask for 4 GiB.
-    let (len_at, len_bytes) = match bytes.get(6) {
-        Some(1) => (8, 2),
-        _ => (8, 4),
+    let (len_at, len_bytes) = match (bytes.get(6), bytes.get(7)) {
+        (Some(1), _) => (8, 2),
+        (Some(2 | 3), _) => (8, 4),
+        (Some(&major), Some(&minor)) => bail!(
+            "{p}: .npy format version {major}.{minor} is not supported (versions 1.0, 2.0 and 3.0 are)"
+        ),
+        _ => bail!("{p}: not a valid .npy file (header truncated)"),
     };
     let header_len = bytes.get(len_at..len_at + len_bytes).map(|b| {
         b.iter()
@@ -228,21 +232,7 @@ pub fn read_scan(path: &Path) -> Result<Scan> {
 pub fn scan_from_bytes(path: &Path, bytes: &[u8]) -> Result<Scan> {
     let npy = open_npy(path, bytes)?;
     let p = path.display();
-    let shape: Vec<u64> = npy.shape().to_vec();
-    if shape.len() != 4 {
-        bail!(
-            "{p}: a scan must have rank 4 (rows, cols, J1, J2), got shape {shape:?} (rank {})",
-            shape.len()
-        );
-    }
-    let dim = |i: usize| {
-        usize::try_from(shape[i]).map_err(|_| anyhow!("{p}: shape {shape:?} is too large"))
-    };
-    let (rows, cols, j1, j2) = (dim(0)?, dim(1)?, dim(2)?, dim(3)?);
-    let geometry = Geometry::new(j1, j2).map_err(|e| anyhow!("{p}: {e}"))?;
-    if rows == 0 || cols == 0 {
-        bail!("{p}: empty scan (shape {shape:?} has no beam positions)");
-    }
+    let (rows, cols, geometry) = scan_shape(path, &npy)?;
     let dtype = npy.dtype();
     let (data, kind) = match plain(&dtype) {
         Some((TypeChar::Uint, 1)) => (to_f64(decode::<u8>(path, npy)?), ScanDtype::U8),
@@ -272,26 +262,331 @@ pub fn scan_from_bytes(path: &Path, bytes: &[u8]) -> Result<Scan> {
     Ok(scan)
 }
 
+/// A file's bytes: mapped (read only) when the file can be, else read.
+enum FileBytes {
+    Mapped(memmap2::Mmap),
+    Read(Vec<u8>),
+}
+
+impl std::ops::Deref for FileBytes {
+    type Target = [u8];
+    fn deref(&self) -> &[u8] {
+        match self {
+            FileBytes::Mapped(m) => m,
+            FileBytes::Read(v) => v,
+        }
+    }
+}
+
+/// Maps a regular file; reads anything else (a pipe, an empty file).
+fn map_file(path: &Path) -> Result<FileBytes> {
+    let p = path.display();
+    let file = std::fs::File::open(path).map_err(|e| anyhow!("{p}: cannot read: {e}"))?;
+    let meta = file
+        .metadata()
+        .map_err(|e| anyhow!("{p}: cannot read: {e}"))?;
+    if meta.is_file() && meta.len() > 0 {
+        // SAFETY: the mapping is read only; the file must not be truncated
+        // while it is mapped (the process would fault on the lost pages).
+        if let Ok(map) = unsafe { memmap2::Mmap::map(&file) } {
+            let _ = map.advise(memmap2::Advice::Sequential);
+            return Ok(FileBytes::Mapped(map));
+        }
+    }
+    read_bytes(path).map(FileBytes::Read)
+}
+
+/// Rows, columns and detector geometry of a scan's header.
+fn scan_shape(path: &Path, npy: &NpyFile<&[u8]>) -> Result<(usize, usize, Geometry)> {
+    let p = path.display();
+    let shape: Vec<u64> = npy.shape().to_vec();
+    if shape.len() != 4 {
+        bail!(
+            "{p}: a scan must have rank 4 (rows, cols, J1, J2), got shape {shape:?} (rank {})",
+            shape.len()
+        );
+    }
+    let dim = |i: usize| {
+        usize::try_from(shape[i]).map_err(|_| anyhow!("{p}: shape {shape:?} is too large"))
+    };
+    let (rows, cols, j1, j2) = (dim(0)?, dim(1)?, dim(2)?, dim(3)?);
+    let geometry = Geometry::new(j1, j2).map_err(|e| anyhow!("{p}: {e}"))?;
+    if rows == 0 || cols == 0 {
+        bail!("{p}: empty scan (shape {shape:?} has no beam positions)");
+    }
+    Ok((rows, cols, geometry))
+}
+
+/// A scan file mapped into memory (read only): samples are decoded map by
+/// map when asked, so that `score` and `stream` hold a few rows of a scan at
+/// a time and a scan larger than memory still goes through. Every header
+/// check of [`read_scan`] applies.
+///
+/// The mapping assumes nobody truncates the file during the run (the
+/// process would fault on the missing pages).
+pub struct MappedScan {
+    path: PathBuf,
+    map: FileBytes,
+    offset: usize,
+    /// Positions along the slow axis.
+    pub rows: usize,
+    /// Positions along the fast axis.
+    pub cols: usize,
+    /// Detector geometry.
+    pub geometry: Geometry,
+    /// The dtype the file stores.
+    pub dtype: ScanDtype,
+    big_endian: bool,
+}
+
+impl MappedScan {
+    /// Maps `path` and checks its header. What cannot be mapped (a pipe,
+    /// `/dev/stdin`) is read into memory instead.
+    pub fn open(path: &Path) -> Result<Self> {
+        let p = path.display();
+        let map = map_file(path)?;
+        let bytes: &[u8] = &map;
+        let npy = open_npy(path, bytes)?;
+        let (rows, cols, geometry) = scan_shape(path, &npy)?;
+        let dtype = npy.dtype();
+        let kind = match plain(&dtype) {
+            Some((TypeChar::Uint, 1)) => ScanDtype::U8,
+            Some((TypeChar::Uint, 2)) => ScanDtype::U16,
+            Some((TypeChar::Uint, 4)) => ScanDtype::U32,
+            Some((TypeChar::Float, 4)) => ScanDtype::F32,
+            Some((TypeChar::Float, 8)) => ScanDtype::F64,
+            _ => bail!(
+                "{p}: unsupported dtype {} (scans must be uint8, uint16, uint32, float32 or float64)",
+                dtype.descr()
+            ),
+        };
+        let big_endian = matches!(
+            &dtype,
+            DType::Plain(ts) if ts.endianness() == npyz::Endianness::Big
+        );
+        let offset = bytes.len() - npy.into_inner().len();
+        Ok(MappedScan {
+            path: path.to_path_buf(),
+            map,
+            offset,
+            rows,
+            cols,
+            geometry,
+            dtype: kind,
+            big_endian,
+        })
+    }
+
+    fn data(&self) -> &[u8] {
+        &self.map[self.offset..]
+    }
+
+    fn item(&self) -> usize {
+        match self.dtype {
+            ScanDtype::U8 => 1,
+            ScanDtype::U16 => 2,
+            ScanDtype::U32 | ScanDtype::F32 => 4,
+            ScanDtype::F64 => 8,
+        }
+    }
+
+    /// Positions of the scan.
+    pub fn maps(&self) -> usize {
+        self.rows * self.cols
+    }
+
+    /// The samples of maps `first..first + out.len() / cells`, as f64,
+    /// checked finite and non-negative.
+    pub fn maps_f64(&self, first: usize, out: &mut [f64]) -> Result<()> {
+        let n = self.geometry.cells();
+        let item = self.item();
+        let bytes = &self.data()[first * n * item..(first * n + out.len()) * item];
+        let be = self.big_endian;
+        macro_rules! decode {
+            ($t:ty) => {
+                for (o, b) in out.iter_mut().zip(bytes.chunks_exact(item)) {
+                    let b = b.try_into().expect("chunk of the item size");
+                    *o = if be {
+                        <$t>::from_be_bytes(b)
+                    } else {
+                        <$t>::from_le_bytes(b)
+                    } as f64;
+                }
+            };
+        }
+        match self.dtype {
+            ScanDtype::U8 => out.iter_mut().zip(bytes).for_each(|(o, &b)| *o = b.into()),
+            ScanDtype::U16 => decode!(u16),
+            ScanDtype::U32 => decode!(u32),
+            ScanDtype::F32 => decode!(f32),
+            ScanDtype::F64 => decode!(f64),
+        }
+        if let Some(i) = out.iter().position(|x| !(x.is_finite() && *x >= 0.0)) {
+            let (pos, cell) = self.locate(first * n + i);
+            bail!(
+                "{}: sample {} at position {pos:?} cell {cell:?} is not a finite non-negative intensity",
+                self.path.display(),
+                out[i]
+            );
+        }
+        Ok(())
+    }
+
+    /// The samples of maps `first..first + out.len() / cells` as `u16`
+    /// counts, the firmware's input; fails on any value that is not an
+    /// integer in `0..=65535`.
+    pub fn maps_u16(&self, first: usize, out: &mut [u16], scratch: &mut Vec<f64>) -> Result<()> {
+        let n = self.geometry.cells();
+        scratch.resize(out.len(), 0.0);
+        self.maps_f64(first, scratch)?;
+        for (i, (o, &x)) in out.iter_mut().zip(scratch.iter()).enumerate() {
+            if x.fract() == 0.0 && (0.0..=65535.0).contains(&x) {
+                *o = x as u16;
+            } else {
+                let (pos, cell) = self.locate(first * n + i);
+                bail!(
+                    "{}: {} scan value {x} at {pos:?} cell {cell:?} is not a u16 count (integer 0..=65535)",
+                    self.path.display(),
+                    self.dtype.name()
+                );
+            }
+        }
+        Ok(())
+    }
+
+    /// Checks every sample (as [`Self::maps_f64`], or as counts with
+    /// `counts`) before anything is written, a few rows at a time, and
+    /// reports the first bad sample in file order.
+    pub fn validate(&self, counts: bool) -> Result<()> {
+        use rayon::prelude::*;
+        let n = self.geometry.cells();
+        let band = band_rows(self.cols, n);
+        for r0 in (0..self.rows).step_by(band) {
+            let r1 = (r0 + band).min(self.rows);
+            let first_error = (r0..r1).into_par_iter().find_map_first(|r| {
+                let mut f = vec![0.0; self.cols * n];
+                let mut c = vec![0u16; self.cols * n];
+                let res = if counts {
+                    self.maps_u16(r * self.cols, &mut c, &mut f)
+                } else {
+                    self.maps_f64(r * self.cols, &mut f)
+                };
+                res.err()
+            });
+            if let Some(e) = first_error {
+                return Err(e);
+            }
+            self.release(0..r1 * self.cols);
+        }
+        Ok(())
+    }
+
+    /// Lets the kernel drop the pages of maps `maps` from memory (they are
+    /// read again from the file if needed): what has been scored need not
+    /// stay resident.
+    pub fn release(&self, maps: std::ops::Range<usize>) {
+        let FileBytes::Mapped(map) = &self.map else {
+            return;
+        };
+        let per_map = self.geometry.cells() * self.item();
+        let page = 4096;
+        let start = (self.offset + maps.start * per_map).div_ceil(page) * page;
+        let end = (self.offset + maps.end * per_map) / page * page;
+        if end > start {
+            // SAFETY: the mapping is a read-only shared file mapping: dropped
+            // pages are read again from the file on the next access, and no
+            // reference into them is kept.
+            let _ = unsafe {
+                map.unchecked_advise_range(memmap2::UncheckedAdvice::DontNeed, start, end - start)
+            };
+        }
+    }
+
+    fn locate(&self, i: usize) -> ((usize, usize), (usize, usize)) {
+        let n = self.geometry.cells();
+        let p = i / n;
+        ((p / self.cols, p % self.cols), self.geometry.cell(i % n))
+    }
+}
+
+/// Rows per band when a scan is processed a few rows at a time: about
+/// 2^20 samples per band, at least one row.
+pub fn band_rows(cols: usize, cells: usize) -> usize {
+    ((1usize << 20) / (cols * cells).max(1)).max(1)
+}
+
 fn to_f64<T: Into<f64>>(v: Vec<T>) -> Vec<f64> {
     v.into_iter().map(Into::into).collect()
 }
 
 fn write_npy<T: npyz::AutoSerialize + Copy>(path: &Path, shape: &[u64], data: &[T]) -> Result<()> {
-    let p = path.display();
-    let file = std::fs::File::create(path).map_err(|e| anyhow!("{p}: cannot create: {e}"))?;
-    let mut out = BufWriter::new(file);
-    {
-        let mut w = npyz::WriteOptions::new()
+    crate::out::write_file(path, |out| {
+        encode_npy(&path.display().to_string(), shape, data, out)
+    })
+}
+
+/// `data` as a `.npy` file of `shape`, to `out`; `name` names it in errors.
+fn encode_npy<T: npyz::AutoSerialize + Copy>(
+    name: &str,
+    shape: &[u64],
+    data: &[T],
+    out: &mut dyn Write,
+) -> Result<()> {
+    let mut w = npyz::WriteOptions::new()
+        .default_dtype()
+        .shape(shape)
+        .writer(out)
+        .begin_nd()
+        .map_err(|e| anyhow!("{name}: cannot write: {e}"))?;
+    w.extend(data.iter().copied())
+        .map_err(|e| anyhow!("{name}: cannot write: {e}"))?;
+    w.finish().map_err(|e| anyhow!("{name}: cannot write: {e}"))
+}
+
+/// A gradient image written a few rows at a time (float64, shape
+/// `(rows, cols, 3)`), so that it need not be held whole.
+pub struct GradientWriter<'a> {
+    w: npyz::NpyWriter<f64, &'a mut dyn Write>,
+    name: String,
+    left: usize,
+}
+
+impl<'a> GradientWriter<'a> {
+    /// Starts the file on `out`; `name` names it in errors.
+    pub fn new(out: &'a mut dyn Write, name: String, rows: usize, cols: usize) -> Result<Self> {
+        let w = npyz::WriteOptions::new()
             .default_dtype()
-            .shape(shape)
-            .writer(&mut out)
+            .shape(&[rows as u64, cols as u64, 3])
+            .writer(out)
             .begin_nd()
-            .map_err(|e| anyhow!("{p}: cannot write: {e}"))?;
-        w.extend(data.iter().copied())
-            .map_err(|e| anyhow!("{p}: cannot write: {e}"))?;
-        w.finish().map_err(|e| anyhow!("{p}: cannot write: {e}"))?;
+            .map_err(|e| anyhow!("{name}: cannot write: {e}"))?;
+        Ok(GradientWriter {
+            w,
+            name,
+            left: rows * cols * 3,
+        })
     }
-    out.flush().map_err(|e| anyhow!("{p}: cannot write: {e}"))
+
+    /// The next values, `[g0, g1, magnitude]` per position in raster order.
+    pub fn push(&mut self, values: &[f64]) -> Result<()> {
+        if values.len() > self.left {
+            bail!("{}: more values than the shape holds", self.name);
+        }
+        self.left -= values.len();
+        self.w
+            .extend(values.iter().copied())
+            .map_err(|e| anyhow!("{}: cannot write: {e}", self.name))
+    }
+
+    /// Ends the file; fails if the shape is not filled.
+    pub fn finish(self) -> Result<()> {
+        if self.left != 0 {
+            bail!("{}: {} values short of the shape", self.name, self.left);
+        }
+        self.w
+            .finish()
+            .map_err(|e| anyhow!("{}: cannot write: {e}", self.name))
+    }
 }
 
 /// Write a scan of `u16` counts, shape `(rows, cols, J1, J2)`.
@@ -332,10 +627,34 @@ fn check_len(path: &Path, got: usize, want: usize) -> Result<()> {
 }
 
 /// Write a gradient image: float64, shape `(rows, cols, 3)` with
-/// `[g0, g1, magnitude]` per position (design.md §2).
+/// `[g0, g1, magnitude]` per position (docs/method.md §2).
 pub fn write_gradient(path: &Path, rows: usize, cols: usize, data: &[f64]) -> Result<()> {
-    check_len(path, data.len(), rows * cols * 3)?;
-    write_npy(path, &[rows as u64, cols as u64, 3], data)
+    write_gradient_to(
+        &crate::out::Target::File(path.to_path_buf()),
+        rows,
+        cols,
+        data,
+    )
+}
+
+/// [`write_gradient`] to a file or standard output.
+pub fn write_gradient_to(
+    target: &crate::out::Target,
+    rows: usize,
+    cols: usize,
+    data: &[f64],
+) -> Result<()> {
+    let name = target.name();
+    if data.len() != rows * cols * 3 {
+        bail!(
+            "{name}: {} values do not fill the {} of the shape",
+            data.len(),
+            rows * cols * 3
+        );
+    }
+    crate::out::write_target(target, |out| {
+        encode_npy(&name, &[rows as u64, cols as u64, 3], data, out)
+    })
 }
 
 /// A gradient image as written by [`write_gradient`].
@@ -376,6 +695,21 @@ pub fn gradient_from_bytes(path: &Path, bytes: &[u8]) -> Result<GradientImage> {
         cols: shape[1] as usize,
         data,
     })
+}
+
+/// Rows and columns of a gradient image or a mask, from its header alone
+/// (the file is mapped, not read): what `render` sizes its image by before
+/// loading anything.
+pub fn image_shape(path: &Path) -> Result<(usize, usize)> {
+    let p = path.display();
+    let map = map_file(path)?;
+    let npy = open_npy(path, &map)?;
+    let shape = npy.shape();
+    let dim = |d: u64| usize::try_from(d).map_err(|_| anyhow!("{p}: shape {shape:?} is too large"));
+    match shape {
+        [rows, cols, 3] | [rows, cols] => Ok((dim(*rows)?, dim(*cols)?)),
+        _ => bail!("{p}: a gradient image must have shape (rows, cols, 3), got {shape:?}"),
+    }
 }
 
 /// A boolean mask over the scan positions (true on defects).

@@ -7,7 +7,7 @@ use clap::{Args, ValueEnum};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum KernelArg {
-    /// b in {1..J1} x {1..J2} (design.md §3)
+    /// b in {1..J1} x {1..J2} (docs/method.md §3)
     Paper,
     /// b = (k, k), k = 0..K, unit weights
     Square,
@@ -61,7 +61,9 @@ impl ScoringArgs {
             }
             KernelArg::Square => {
                 if self.weights == Some(WeightArg::Uniform) {
-                    bail!("square kernels use unit weights (design.md §3); drop --weights uniform");
+                    bail!(
+                        "square kernels use unit weights (docs/method.md §3); drop --weights uniform"
+                    );
                 }
                 let limit = j1.max(j2) - 1;
                 if let Some(k) = self.bmax
@@ -108,6 +110,15 @@ impl ScoringArgs {
         let cfg = self.core_config(j1, j2)?;
         cvm_core::Scorer::new(&cfg)
             .map_err(|e| anyhow::anyhow!("fixed-point scorer refused the configuration: {e:?}"))
+    }
+
+    /// Warnings for configurations under which part or all of the gradient
+    /// is zero whatever the scan (see [`crate::score::blind_axes`]).
+    pub fn warnings(&self, j1: usize, j2: usize) -> Result<Vec<String>> {
+        let e = cvm_reference::CvmEmbedding::new(&self.reference_config(j1, j2)?);
+        Ok(crate::score::blind_axes(j1, j2, |a, b| {
+            e.distance(&e.embed(a), &e.embed(b))
+        }))
     }
 
     /// The f64 reference configuration for `j1 x j2` maps.

@@ -8,6 +8,7 @@ use anyhow::{Context, Result, bail};
 use clap::Args;
 
 use crate::font::{draw_text, text_height, text_width};
+use crate::stream::fmt_num;
 
 const NAN_RGB: [u8; 3] = [255, 0, 255];
 const INK: [u8; 3] = [0, 0, 0];
@@ -21,7 +22,7 @@ pub struct RenderArgs {
     /// Gradient images (.npy, rows x cols x 3 as written by `dmap score`) or bool masks
     #[arg(required = true, value_name = "GRAD.npy")]
     pub inputs: Vec<PathBuf>,
-    /// Output PNG
+    /// Output PNG ("-" for standard output)
     #[arg(short, long, value_name = "OUT.png")]
     pub out: PathBuf,
     /// Channel of a rows x cols x C input: 0 horizontal, 1 vertical, 2 magnitude
@@ -45,9 +46,9 @@ pub struct RenderArgs {
     /// Draw only rows R0..R0+H and columns C0..C0+W of every input
     #[arg(long, value_name = "R0,C0,H,W")]
     pub crop: Option<String>,
-    /// Pixels per scan position (default: about 400 pixels per panel side)
-    #[arg(long)]
-    pub scale: Option<usize>,
+    /// Pixels per scan position, 1..=64 (default: about 400 pixels per panel side)
+    #[arg(long, value_parser = clap::value_parser!(u8).range(1..=64))]
+    pub scale: Option<u8>,
 }
 
 /// One image to draw: `values[row * cols + col]`.
@@ -140,9 +141,28 @@ pub fn colour(v: f64, lo: f64, hi: f64, log: bool) -> [u8; 3] {
     if a.is_nan() {
         return NAN_RGB;
     }
-    let t = ((a - lo) / (hi - lo)).clamp(0.0, 1.0);
-    let c = colorous::VIRIDIS.eval_continuous(t);
+    let c = colorous::VIRIDIS.eval_continuous(position(a, lo, hi));
     [c.r, c.g, c.b]
+}
+
+/// Where `a` sits between `lo` and `hi`, in [0, 1]; halved first so that
+/// a range as wide as the f64 numbers (-1e308..1e308) does not overflow.
+fn position(a: f64, lo: f64, hi: f64) -> f64 {
+    let t = (a / 2.0 - lo / 2.0) / (hi / 2.0 - lo / 2.0);
+    if t.is_nan() { 0.0 } else { t.clamp(0.0, 1.0) }
+}
+
+/// The colour bar's tick values (on the colour axis) and labels, from
+/// `lo` to `hi`.
+pub fn ticks(lo: f64, hi: f64, log: bool) -> Vec<(f64, String)> {
+    (0..TICKS)
+        .map(|k| {
+            let f = k as f64 / (TICKS - 1) as f64;
+            // Interpolated, not `lo + (hi - lo) * f`, which overflows.
+            let a = lo * (1.0 - f) + hi * f;
+            (a, label(if log { 10f64.powf(a) } else { a }))
+        })
+        .collect()
 }
 
 /// Short tick label: up to 4 significant digits, exponent form outside [0.01, 1e4).
@@ -175,6 +195,12 @@ pub fn render(panels: &[Panel], s: &Style) -> Result<Image> {
         .unwrap_or(1)
         .max(1);
     let px = s.scale.unwrap_or((400 / biggest).clamp(1, 64));
+    if width_at_least(panels, px).is_none_or(|a| a > MAX_PIXELS) {
+        bail!(
+            "image of at least {} pixels is too large: lower --scale",
+            fmt_big(width_at_least(panels, px))
+        );
+    }
     if px == 0 || px > 64 {
         bail!("--scale must be 1..=64, got {px}");
     }
@@ -187,14 +213,7 @@ pub fn render(panels: &[Panel], s: &Style) -> Result<Image> {
         .collect();
     let labels: Vec<Vec<(f64, String)>> = ranges
         .iter()
-        .map(|&(lo, hi)| {
-            (0..TICKS)
-                .map(|k| {
-                    let a = lo + (hi - lo) * k as f64 / (TICKS - 1) as f64;
-                    (a, label(if s.log { 10f64.powf(a) } else { a }))
-                })
-                .collect()
-        })
+        .map(|&(lo, hi)| ticks(lo, hi, s.log))
         .collect();
     let th = text_height(FONT);
     let legend_h = th + 8;
@@ -214,7 +233,7 @@ pub fn render(panels: &[Panel], s: &Style) -> Result<Image> {
     let img_h = panels.iter().map(|p| p.rows * px).max().unwrap_or(0);
     let width = MARGIN + widths.iter().sum::<usize>();
     let height = MARGIN + th + 8 + img_h.max(th * 3) + 8 + legend_h + MARGIN;
-    if width.saturating_mul(height) > 100_000_000 {
+    if width.saturating_mul(height) > MAX_PIXELS {
         bail!("image of {width}x{height} pixels is too large: lower --scale");
     }
     let mut im = Image {
@@ -247,7 +266,7 @@ pub fn render(panels: &[Panel], s: &Style) -> Result<Image> {
             im.fill(bx, y0 + yy, BAR_W, 1, [c.r, c.g, c.b]);
         }
         for (a, text) in ticks {
-            let t = if hi > lo { (a - lo) / (hi - lo) } else { 0.0 };
+            let t = if hi > lo { position(*a, lo, hi) } else { 0.0 };
             let yy = y0 + ((1.0 - t) * (bh - 1) as f64).round() as usize;
             // Ticks sit on the bar itself so they cannot be read as minus signs.
             im.fill(bx + BAR_W / 2, yy, BAR_W - BAR_W / 2, 1, INK);
@@ -266,25 +285,43 @@ pub fn render(panels: &[Panel], s: &Style) -> Result<Image> {
     Ok(im)
 }
 
+/// Most pixels an image may have.
+pub const MAX_PIXELS: usize = 100_000_000;
+
+/// A lower bound of the image's pixels from the panels' sizes alone: what
+/// can be refused before any value is looked at.
+fn width_at_least(panels: &[Panel], px: usize) -> Option<usize> {
+    let w = panels
+        .iter()
+        .try_fold(0usize, |acc, p| acc.checked_add(p.cols.checked_mul(px)?))?;
+    let h = panels.iter().map(|p| p.rows).max()?.checked_mul(px)?;
+    w.checked_mul(h)
+}
+
+fn fmt_big(v: Option<usize>) -> String {
+    v.map_or_else(|| "more than 2^64".to_string(), |v| v.to_string())
+}
+
 /// Write an RGB image as an 8-bit PNG.
 pub fn write_png(path: &Path, im: &Image) -> Result<()> {
-    let file =
-        std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
-    let mut enc = png::Encoder::new(
-        std::io::BufWriter::new(file),
-        im.width as u32,
-        im.height as u32,
-    );
-    enc.set_color(png::ColorType::Rgb);
-    enc.set_depth(png::BitDepth::Eight);
-    let mut w = enc
-        .write_header()
-        .with_context(|| format!("writing {}", path.display()))?;
-    w.write_image_data(&im.rgb)
-        .with_context(|| format!("writing {}", path.display()))?;
-    w.finish()
-        .with_context(|| format!("writing {}", path.display()))?;
-    Ok(())
+    write_png_to(&crate::out::Target::File(path.to_path_buf()), im)
+}
+
+/// [`write_png`] to a file or standard output.
+pub fn write_png_to(target: &crate::out::Target, im: &Image) -> Result<()> {
+    let name = target.name();
+    crate::out::write_target(target, |out| {
+        let mut enc = png::Encoder::new(out, im.width as u32, im.height as u32);
+        enc.set_color(png::ColorType::Rgb);
+        enc.set_depth(png::BitDepth::Eight);
+        let mut w = enc
+            .write_header()
+            .with_context(|| format!("writing {name}"))?;
+        w.write_image_data(&im.rgb)
+            .with_context(|| format!("writing {name}"))?;
+        w.finish().with_context(|| format!("writing {name}"))?;
+        Ok(())
+    })
 }
 
 /// Load one channel of a gradient image (rows x cols x 3) as a panel; a
@@ -321,9 +358,15 @@ pub fn load_panel(path: &Path, channel: usize, title: String) -> Result<Panel> {
     })
 }
 
+/// Whether `start..start + len` lies within `0..all` (no overflow: the
+/// numbers come from the user).
+fn fits(start: usize, len: usize, all: usize) -> bool {
+    start.checked_add(len).is_some_and(|end| end <= all)
+}
+
 /// The part of a panel at rows r0..r0+h, columns c0..c0+w.
 pub fn crop_panel(p: &Panel, (r0, c0, h, w): (usize, usize, usize, usize)) -> Result<Panel> {
-    if r0 + h > p.rows || c0 + w > p.cols {
+    if !fits(r0, h, p.rows) || !fits(c0, w, p.cols) {
         bail!(
             "--crop {r0},{c0},{h},{w} exceeds the {}x{} image",
             p.rows,
@@ -368,10 +411,26 @@ pub fn run(a: &RenderArgs) -> Result<()> {
             })
             .collect(),
     };
+    for (name, v) in [("--vmin", a.vmin), ("--vmax", a.vmax)] {
+        if let Some(v) = v
+            && !v.is_finite()
+        {
+            bail!("{name} must be a finite number, got {v}");
+        }
+    }
     if let (Some(lo), Some(hi)) = (a.vmin, a.vmax)
         && lo >= hi
     {
-        bail!("--vmin {lo} must be below --vmax {hi}");
+        bail!(
+            "--vmin {} must be below --vmax {}",
+            fmt_num(lo),
+            fmt_num(hi)
+        );
+    }
+    let target = crate::out::Target::new(&a.out);
+    if let crate::out::Target::File(out) = &target {
+        let inputs: Vec<&Path> = a.inputs.iter().map(PathBuf::as_path).collect();
+        crate::out::refuse_inputs(out, &inputs)?;
     }
     if a.log && (a.vmin.is_some_and(|v| v <= 0.0) || a.vmax.is_some_and(|v| v <= 0.0)) {
         bail!("--log needs positive --vmin/--vmax");
@@ -390,6 +449,49 @@ pub fn run(a: &RenderArgs) -> Result<()> {
             Some((v[0], v[1], v[2], v[3]))
         }
     };
+    // The image's size follows from the inputs' shapes: refuse one too
+    // large before reading any values.
+    let shapes = a
+        .inputs
+        .iter()
+        .map(|p| {
+            let (rows, cols) = crate::npy::image_shape(p)?;
+            Ok(match crop {
+                Some((r0, c0, h, w)) => {
+                    if !fits(r0, h, rows) || !fits(c0, w, cols) {
+                        bail!(
+                            "{}: --crop {r0},{c0},{h},{w} exceeds the {rows}x{cols} image",
+                            p.display()
+                        );
+                    }
+                    (h, w)
+                }
+                None => (rows, cols),
+            })
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let outlines: Vec<Panel> = shapes
+        .iter()
+        .map(|&(rows, cols)| Panel {
+            rows,
+            cols,
+            values: Vec::new(),
+            title: String::new(),
+        })
+        .collect();
+    let biggest = shapes
+        .iter()
+        .map(|&(r, c)| r.max(c))
+        .max()
+        .unwrap_or(1)
+        .max(1);
+    let px = a.scale.map_or((400 / biggest).clamp(1, 64), usize::from);
+    if width_at_least(&outlines, px).is_none_or(|n| n > MAX_PIXELS) {
+        bail!(
+            "image of at least {} pixels is too large: lower --scale",
+            fmt_big(width_at_least(&outlines, px))
+        );
+    }
     let panels = a
         .inputs
         .iter()
@@ -409,10 +511,10 @@ pub fn run(a: &RenderArgs) -> Result<()> {
             vmin: a.vmin,
             vmax: a.vmax,
             shared: a.shared,
-            scale: a.scale,
+            scale: a.scale.map(usize::from),
         },
     )?;
-    write_png(&a.out, &im)
+    write_png_to(&target, &im)
 }
 
 #[cfg(test)]

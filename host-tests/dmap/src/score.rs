@@ -1,12 +1,14 @@
 //! `dmap score`: the gradient image (Eq. 1) of a scan under one of the
 //! distances, exact in f64 (or the firmware's fixed point, `cvm-fixed`).
 
-use crate::npy::{Scan, read_scan, write_gradient};
+use crate::npy::{GradientWriter, MappedScan, band_rows};
 use crate::options::ScoringArgs;
+use crate::out::Target;
 use anyhow::{Result, bail};
 use clap::{Args, ValueEnum};
 use cvm_reference::{CvmEmbedding, Emd, Ground, MapDistance, MeanDir};
 use rayon::prelude::*;
+use std::collections::VecDeque;
 use std::path::PathBuf;
 
 /// Distance between neighbouring deflection maps.
@@ -35,7 +37,7 @@ pub enum GroundArg {
 pub struct ScoreArgs {
     /// Scan .npy, shape (rows, cols, J1, J2)
     pub scan: PathBuf,
-    /// Output gradient image .npy, float64 (rows, cols, 3)
+    /// Output gradient image .npy, float64 (rows, cols, 3); "-" for standard output
     #[arg(short, long, value_name = "OUT.npy")]
     pub output: PathBuf,
     /// Distance between neighbouring maps
@@ -48,14 +50,238 @@ pub struct ScoreArgs {
     pub ground: Option<GroundArg>,
 }
 
-/// Read the scan, score it, write the gradient image.
+/// Map the scan, score it a band of rows at a time, write the gradient
+/// image as the bands complete.
+///
+/// Memory: the scan is memory-mapped and read twice in file order (a check
+/// of every sample, then the scoring), with the pages behind the current
+/// band released; what is held is the band's prepared maps and gradient
+/// (about 2^20 samples' worth, [`crate::npy::band_rows`]), whatever the
+/// size of the scan.
 pub fn run(args: &ScoreArgs) -> Result<()> {
     check_flags(args)?;
-    let scan = read_scan(&args.scan)?;
-    let image = score(&scan, args)?;
-    write_gradient(&args.output, scan.rows, scan.cols, &image)
+    let target = Target::new(&args.output);
+    if let Target::File(out) = &target {
+        crate::out::refuse_inputs(out, &[&args.scan])?;
+    }
+    let scan = MappedScan::open(&args.scan)?;
+    let g = scan.geometry;
+    let (j1, j2) = (g.j1(), g.j2());
+    // The configuration is checked before the samples are.
+    let method = match args.distance {
+        DistanceArg::Cvm => Method::Cvm(CvmEmbedding::new(&args.scoring.reference_config(j1, j2)?)),
+        DistanceArg::CvmFixed => Method::Fixed(args.scoring.scorer(j1, j2)?),
+        DistanceArg::Emd => {
+            let ground = match args.ground.unwrap_or(GroundArg::Euclid) {
+                GroundArg::Euclid => Ground::Euclid,
+                GroundArg::L1 => Ground::L1,
+            };
+            Method::Emd(Emd::new(cvm_reference::Geometry::new(j1, j2)?, ground))
+        }
+        DistanceArg::MeanDir => Method::MeanDir(MeanDir(cvm_reference::Geometry::new(j1, j2)?)),
+    };
+    let mut warnings = match &method {
+        Method::Cvm(_) | Method::Fixed(_) => args.scoring.warnings(j1, j2)?,
+        Method::Emd(d) => blind_axes(j1, j2, |a, b| d.distance(&d.prepare(a), &d.prepare(b))),
+        Method::MeanDir(d) => blind_axes(j1, j2, |a, b| d.distance(&d.prepare(a), &d.prepare(b))),
+    };
+    warnings.extend(flat_scan_warnings(scan.rows, scan.cols));
+    scan.validate(args.distance == DistanceArg::CvmFixed)?;
+    crate::out::write_target(&target, |out| {
+        let mut w = GradientWriter::new(out, target.name(), scan.rows, scan.cols)?;
+        match &method {
+            Method::Cvm(d) => banded(&scan, &Prepare(d), &mut w)?,
+            Method::Fixed(s) => banded(&scan, &FixedPrepare(s), &mut w)?,
+            Method::Emd(d) => banded(&scan, &Prepare(d), &mut w)?,
+            Method::MeanDir(d) => banded(&scan, &Prepare(d), &mut w)?,
+        }
+        w.finish()
+    })?;
+    // After the result, so that a failed run says one thing only.
+    for w in &warnings {
+        crate::out::warn(w);
+    }
+    Ok(())
 }
 
+/// The distance a run scores with (one per run: the size of the largest
+/// variant does not matter).
+#[allow(clippy::large_enum_variant)]
+enum Method {
+    Cvm(CvmEmbedding),
+    Fixed(cvm_core::Scorer),
+    Emd(Emd),
+    MeanDir(MeanDir),
+}
+
+/// A scan of one position: the border rule makes its gradient zero.
+pub fn flat_scan_warnings(rows: usize, cols: usize) -> Vec<String> {
+    if rows == 1 && cols == 1 {
+        vec!["the scan has a single position: its gradient is zero (a neighbour outside the scan is the map itself)".into()]
+    } else {
+        Vec::new()
+    }
+}
+
+/// Detector axes along which the distance `d` cannot tell two maps apart:
+/// a unit spot moved from the first cell to the next (and to the last) of
+/// the axis scores 0. A 1x1 detector normalised tells nothing apart at all.
+pub fn blind_axes(j1: usize, j2: usize, d: impl Fn(&[f64], &[f64]) -> f64) -> Vec<String> {
+    let n = j1 * j2;
+    let spot = |k: usize| {
+        let mut m = vec![0.0; n];
+        m[k] = 1.0;
+        m
+    };
+    // Rounding noise of maps of unit mass, far below any real distance.
+    let zero = |x: f64| x.abs() <= 1e-12;
+    let mut blind = Vec::new();
+    let mut any_axis = false;
+    for (axis, len, step) in [(1, j1, j2), (2, j2, 1)] {
+        if len < 2 {
+            continue;
+        }
+        any_axis = true;
+        if zero(d(&spot(0), &spot(step))) && zero(d(&spot(0), &spot(step * (len - 1)))) {
+            blind.push(format!(
+                "maps that differ only along detector axis {axis} ({len} cells) score 0 under this configuration: that axis contributes nothing to the gradient"
+            ));
+        }
+    }
+    let mut dimmer = spot(0);
+    dimmer[0] = 0.5;
+    let intensity_blind = zero(d(&spot(0), &dimmer));
+    if intensity_blind && (!any_axis || blind.len() == usize::from(j1 >= 2) + usize::from(j2 >= 2))
+    {
+        return vec![format!(
+            "{j1}x{j2} maps: this configuration scores every pair of maps 0, so the whole gradient is zero"
+        )];
+    }
+    blind
+}
+
+/// One band-at-a-time way of scoring: per-map preparation of a row, and the
+/// gradient of a position from its four neighbours' prepared maps.
+trait Banded: Sync {
+    type Prepared: Send + Sync;
+    fn prepare_row(&self, scan: &MappedScan, row: usize) -> Result<Vec<Self::Prepared>>;
+    fn gradient(
+        &self,
+        left: &Self::Prepared,
+        right: &Self::Prepared,
+        up: &Self::Prepared,
+        down: &Self::Prepared,
+    ) -> [f64; 3];
+}
+
+/// An f64 distance of the reference crate.
+struct Prepare<'a, D>(&'a D);
+
+impl<D> Banded for Prepare<'_, D>
+where
+    D: MapDistance + Sync,
+    D::Prepared: Send + Sync,
+{
+    type Prepared = D::Prepared;
+    fn prepare_row(&self, scan: &MappedScan, row: usize) -> Result<Vec<D::Prepared>> {
+        let n = scan.geometry.cells();
+        let mut samples = vec![0.0; scan.cols * n];
+        scan.maps_f64(row * scan.cols, &mut samples)?;
+        Ok(samples.par_chunks(n).map(|m| self.0.prepare(m)).collect())
+    }
+    fn gradient(
+        &self,
+        l: &D::Prepared,
+        r: &D::Prepared,
+        u: &D::Prepared,
+        d: &D::Prepared,
+    ) -> [f64; 3] {
+        let g0 = self.0.distance(l, r);
+        let g1 = self.0.distance(u, d);
+        [g0, g1, (g0 * g0 + g1 * g1).sqrt()]
+    }
+}
+
+/// The firmware's fixed point (`cvm-fixed`): the core's scorer, the same
+/// per-position arithmetic as [`crate::fixed::score_scan`].
+struct FixedPrepare<'a>(&'a cvm_core::Scorer);
+
+impl Banded for FixedPrepare<'_> {
+    type Prepared = Vec<i32>;
+    fn prepare_row(&self, scan: &MappedScan, row: usize) -> Result<Vec<Vec<i32>>> {
+        let n = scan.geometry.cells();
+        let mut counts = vec![0u16; scan.cols * n];
+        scan.maps_u16(row * scan.cols, &mut counts, &mut Vec::new())?;
+        Ok(counts
+            .par_chunks(n)
+            .map(|frame| {
+                let mut state = vec![0i32; n];
+                // The length is the scorer's: the scan's geometry made it.
+                let _ = self.0.prepare(frame, &mut state);
+                state
+            })
+            .collect())
+    }
+    fn gradient(&self, l: &Vec<i32>, r: &Vec<i32>, u: &Vec<i32>, d: &Vec<i32>) -> [f64; 3] {
+        // A missing neighbour at the border is the map itself; d(a, a) = 0.
+        let g0 = if std::ptr::eq(l, r) {
+            0
+        } else {
+            self.0.distance(l, r)
+        };
+        let g1 = if std::ptr::eq(u, d) {
+            0
+        } else {
+            self.0.distance(u, d)
+        };
+        let mag = cvm_core::magnitude(g0, g1);
+        [g0, g1, mag].map(|s| self.0.score_to_units(s))
+    }
+}
+
+/// Eq. 1 with the border rule (a missing neighbour is the map itself), a
+/// band of rows at a time: each map prepared once, held while a row next to
+/// it is scored, then dropped.
+fn banded<B: Banded>(scan: &MappedScan, b: &B, w: &mut GradientWriter) -> Result<()> {
+    let (rows, cols) = (scan.rows, scan.cols);
+    let band = band_rows(cols, scan.geometry.cells());
+    let mut window: VecDeque<Vec<B::Prepared>> = VecDeque::new();
+    let mut first = 0;
+    let mut out = Vec::new();
+    for r0 in (0..rows).step_by(band) {
+        let r1 = (r0 + band).min(rows);
+        let (lo, hi) = (r0.saturating_sub(1), r1.min(rows - 1));
+        while first < lo {
+            window.pop_front();
+            first += 1;
+        }
+        while first + window.len() <= hi {
+            window.push_back(b.prepare_row(scan, first + window.len())?);
+        }
+        scan.release(0..(hi + 1) * cols);
+        let at = |r: usize, c: usize| &window[r - first][c];
+        out.clear();
+        out.resize((r1 - r0) * cols * 3, 0.0);
+        out.par_chunks_mut(3).enumerate().for_each(|(i, px)| {
+            let (r, c) = (r0 + i / cols, i % cols);
+            px.copy_from_slice(&b.gradient(
+                at(r, c.saturating_sub(1)),
+                at(r, (c + 1).min(cols - 1)),
+                at(r.saturating_sub(1), c),
+                at((r + 1).min(rows - 1), c),
+            ));
+        });
+        if let Some(i) = out.iter().position(|x| !x.is_finite()) {
+            bail!(
+                "internal error: non-finite score at position ({}, {})",
+                r0 + i / 3 / cols,
+                i / 3 % cols
+            );
+        }
+        w.push(&out)?;
+    }
+    Ok(())
+}
 /// Flags that only mean something for some distances are refused elsewhere,
 /// so that nobody believes they changed a result.
 fn check_flags(args: &ScoreArgs) -> Result<()> {
@@ -78,72 +304,4 @@ fn check_flags(args: &ScoreArgs) -> Result<()> {
         }
     }
     Ok(())
-}
-
-/// The gradient image of `scan`: `rows * cols * 3` values
-/// `[g0, g1, magnitude]`, row-major.
-pub fn score(scan: &Scan, args: &ScoreArgs) -> Result<Vec<f64>> {
-    let g = scan.geometry;
-    let image = match args.distance {
-        DistanceArg::Cvm => {
-            let config = args.scoring.reference_config(g.j1(), g.j2())?;
-            gradient(scan, &CvmEmbedding::new(&config))
-        }
-        // --- cvm-fixed: dispatch to the fixed-point scorer (dmap::fixed) ---
-        DistanceArg::CvmFixed => {
-            let scorer = args.scoring.scorer(g.j1(), g.j2())?;
-            let data = scan.to_u16()?;
-            let scores = crate::fixed::score_scan(&scorer, scan.rows, scan.cols, &data);
-            crate::fixed::to_image(&scorer, &scores)
-        }
-        // --- end cvm-fixed ---
-        DistanceArg::Emd => {
-            let ground = match args.ground.unwrap_or(GroundArg::Euclid) {
-                GroundArg::Euclid => Ground::Euclid,
-                GroundArg::L1 => Ground::L1,
-            };
-            gradient(scan, &Emd::new(g, ground))
-        }
-        DistanceArg::MeanDir => gradient(scan, &MeanDir(g)),
-    };
-    if let Some(i) = image.iter().position(|x| !x.is_finite()) {
-        bail!(
-            "internal error: non-finite score at position ({}, {})",
-            i / 3 / scan.cols,
-            i / 3 % scan.cols
-        );
-    }
-    Ok(image)
-}
-
-/// Eq. 1 with the border rule (a missing neighbour is the map itself):
-/// every map prepared once, rows scored in parallel.
-fn gradient<D>(scan: &Scan, distance: &D) -> Vec<f64>
-where
-    D: MapDistance + Sync,
-    D::Prepared: Send + Sync,
-{
-    let (rows, cols) = (scan.rows, scan.cols);
-    let prepared: Vec<D::Prepared> = scan
-        .data
-        .par_chunks(scan.geometry.cells())
-        .map(|m| distance.prepare(m))
-        .collect();
-    let at = |r: usize, c: usize| &prepared[r * cols + c];
-    let mut image = vec![0.0; rows * cols * 3];
-    image
-        .par_chunks_mut(cols * 3)
-        .enumerate()
-        .for_each(|(r, line)| {
-            for c in 0..cols {
-                let left = at(r, c.saturating_sub(1));
-                let right = at(r, (c + 1).min(cols - 1));
-                let up = at(r.saturating_sub(1), c);
-                let down = at((r + 1).min(rows - 1), c);
-                let g0 = distance.distance(left, right);
-                let g1 = distance.distance(up, down);
-                line[c * 3..c * 3 + 3].copy_from_slice(&[g0, g1, (g0 * g0 + g1 * g1).sqrt()]);
-            }
-        });
-    image
 }

@@ -1,7 +1,7 @@
 //! `dmap simulate`: run the scanner's ray model (crate `cvm-sim`) and write
 //! the scan and its ground-truth mask as `.npy` files.
 
-use std::io::IsTerminal;
+use std::io::{IsTerminal, Write};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -50,9 +50,9 @@ pub struct SimulateArgs {
     /// Random seed (same seed, same scan, whatever the thread count)
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Worker threads (default: all cores)
-    #[arg(long)]
-    pub threads: Option<usize>,
+    /// Worker threads, 1..=256 (default: all cores)
+    #[arg(long, value_parser = clap::value_parser!(u16).range(1..=MAX_THREADS as i64))]
+    pub threads: Option<u16>,
     /// Raster rows (a smaller raster stays centred on --center-mm)
     #[arg(long)]
     pub rows: Option<usize>,
@@ -168,14 +168,22 @@ fn parse_floats(s: &str, what: &str, min: usize, max: usize) -> Result<Vec<f64>>
     Ok(v)
 }
 
-/// Parse "J1xJ2".
+/// Most worker threads `--threads` starts.
+pub const MAX_THREADS: usize = 256;
+
+/// Parse "J1xJ2", each axis 1..=16 (what the scorers take).
 fn parse_detector(s: &str) -> Result<(usize, usize)> {
-    let bad = || anyhow::anyhow!("detector {s:?}: expected J1xJ2, e.g. 15x15");
+    let bad =
+        || anyhow::anyhow!("--detector {s:?}: expected J1xJ2 with each axis in 1..=16, e.g. 15x15");
     let (a, b) = s.split_once(['x', 'X']).ok_or_else(bad)?;
-    Ok((
+    let (j1, j2): (usize, usize) = (
         a.trim().parse().map_err(|_| bad())?,
         b.trim().parse().map_err(|_| bad())?,
-    ))
+    );
+    if !(1..=16).contains(&j1) || !(1..=16).contains(&j2) {
+        return Err(bad());
+    }
+    Ok((j1, j2))
 }
 
 /// The simulator configuration: the preset with every given flag applied.
@@ -336,7 +344,10 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
         .truth
         .clone()
         .unwrap_or_else(|| default_truth_path(&a.out));
-    if truth_path == a.out {
+    if a.out.as_os_str() == "-" || truth_path.as_os_str() == "-" {
+        bail!("simulate writes two .npy files (scan and truth mask): give both file names, not -");
+    }
+    if crate::out::same_destination(&truth_path, &a.out) {
         bail!("--truth and --out name the same file {}", a.out.display());
     }
     let bar = ProgressBar::with_draw_target(
@@ -354,9 +365,8 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
     let start = Instant::now();
     let tick = || bar.inc(1);
     let scan = match a.threads {
-        Some(0) => bail!("--threads must be at least 1"),
         Some(t) => rayon::ThreadPoolBuilder::new()
-            .num_threads(t)
+            .num_threads(usize::from(t))
             .build()
             .context("starting worker threads")?
             .install(|| cvm_sim::simulate(&cfg, &tick)),
@@ -375,7 +385,8 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
     let b = scan.budget;
     let beams = (scan.rows * scan.cols) as f64;
     let pct = |v: f64| 100.0 * v / beams;
-    eprintln!(
+    let _ = writeln!(
+        std::io::stderr(),
         "dmap simulate: {}x{} positions x {}x{} cells in {secs:.1} s -> {} and {} ({} defect positions)",
         scan.rows,
         scan.cols,
@@ -385,7 +396,8 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
         truth_path.display(),
         scan.truth.iter().filter(|&&t| t).count()
     );
-    eprintln!(
+    let _ = writeln!(
+        std::io::stderr(),
         "beam power: detected {:.2} %, outside receiver aperture {:.2} %, beside detector {:.2} %, backward {:.2} %, part rim {:.2} %, below cut-off {:.2e} %; {} samples clipped at full scale {}",
         pct(b.detected),
         pct(b.aperture),

@@ -2,13 +2,12 @@
 //! encoder, `cvm_core::Pipeline`) run on the host over a scan file, so that
 //! host and firmware output can be compared byte for byte.
 
-use crate::npy::read_scan;
+use crate::npy::MappedScan;
 use crate::options::ScoringArgs;
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use clap::Args;
 use cvm_core::protocol::{LineSink, Priority};
 use cvm_core::{Pipeline, Position, Scorer, Settings};
-use std::io::Write;
 use std::path::PathBuf;
 
 /// Most columns the host pipeline accepts (the engine's capacity is fixed
@@ -31,9 +30,10 @@ pub struct StreamArgs {
 /// What the pipeline reports: shared by `stream` and `emulate`.
 #[derive(Args, Clone, Debug, PartialEq)]
 pub struct OutputArgs {
-    /// Defect threshold on the gradient magnitude, in distance units
-    #[arg(long, default_value_t = DEFAULT_THRESHOLD)]
-    pub threshold: f64,
+    /// Defect threshold on the gradient magnitude, in distance units (default 0.5 for
+    /// normalised maps; required with --raw, whose distances are in counts)
+    #[arg(long)]
+    pub threshold: Option<f64>,
     /// Also emit every position's score (S lines)
     #[arg(long)]
     pub scores: bool,
@@ -45,7 +45,7 @@ pub struct OutputArgs {
 impl Default for OutputArgs {
     fn default() -> Self {
         OutputArgs {
-            threshold: DEFAULT_THRESHOLD,
+            threshold: None,
             scores: false,
             max_defect_lines: 16,
         }
@@ -53,11 +53,64 @@ impl Default for OutputArgs {
 }
 
 impl OutputArgs {
-    pub fn settings(&self, scorer: &Scorer, cols: usize) -> Result<Settings> {
-        if self.threshold.is_nan() || self.threshold < 0.0 {
+    /// The threshold in distance units: the one given, or the default for
+    /// normalised maps. Raw counts have no sensible default (their
+    /// distances scale with the square of the counts), so `--raw` needs
+    /// `--threshold`.
+    pub fn threshold_units(&self, scoring: &ScoringArgs) -> Result<f64> {
+        let t = match self.threshold {
+            Some(t) => t,
+            None if scoring.raw => bail!(
+                "--raw compares raw counts, whose distances have no default scale: give --threshold (the default {DEFAULT_THRESHOLD} is for normalised maps)"
+            ),
+            None => DEFAULT_THRESHOLD,
+        };
+        if t.is_nan() || t < 0.0 {
             bail!(
                 "--threshold must be a non-negative number, got {}",
-                self.threshold
+                fmt_num(t)
+            );
+        }
+        if t.is_infinite() {
+            bail!("--threshold must be finite, got {t}");
+        }
+        Ok(t)
+    }
+
+    /// What the scorer makes of the threshold when it is not what was
+    /// asked: above every score it can report, or rounded up by more than
+    /// 1 % to its integer format.
+    pub fn threshold_warnings(&self, scorer: &Scorer, units: f64) -> Vec<String> {
+        let thr = scorer.threshold_from_units(units);
+        let effective = scorer.score_to_units(thr);
+        let step = scorer.score_to_units(1);
+        let q = scorer.score_frac_bits();
+        if thr == u32::MAX && units > effective {
+            vec![format!(
+                "--threshold {} is above the largest score the scorer reports ({} in its Q({q}) format): no position can be a defect",
+                fmt_num(units),
+                fmt_num(effective)
+            )]
+        } else if effective > units * 1.01 {
+            vec![format!(
+                "--threshold {} becomes {} in the scorer's Q({q}) format (one score step is {} distance units)",
+                fmt_num(units),
+                fmt_num(effective),
+                fmt_num(step)
+            )]
+        } else {
+            Vec::new()
+        }
+    }
+
+    /// The pipeline's settings for a scan of `cols` columns, with the
+    /// threshold given or the default ([`Self::threshold_units`] checks it).
+    pub fn settings(&self, scorer: &Scorer, cols: usize) -> Result<Settings> {
+        let t = self.threshold.unwrap_or(DEFAULT_THRESHOLD);
+        if t.is_nan() || t < 0.0 || t.is_infinite() {
+            bail!(
+                "--threshold must be a finite non-negative number, got {}",
+                fmt_num(t)
             );
         }
         if cols == 0 || cols > MAX_COLS {
@@ -65,11 +118,43 @@ impl OutputArgs {
         }
         Ok(Settings {
             cols: cols as u32,
-            threshold: scorer.threshold_from_units(self.threshold),
+            threshold: scorer.threshold_from_units(t),
             scores: self.scores,
             max_defect_lines_per_row: self.max_defect_lines,
             firmware_version: cvm_core::VERSION,
         })
+    }
+}
+
+/// The scorer, settings and warnings of a `stream` or `emulate` run on a
+/// scan of `j1 x j2` maps and `cols` columns.
+pub fn configure(
+    scoring: &ScoringArgs,
+    output: &OutputArgs,
+    j1: usize,
+    j2: usize,
+    cols: usize,
+) -> Result<(Scorer, Settings, Vec<String>)> {
+    let scorer = scoring.scorer(j1, j2)?;
+    let units = output.threshold_units(scoring)?;
+    let settings = OutputArgs {
+        threshold: Some(units),
+        ..output.clone()
+    }
+    .settings(&scorer, cols)?;
+    let mut warnings = scoring.warnings(j1, j2)?;
+    warnings.extend(output.threshold_warnings(&scorer, units));
+    Ok((scorer, settings, warnings))
+}
+
+/// A number for a message: plain when short, in exponent form when huge
+/// or tiny (never 300 digits).
+pub fn fmt_num(v: f64) -> String {
+    let a = v.abs();
+    if v == 0.0 || !v.is_finite() || (1e-4..1e12).contains(&a) {
+        format!("{v}")
+    } else {
+        format!("{v:e}")
     }
 }
 
@@ -117,17 +202,69 @@ pub fn stream_scan(
     Ok(sink.0)
 }
 
+/// Runs the pipeline over a mapped scan a row at a time, handing its lines
+/// to `emit` as they come (in pieces of about 64 KiB): memory does not grow
+/// with the scan.
+pub fn stream_mapped(
+    scorer: &Scorer,
+    settings: Settings,
+    scan: &MappedScan,
+    emit: &mut dyn FnMut(&[u8]) -> Result<()>,
+) -> Result<()> {
+    let n = scorer.cells();
+    let cols = settings.cols as usize;
+    if cols != scan.cols || n != scan.geometry.cells() {
+        bail!("the settings do not match the scan");
+    }
+    if scan.rows > u32::MAX as usize {
+        bail!(
+            "scan has {} rows, more than a position can number",
+            scan.rows
+        );
+    }
+    let words = cvm_core::stream::row_words(cols, n, 1);
+    let (mut a, mut b) = (vec![0i32; words], vec![0i32; words]);
+    let mut pipeline = Box::new(
+        Pipeline::<MAX_COLS>::new(scorer, settings, &mut a, &mut b)
+            .map_err(|e| anyhow::anyhow!("pipeline refused the scan: {e:?}"))?,
+    );
+    let mut sink = VecSink::default();
+    pipeline.begin(&mut sink);
+    let (mut counts, mut scratch) = (vec![0u16; cols * n], Vec::new());
+    for row in 0..scan.rows {
+        scan.maps_u16(row * cols, &mut counts, &mut scratch)?;
+        for (col, frame) in counts.chunks_exact(n).enumerate() {
+            let pos = Position {
+                row: row as u32,
+                col: col as u32,
+            };
+            pipeline.push(pos, frame, &mut sink);
+        }
+        scan.release(0..(row + 1) * cols);
+        if sink.0.len() >= 1 << 16 {
+            emit(&sink.0)?;
+            sink.0.clear();
+        }
+    }
+    pipeline.finish(0, &mut sink);
+    emit(&sink.0)
+}
+
 pub fn run(args: &StreamArgs) -> Result<()> {
-    let scan = read_scan(&args.scan)?;
+    let scan = MappedScan::open(&args.scan)?;
     let (j1, j2) = (scan.geometry.j1(), scan.geometry.j2());
-    let scorer = args.scoring.scorer(j1, j2)?;
-    let settings = args.output.settings(&scorer, scan.cols)?;
-    let data = scan
-        .to_u16()
-        .with_context(|| format!("{}", args.scan.display()))?;
-    let out = stream_scan(&scorer, settings, scan.rows, &data)?;
-    let mut stdout = std::io::stdout().lock();
-    stdout.write_all(&out).context("writing to stdout")?;
-    stdout.flush().context("writing to stdout")?;
+    let (scorer, settings, warnings) = configure(&args.scoring, &args.output, j1, j2, scan.cols)?;
+    // Every sample is checked before the first line goes out.
+    scan.validate(true)?;
+    stream_mapped(&scorer, settings, &scan, &mut |bytes| {
+        crate::out::stdout(bytes)
+    })?;
+    // After the lines, so that a failed run says one thing only.
+    for w in warnings
+        .iter()
+        .chain(&crate::score::flat_scan_warnings(scan.rows, scan.cols))
+    {
+        crate::out::warn(w);
+    }
     Ok(())
 }

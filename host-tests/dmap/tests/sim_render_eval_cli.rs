@@ -100,7 +100,6 @@ fn simulate_rejects_bad_parameters_in_one_line() {
         (vec!["--rays", "0"], "rays per beam"),
         (vec!["--pitch-um=-5"], "pitch"),
         (vec!["--index", "nan"], "refractive index"),
-        (vec!["--threads", "0"], "--threads"),
         (vec!["--part", "plate", "--radius-mm", "5"], "flat plate"),
     ] {
         assert_one_line_error(&dmap(&[&base[..], &extra[..]].concat()), needle);

@@ -74,7 +74,7 @@ fn stream_then_listen_reproduces_cvm_fixed() {
             let data = scan(&mut r, rows, cols, j1 * j2);
             let scorer = args.scorer(j1, j2).unwrap();
             let out = OutputArgs {
-                threshold: 0.05,
+                threshold: Some(0.05),
                 scores: true,
                 max_defect_lines: 1000,
             };
@@ -114,7 +114,7 @@ fn sample_stream() -> (Scorer, Vec<u8>, usize, usize) {
     let data = scan(&mut r, rows, cols, j1 * j2);
     let scorer = ScoringArgs::default().scorer(j1, j2).unwrap();
     let out = OutputArgs {
-        threshold: 0.05,
+        threshold: Some(0.05),
         scores: true,
         max_defect_lines: 1000,
     };
@@ -211,7 +211,7 @@ fn duplicated_and_missing_frames_reach_the_totals() {
     let data = scan(&mut r, rows, cols, j1 * j2);
     let scorer = ScoringArgs::default().scorer(j1, j2).unwrap();
     let settings = OutputArgs {
-        threshold: 0.05,
+        threshold: Some(0.05),
         scores: true,
         max_defect_lines: 100,
     }
@@ -329,7 +329,7 @@ fn bandwidth_figures_of_the_protocol_document() {
     let scorer = ScoringArgs::default().scorer(j1, j2).unwrap();
     // A threshold no position reaches: no D lines.
     let out = OutputArgs {
-        threshold: 1e9,
+        threshold: Some(1e9),
         scores: true,
         max_defect_lines: 16,
     };
