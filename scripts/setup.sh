@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Installs what the project needs on a fresh Debian machine with rustup:
-# the Cortex-M target, rustfmt/clippy, and QEMU for the emulated board.
+# the Cortex-M target, rustfmt/clippy, QEMU for the emulated board, and the
+# Python packages of the H743 chip model (Unicorn, pyelftools).
 # Idempotent: does nothing that is already done.
 set -euo pipefail
 
@@ -19,4 +20,8 @@ if ! command -v qemu-system-arm >/dev/null 2>&1; then
     echo "setup: installing qemu-system-arm" >&2
     need_sudo apt-get update -qq
     DEBIAN_FRONTEND=noninteractive need_sudo apt-get install -y -qq qemu-system-arm >/dev/null
+fi
+if ! python3 -c "import unicorn, elftools" >/dev/null 2>&1; then
+    echo "setup: installing the chip model's Python packages (unicorn, pyelftools)" >&2
+    python3 -m pip install --quiet --disable-pip-version-check unicorn==2.1.4 pyelftools==0.33
 fi

@@ -18,6 +18,10 @@ step "firmware: NUCLEO-H743ZI2 build and lints"
 cargo build --release
 cargo clippy --release --workspace -- -D warnings
 
+step "firmware: the H743 release ELF's memory layout, and its boot on the chip model"
+(cd host-tests/twin && python3 -m h743twin.layout ../../target/thumbv7em-none-eabihf/release/cvm-fw &&
+    python3 -m h743twin.smoke ../../target/thumbv7em-none-eabihf/release/cvm-fw)
+
 step "firmware: emulated board build and lints"
 cargo build --release --no-default-features --features emulated
 cargo clippy --release --no-default-features --features emulated --workspace -- -D warnings

@@ -24,6 +24,7 @@ def main(argv=None):
     ap.add_argument("--run-ms", type=float, help="without --scan: run this long")
     ap.add_argument("--debugger", action="store_true", help="a debugger is attached (DBGMCU freeze applies)")
     ap.add_argument("--scans", type=int, default=1, help="end lines to wait for (default 1)")
+    ap.add_argument("--max-instructions", type=int, help="stop after this many instructions")
     args = ap.parse_args(argv)
 
     try:
@@ -47,9 +48,9 @@ def main(argv=None):
                 out = bytes(b for b, _ in m.uart)
                 ends = out.count(b"\nE,") + (1 if out.startswith(b"E,") else 0)
                 return ends >= args.scans and out.endswith(b"\n") and not m.usart.shifting
-            status = m.run(end, done)
+            status = m.run(end, done, args.max_instructions)
         else:
-            status = m.run(cycles_of_ms(args.run_ms or 100.0))
+            status = m.run(cycles_of_ms(args.run_ms or 100.0), None, args.max_instructions)
     except Stop as e:
         error = str(e)
     sys.stdout.buffer.write(bytes(b for b, _ in m.uart))

@@ -91,7 +91,7 @@ class Bus:
         addr = region + offset
         if TRACE and self.accesses < TRACE:
             v = self._read_inner(uc, offset, size, region)
-            print(f"R {addr:#010x} -> {v:#x} pc {uc.reg_read(UC_ARM_REG_PC):#010x}", file=sys.stderr)
+            print(f"R {addr:#010x} -> {v:#x} pc {uc.reg_read(UC_ARM_REG_PC):#010x} t {self.core.cycles}", file=sys.stderr)
             return v
         return self._read_inner(uc, offset, size, region)
 
@@ -115,7 +115,7 @@ class Bus:
     def _write(self, uc, offset, size, value, region):
         addr = region + offset
         if TRACE and self.accesses < TRACE:
-            print(f"W {addr:#010x} <- {value:#x} pc {uc.reg_read(UC_ARM_REG_PC):#010x}", file=sys.stderr)
+            print(f"W {addr:#010x} <- {value:#x} pc {uc.reg_read(UC_ARM_REG_PC):#010x} t {self.core.cycles}", file=sys.stderr)
         try:
             self.accesses += 1
             if region == PPB_BASE:

@@ -109,12 +109,15 @@ class Machine:
         self.core.reset()
 
     # --- running
-    def run(self, until_cycles, done=None):
-        """Runs until the model clock reaches `until_cycles` or done()."""
+    def run(self, until_cycles, done=None, max_instructions=None):
+        """Runs until the model clock reaches `until_cycles`, done(), or
+        `max_instructions` executed."""
         core, bus = self.core, self.bus
         while core.cycles < until_cycles:
             if done is not None and done():
                 return "done"
+            if max_instructions is not None and core.instructions >= max_instructions:
+                return "instruction limit"
             try:
                 bus.fire_due()
                 if bus.error:
