@@ -1,0 +1,152 @@
+#!/usr/bin/env bash
+# Mutation testing of the core (cvm-core) and the firmware logic (fw-app):
+# cargo-mutants puts one small bug at a time into a copy of the code and
+# runs the host tests against it; a mutant the tests do not notice is a
+# "survivor". Too slow for every commit (scripts/test.sh does not run it);
+# results and the survivors' explanations are in docs/mutants.md.
+#
+# usage: scripts/mutants.sh [pass...] [-- cargo-mutants options]
+#   scripts/mutants.sh                      every pass, in the order below
+#   scripts/mutants.sh stream embed         two passes
+#   scripts/mutants.sh scorer -- --list     list one pass's mutants only
+#   scripts/mutants.sh protocol -- --iterate
+#                                           finish an interrupted pass
+#                                           (skips mutants already caught)
+#
+# Passes (each its own cargo-mutants run and output directory):
+#   fw-app    fw-app/src/sequence.rs and queue.rs, against fw-app-tests
+#   stream    cvm-core/src/stream.rs (gradient, border rule, flags,
+#             decisions, row summaries), against core-tests and
+#             fw-app-tests
+#   embed     the per-map passes of cvm-core/src/scorer/embed.rs (sum and
+#             saturation, conversion, row and column passes)
+#   scorer    normalisation, flags, score conversion, distances and the
+#             gradient magnitude in cvm-core/src/scorer.rs
+#   protocol  the line encoder and CRC in cvm-core/src/protocol.rs
+#   pipeline  cvm-core/src/pipeline.rs
+#   rest      everything else in both crates (tables, configuration, the
+#             protocol parser, acquisition, driver, ...), against every
+#             host test crate that uses them
+#
+# Environment:
+#   MUTANTS_REV    commit to test (default HEAD: the committed tree, so a
+#                  run can be quoted against a commit)
+#   MUTANTS_OUT    where <pass>/mutants.out/ go (default target/mutants)
+#   MUTANTS_STAGE  the staging workspace (default $TMPDIR/cvm-mutants-stage;
+#                  its build cache is kept next to it, in .target)
+#   MUTANTS_TIMEOUT, MUTANTS_BUILD_TIMEOUT  seconds (default 240, 600)
+#   CARGO_BUILD_JOBS  cargo's parallelism per build (default 1)
+set -euo pipefail
+root=$(cd "$(dirname "$0")/.." && pwd)
+cd "$root"
+
+rev=${MUTANTS_REV:-HEAD}
+out=${MUTANTS_OUT:-$root/target/mutants}
+stage=${MUTANTS_STAGE:-${TMPDIR:-/tmp}/cvm-mutants-stage}
+export CARGO_BUILD_JOBS=${CARGO_BUILD_JOBS:-1}
+export CARGO_TARGET_DIR=$stage.target
+
+passes=()
+while [ $# -gt 0 ] && [ "$1" != "--" ]; do
+    passes+=("$1")
+    shift
+done
+[ "${1-}" = "--" ] && shift
+[ ${#passes[@]} -gt 0 ] || passes=(fw-app stream embed scorer protocol pipeline rest)
+
+if ! cargo mutants --version >/dev/null 2>&1; then
+    cargo install --locked cargo-mutants
+fi
+
+# cargo-mutants mutates packages of one cargo workspace and runs that
+# workspace's tests. cvm-core and fw-app are path dependencies of the host
+# workspace (host-tests/), not members of it, and the repository root is
+# the firmware workspace (cross-compiled). So the run uses a staging copy
+# of the committed tree with one workspace at its root: members cvm-core,
+# fw-app and the host crates, with the host workspace's settings and lock
+# file. The crates' relative paths are unchanged, so every path dependency
+# and every test that reads a file of the repository (docs/protocol.md)
+# resolves inside the copy. cargo-mutants mutates the stage in place (see
+# below), never the working tree.
+commit=$(git rev-parse --verify "$rev^{commit}")
+rm -rf "$stage"
+mkdir -p "$stage"
+git archive "$commit" cvm-core fw-app docs host-tests | tar -x -C "$stage"
+rm -rf "$stage/host-tests/fuzz"
+rm -f "$stage/host-tests/Cargo.toml"
+mv "$stage/host-tests/Cargo.lock" "$stage/Cargo.lock"
+host_members=$(git show "$commit:host-tests/Cargo.toml" |
+    sed -n 's/^members = \[\(.*\)\]$/\1/p' | sed 's/"\([^"]*\)"/"host-tests\/\1"/g')
+{
+    echo '# Staging workspace for scripts/mutants.sh (generated).'
+    echo '[workspace]'
+    echo 'resolver = "3"'
+    echo "members = [\"cvm-core\", \"fw-app\", $host_members]"
+    echo
+    git show "$commit:host-tests/Cargo.toml" | sed -n '/^\[workspace\.package\]/,$p'
+} >"$stage/Cargo.toml"
+# Needs the firmware built for the emulated board, which is not staged.
+rm -f "$stage/host-tests/dmap/tests/emulate.rs"
+
+# Functions of each pass (cargo-mutants matches these against the
+# mutant's name, e.g. "cvm-core/src/scorer.rs:412:5: replace Scorer::scale
+# -> (u32, i32) with (0, 0)" or "replace + with - in rows").
+fn_re() { printf '(replace|in) (%s)( |$)' "$1"; }
+embed_fns='sum_and_saturation|saturation_offset|mul_hi_round|tri|rows|cols|embed'
+scorer_fns='Scorer::(normalise|converter|prepare|prepare_with|prepare_replacing|prepare_into|scale|distance|square_distance|to_score)|recip_sample|shr_sample|fill|squared_difference|reciprocal|magnitude'
+protocol_fns='crc16|LineBuf::[a-z0-9_]+|encode_score|encode_header|encode_row|encode_end|end_fields|HeaderInfo<.*>::new'
+core_tests=(--test-package cvm-core-tests --test-package cvm-fw-app-tests)
+
+status=0
+baselined=
+for pass in "${passes[@]}"; do
+    case $pass in
+    fw-app) args=(--package cvm-fw-app --test-package cvm-fw-app-tests
+        --file fw-app/src/sequence.rs --file fw-app/src/queue.rs) ;;
+    stream) args=(--package cvm-core "${core_tests[@]}" --file cvm-core/src/stream.rs) ;;
+    embed) args=(--package cvm-core "${core_tests[@]}" --file cvm-core/src/scorer/embed.rs
+        --re "$(fn_re "$embed_fns")") ;;
+    scorer) args=(--package cvm-core "${core_tests[@]}" --file cvm-core/src/scorer.rs
+        --re "$(fn_re "$scorer_fns")") ;;
+    protocol) args=(--package cvm-core "${core_tests[@]}" --file cvm-core/src/protocol.rs
+        --re "$(fn_re "$protocol_fns")") ;;
+    pipeline) args=(--package cvm-core "${core_tests[@]}" --file cvm-core/src/pipeline.rs) ;;
+    rest) args=(--package cvm-core --package cvm-fw-app --test-workspace=true
+        --exclude fw-app/src/sequence.rs --exclude fw-app/src/queue.rs
+        --exclude cvm-core/src/stream.rs --exclude cvm-core/src/pipeline.rs
+        --exclude-re "$(fn_re "$embed_fns|$scorer_fns|$protocol_fns")") ;;
+    *)
+        echo "unknown pass '$pass'" >&2
+        exit 2
+        ;;
+    esac
+    # The unmutated tree is tested once per test set and invocation.
+    tests_of_pass=$(printf '%s\n' "${args[@]}" | grep -A1 -e '--test-' | tr '\n' ' ')
+    case " $baselined " in
+    *" [$tests_of_pass] "*) args+=(--baseline=skip) ;;
+    *) baselined="$baselined [$tests_of_pass]" ;;
+    esac
+    mkdir -p "$out/$pass"
+    echo "== pass $pass: mutants of $commit -> $out/$pass/mutants.out" >&2
+    # In place: the stage is this script's own copy, so nothing else sees
+    # the mutated files, and one build cache serves every pass.
+    s=0
+    nice -n 19 cargo mutants \
+        --dir "$stage" \
+        --in-place \
+        "${args[@]}" \
+        --timeout "${MUTANTS_TIMEOUT:-240}" \
+        --build-timeout "${MUTANTS_BUILD_TIMEOUT:-600}" \
+        --output "$out/$pass" \
+        "$@" || s=$?
+    if [ -d "$out/$pass/mutants.out" ]; then
+        echo "$commit" >"$out/$pass/mutants.out/commit"
+    fi
+    # cargo-mutants exits 2 when mutants were missed and 3 on timeouts: a
+    # report, not a failure of this script. Anything else is.
+    case $s in
+    0 | 2 | 3) ;;
+    *) status=$s ;;
+    esac
+done
+exit $status
