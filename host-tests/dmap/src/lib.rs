@@ -14,3 +14,4 @@ pub mod render;
 pub mod score;
 pub mod simulate;
 pub mod stream;
+pub mod twin;

@@ -33,6 +33,8 @@ enum Command {
     Listen(dmap::listen::ListenArgs),
     /// Run the firmware (emulated board, QEMU mps2-an386) over a scan and print its UART output
     Emulate(dmap::emulate::EmulateArgs),
+    /// Run the H743 release firmware on the chip model (STM32H743 on Unicorn) over a scan, with injectable faults
+    Twin(dmap::twin::TwinArgs),
     /// Maps scored per second by each implementation (f64 brute/SAT/embedding, fixed point, EMD), one thread
     Bench(dmap::bench::BenchArgs),
 }
@@ -73,6 +75,7 @@ fn main() {
         Command::Stream(args) => dmap::stream::run(&args),
         Command::Listen(args) => dmap::listen::run(&args),
         Command::Emulate(args) => dmap::emulate::run(&args),
+        Command::Twin(args) => dmap::twin::run(&args),
         Command::Bench(args) => dmap::bench::run(&args),
     };
     if let Err(e) = result {

@@ -1,0 +1,553 @@
+//! `dmap twin`: the H743 release firmware, unmodified, run on the chip
+//! model in `host-tests/twin` (an STM32H743 on Unicorn, with a detector
+//! model wired to its pins) over a scan.
+//!
+//! * The scan is read and validated by `dmap emulate`'s own code
+//!   ([`crate::emulate::scan_file_and_warnings`]: same settings, errors and warnings as
+//!   `dmap stream`), and the H743 build configuration (`CVM_H743_SCAN`, read
+//!   by the firmware's `build.rs`) is derived from the header the emulated
+//!   board would get: geometry, columns, rows, kernels, weights,
+//!   normalisation, threshold, score lines and defect lines per row.
+//! * The ELF is built with `cargo build --release` into `target/twin` and
+//!   cached per configuration in `target/twin/elf/<hash>.elf`; a cached ELF
+//!   is reused while it is newer than every firmware source. `--elf` skips
+//!   the build (the ELF must have been built for the scan's configuration).
+//! * The model (`python3 -m h743twin`) reads the scan in its own format,
+//!   written to a temporary file; its standard output (the bytes the
+//!   firmware sent on USART3) is copied to standard output, and its
+//!   standard error, whose last line is a JSON object of counters, is
+//!   passed through. A model that fails or stops on something it does not
+//!   model makes `dmap` fail with one line after that JSON.
+//! * The model never outlives `dmap`: on every way out (an error, a closed
+//!   pipe, a panic, SIGINT, SIGTERM or SIGHUP) it is killed and reaped
+//!   before its scan file is removed.
+
+use crate::emulate::{EmulateArgs, scan_file_and_warnings};
+use crate::options::ScoringArgs;
+use crate::stream::{OutputArgs, fmt_num};
+use anyhow::{Context, Result, bail};
+use clap::Args;
+use cvm_core::{Kernels, Weights};
+use cvm_fw_app::emufile::{HEADER_LEN, ScanHeader};
+use std::io::{BufRead, BufReader, Read, Write};
+use std::path::{Path, PathBuf};
+use std::process::{Child, ChildStderr, ChildStdout, Command, ExitStatus, Stdio};
+use std::sync::{Arc, Mutex};
+use std::time::SystemTime;
+
+/// The fault kinds of the detector model and how many numbers follow the
+/// beam in each (`host-tests/twin/h743twin/detector.py`).
+pub const FAULT_KINDS: [(&str, usize); 10] = [
+    ("gap", 1),
+    ("burst", 2),
+    ("sync-glitch", 0),
+    ("sync-miss", 0),
+    ("overrun", 0),
+    ("dma-error", 0),
+    ("dma-stall", 0),
+    ("uart-busy", 1),
+    ("halt", 1),
+    ("wedge", 0),
+];
+
+const FAULTS_HELP: &str = "\
+Faults (--fault KIND@BEAM[:ARG...], repeatable; beams count from 0 in raster order):
+  gap@B:MS         no DRDY for MS milliseconds before beam B
+  burst@B:N:US     beams B..B+N-1 come US microseconds apart (faster than the SPI)
+  sync-glitch@B    an extra LINE_SYNC on beam B (mid-row)
+  sync-miss@B      no LINE_SYNC on beam B (a row start)
+  overrun@B        the SPI loses a frame of beam B's read (OVR)
+  dma-error@B      beam B's SPI DMA transfer fails with a transfer error
+  dma-stall@B      beam B's SPI DMA requests are never served
+  uart-busy@B:MS   the UART line is held busy for MS milliseconds from beam B
+  halt@B:MS        a debugger halts the core for MS milliseconds at beam B
+  wedge@B          the firmware wedges at beam B (interrupts off; the watchdog must reset it)
+
+Standard output: the bytes the firmware sent on its UART. Standard error: the model's
+counters as one JSON object (last line; `resets` lists watchdog resets). Needs python3
+with unicorn 2.1.4 and pyelftools 0.33 (scripts/setup.sh installs them).";
+
+#[derive(Args, Clone, Debug)]
+#[command(after_help = FAULTS_HELP)]
+pub struct TwinArgs {
+    /// Scan .npy, shape (rows, cols, J1, J2), integer counts 0..=65535
+    pub scan: PathBuf,
+    #[command(flatten)]
+    pub scoring: ScoringArgs,
+    #[command(flatten)]
+    pub output: OutputArgs,
+    /// DRDY period: one beam every P microseconds
+    #[arg(long, value_name = "P", default_value_t = 200.0)]
+    pub beam_us: f64,
+    /// Inject a detector or chip fault, KIND@BEAM[:ARG...] (kinds below)
+    #[arg(long = "fault", value_name = "SPEC")]
+    pub faults: Vec<String>,
+    /// H743 ELF to run, built for this scan's configuration (default: build it, cached in target/twin/elf)
+    #[arg(long)]
+    pub elf: Option<PathBuf>,
+    /// Run the model at most this many milliseconds after the last beam
+    #[arg(long, value_name = "MS", default_value_t = 1500.0)]
+    pub settle_ms: f64,
+    /// A debugger is attached (the DBGMCU freeze bits apply while the core is halted)
+    #[arg(long)]
+    pub debugger: bool,
+}
+
+/// The repository root (this crate lives in host-tests/dmap).
+fn repo_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+/// The `CVM_H743_SCAN` value that builds the H743 firmware for the
+/// configuration of an emulated-board scan header (see the root `build.rs`).
+pub fn h743_config(h: &ScanHeader) -> Result<String> {
+    let g = h.config.geometry;
+    let (kernels, b) = match h.config.kernels {
+        Kernels::Paper { bmax } => ("paper", bmax),
+        Kernels::Square { kmax } => ("square", kmax),
+    };
+    let weights = match h.config.weights {
+        Weights::Uniform => "uniform",
+        Weights::Unit => "unit",
+        Weights::Separable { .. } => bail!("the H743 build has no separable weights"),
+    };
+    if h.config.full_scale != u16::MAX {
+        bail!(
+            "the H743 build has a full scale of 65535, not {}",
+            h.config.full_scale
+        );
+    }
+    Ok(format!(
+        "j1={} j2={} cols={} rows={} kernels={kernels} b={b} weights={weights} normalise={} threshold={:?} scores={} max_defect_lines={}",
+        g.j1,
+        g.j2,
+        h.cols,
+        h.rows,
+        h.config.normalise,
+        h.threshold_units,
+        h.scores,
+        h.max_defect_lines_per_row,
+    ))
+}
+
+/// The model's scan file (`Scan.read_raw` in detector.py): `CVMTWIN1`,
+/// rows, cols, J1, J2 as little-endian u32, then the samples as
+/// little-endian u16 in raster order, each map in (J1, J2) order, from an
+/// emulated-board scan file (the same samples, big-endian).
+pub fn twin_file(h: &ScanHeader, emufile: &[u8]) -> Result<Vec<u8>> {
+    let g = h.config.geometry;
+    let samples = emufile
+        .get(HEADER_LEN..)
+        .context("scan file shorter than its header")?;
+    let expected = h.rows as usize * h.cols as usize * usize::from(g.j1) * usize::from(g.j2);
+    if samples.len() != 2 * expected {
+        bail!(
+            "scan has {} samples, expected {expected}",
+            samples.len() / 2
+        );
+    }
+    let mut out = Vec::with_capacity(24 + samples.len());
+    out.extend_from_slice(b"CVMTWIN1");
+    for v in [h.rows, h.cols, u32::from(g.j1), u32::from(g.j2)] {
+        out.extend_from_slice(&v.to_le_bytes());
+    }
+    for s in samples.chunks_exact(2) {
+        out.extend_from_slice(&[s[1], s[0]]);
+    }
+    Ok(out)
+}
+
+/// Checks a `--fault` against the model's kinds and a scan of `beams`
+/// beams (the model would refuse it only after the build).
+pub fn check_fault(spec: &str, beams: u64) -> Result<()> {
+    let (kind, rest) = spec
+        .split_once('@')
+        .with_context(|| format!("--fault {spec:?}: expected KIND@BEAM[:ARG...]"))?;
+    let Some(&(_, nargs)) = FAULT_KINDS.iter().find(|(k, _)| *k == kind) else {
+        let kinds: Vec<&str> = FAULT_KINDS.iter().map(|(k, _)| *k).collect();
+        bail!(
+            "--fault {spec:?}: unknown kind {kind:?} (one of {})",
+            kinds.join(", ")
+        );
+    };
+    let mut parts = rest.split(':');
+    let beam: u64 = parts
+        .next()
+        .and_then(|b| b.parse().ok())
+        .with_context(|| format!("--fault {spec:?}: the beam must be a number from 0"))?;
+    if beam >= beams {
+        bail!(
+            "--fault {spec:?}: beam {beam} is past the scan's last beam ({})",
+            beams - 1
+        );
+    }
+    let args: Vec<&str> = parts.collect();
+    if args.len() != nargs {
+        bail!("--fault {spec:?}: {kind} takes {nargs} number(s) after the beam");
+    }
+    for a in args {
+        match a.parse::<f64>() {
+            Ok(v) if v.is_finite() && v >= 0.0 => {}
+            _ => bail!("--fault {spec:?}: {a:?} is not a non-negative number"),
+        }
+    }
+    Ok(())
+}
+
+/// A stable 64-bit hash (FNV-1a) of a configuration, naming its cached ELF.
+fn config_hash(config: &str) -> u64 {
+    config.bytes().fold(0xcbf2_9ce4_8422_2325, |h, b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)
+    })
+}
+
+/// The newest modification time of `path` and everything under it.
+fn newest(path: &Path) -> Option<SystemTime> {
+    let meta = std::fs::metadata(path).ok()?;
+    let mut t = meta.modified().ok();
+    if meta.is_dir() {
+        for entry in std::fs::read_dir(path).ok()?.flatten() {
+            t = t.max(newest(&entry.path()));
+        }
+    }
+    t
+}
+
+/// The newest firmware source: what a cached ELF must be newer than.
+fn newest_source(root: &Path) -> Option<SystemTime> {
+    [
+        "src",
+        "cvm-core/src",
+        "cvm-core/Cargo.toml",
+        "fw-app/src",
+        "fw-app/Cargo.toml",
+        "boards",
+        "build.rs",
+        "Cargo.toml",
+        "Cargo.lock",
+        ".cargo/config.toml",
+    ]
+    .iter()
+    .filter_map(|p| newest(&root.join(p)))
+    .max()
+}
+
+/// The H743 release ELF for `config` (a `CVM_H743_SCAN` value): the cached
+/// copy in `target/twin/elf` if it is newer than every firmware source,
+/// else a fresh `cargo build --release --target-dir target/twin`, copied
+/// there. A lock file keeps concurrent runs from copying each other's
+/// build.
+pub fn build_elf(config: &str) -> Result<PathBuf> {
+    let root = repo_root();
+    let target_dir = root.join("target/twin");
+    let cache = target_dir.join("elf");
+    std::fs::create_dir_all(&cache).with_context(|| format!("creating {}", cache.display()))?;
+    let lock = std::fs::File::create(cache.join(".lock"))
+        .with_context(|| format!("creating {}", cache.join(".lock").display()))?;
+    lock.lock()
+        .with_context(|| format!("locking {}", cache.join(".lock").display()))?;
+    let name = format!("{:016x}", config_hash(config));
+    let elf = cache.join(format!("{name}.elf"));
+    let built_at = std::fs::metadata(&elf).and_then(|m| m.modified()).ok();
+    if let Some(t) = built_at
+        && newest_source(&root).is_some_and(|s| s < t)
+    {
+        return Ok(elf);
+    }
+    let status = Command::new(std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into()))
+        .current_dir(&root)
+        .args(["build", "--release", "--target-dir"])
+        .arg(&target_dir)
+        .env("CVM_H743_SCAN", config)
+        .env_remove("CARGO_TARGET_DIR")
+        .env_remove("CARGO_BUILD_TARGET")
+        .env_remove("RUSTFLAGS")
+        .env_remove("CARGO_ENCODED_RUSTFLAGS")
+        .stdout(Stdio::null())
+        .status()
+        .context("running cargo to build the H743 firmware")?;
+    if !status.success() {
+        bail!(
+            "building the H743 firmware with CVM_H743_SCAN=\"{config}\" failed (needs `rustup target add thumbv7em-none-eabihf`); see the cargo output above"
+        );
+    }
+    let built = target_dir.join("thumbv7em-none-eabihf/release/cvm-fw");
+    let tmp = cache.join(format!("{name}.elf.tmp"));
+    std::fs::copy(&built, &tmp).with_context(|| format!("copying {}", built.display()))?;
+    std::fs::rename(&tmp, &elf).with_context(|| format!("renaming {}", tmp.display()))?;
+    // The configuration beside its ELF, for whoever looks in the cache.
+    let _ = std::fs::write(cache.join(format!("{name}.cfg")), format!("{config}\n"));
+    Ok(elf)
+}
+
+/// The model's process and the directory of its scan file. Dropping it
+/// kills the model if it still runs, reaps it, and only then removes the
+/// directory (fields drop after `drop`).
+struct Running {
+    child: Child,
+    _dir: tempfile::TempDir,
+}
+
+impl Drop for Running {
+    fn drop(&mut self) {
+        if let Ok(None) = self.child.try_wait() {
+            let _ = self.child.kill();
+        }
+        let _ = self.child.wait();
+    }
+}
+
+type Shared = Arc<Mutex<Option<Running>>>;
+
+fn lock(shared: &Shared) -> std::sync::MutexGuard<'_, Option<Running>> {
+    shared.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// The model under supervision: whoever takes the child out of `shared`
+/// (this on drop, or the signal thread on SIGINT, SIGTERM or SIGHUP) ends
+/// it.
+struct Supervised {
+    shared: Shared,
+    signals: signal_hook::iterator::Handle,
+}
+
+impl Supervised {
+    /// Installs the signal thread, then starts `cmd` with piped standard
+    /// output and error.
+    fn spawn(
+        cmd: &mut Command,
+        dir: tempfile::TempDir,
+    ) -> Result<(Supervised, ChildStdout, ChildStderr)> {
+        use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
+        let shared: Shared = Arc::new(Mutex::new(None));
+        let mut signals = signal_hook::iterator::Signals::new([SIGINT, SIGTERM, SIGHUP])
+            .context("installing signal handlers")?;
+        let me = Supervised {
+            shared: shared.clone(),
+            signals: signals.handle(),
+        };
+        std::thread::spawn(move || {
+            if let Some(sig) = signals.forever().next() {
+                drop(lock(&shared).take());
+                let _ = signal_hook::low_level::emulate_default_handler(sig);
+                std::process::exit(128 + sig);
+            }
+        });
+        let mut child = cmd
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .context("starting python3 (the chip model needs python3 with unicorn and pyelftools: scripts/setup.sh)")?;
+        let (Some(stdout), Some(stderr)) = (child.stdout.take(), child.stderr.take()) else {
+            bail!("the chip model's output pipes are missing");
+        };
+        *lock(&me.shared) = Some(Running { child, _dir: dir });
+        Ok((me, stdout, stderr))
+    }
+
+    /// Waits for the model's exit status without holding the child away
+    /// from the signal thread.
+    fn wait(&self) -> Result<ExitStatus> {
+        loop {
+            if let Some(r) = lock(&self.shared).as_mut()
+                && let Some(status) = r.child.try_wait().context("waiting for the chip model")?
+            {
+                return Ok(status);
+            }
+            // Gone: taken by the signal thread, which ends the process.
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        }
+    }
+}
+
+impl Drop for Supervised {
+    fn drop(&mut self) {
+        drop(lock(&self.shared).take());
+        self.signals.close();
+    }
+}
+
+/// Passes the model's standard error through as it comes, except its last
+/// non-empty line (the JSON counters), which it returns unprinted so that
+/// `dmap` can put its own messages before it.
+fn pass_stderr(stderr: ChildStderr) -> std::thread::JoinHandle<String> {
+    std::thread::spawn(move || {
+        let mut held = String::new();
+        let mut reader = BufReader::new(stderr);
+        let mut line = Vec::new();
+        while let Ok(n) = reader.read_until(b'\n', &mut line) {
+            if n == 0 {
+                break;
+            }
+            let text = String::from_utf8_lossy(&line);
+            if text.trim().is_empty() {
+                let _ = std::io::stderr().write_all(&line);
+            } else {
+                if !held.is_empty() {
+                    let _ = writeln!(std::io::stderr(), "{held}");
+                }
+                held = text.trim_end().to_string();
+            }
+            line.clear();
+        }
+        held
+    })
+}
+
+/// Runs the model on `elf` with the scan file `scan` (inside `dir`, removed
+/// once the model is gone), handing the UART bytes to `out` and passing its
+/// standard error through. Returns the model's JSON counters and their line
+/// (the last of its standard error), which the caller prints; fails, after
+/// printing that line, if the model fails or stops on something it does
+/// not model.
+pub fn run_model(
+    elf: &Path,
+    scan: &Path,
+    dir: tempfile::TempDir,
+    args: &TwinArgs,
+    out: &mut dyn FnMut(&[u8]) -> Result<()>,
+) -> Result<(serde_json::Value, String)> {
+    let twin = repo_root().join("host-tests/twin");
+    let mut pythonpath = std::ffi::OsString::from(twin.as_os_str());
+    if let Some(p) = std::env::var_os("PYTHONPATH").filter(|p| !p.is_empty()) {
+        pythonpath.push(":");
+        pythonpath.push(p);
+    }
+    let mut cmd = Command::new("python3");
+    cmd.args(["-m", "h743twin"])
+        .arg(elf)
+        .arg("--scan")
+        .arg(scan)
+        .args(["--beam-us", &args.beam_us.to_string()])
+        .args(["--settle-ms", &args.settle_ms.to_string()])
+        .env("PYTHONPATH", pythonpath);
+    for f in &args.faults {
+        cmd.args(["--fault", f]);
+    }
+    if args.debugger {
+        cmd.arg("--debugger");
+    }
+    let (model, mut stdout, stderr) = Supervised::spawn(&mut cmd, dir)?;
+    let errors = pass_stderr(stderr);
+    let mut buf = [0u8; 8192];
+    loop {
+        let n = match stdout.read(&mut buf) {
+            Ok(0) => break,
+            Ok(n) => n,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+            Err(e) => return Err(e).context("reading the chip model's output"),
+        };
+        out(&buf[..n])?;
+    }
+    let status = model.wait()?;
+    drop(model);
+    let last = errors.join().unwrap_or_default();
+    let json: Option<serde_json::Value> = serde_json::from_str(&last)
+        .ok()
+        .filter(|v: &serde_json::Value| v.is_object());
+    if let (Some(0), Some(j)) = (status.code(), &json)
+        && j["status"] != "error"
+    {
+        return Ok((j.clone(), last));
+    }
+    if !last.is_empty() {
+        let _ = writeln!(std::io::stderr(), "{last}");
+    }
+    match (status.code(), json) {
+        (_, Some(j)) if j["status"] == "error" => bail!(
+            "the chip model stopped: {} (at {} ms of model time)",
+            j["error"].as_str().unwrap_or("unknown error"),
+            j["cycles"]
+                .as_f64()
+                .zip(j["clock_hz"].as_f64())
+                .map_or("?".into(), |(c, hz)| fmt_num((c / hz * 1e3).round()))
+        ),
+        (Some(2), _) => bail!("the chip model refused its arguments; its message is above"),
+        _ => bail!(
+            "the chip model failed ({status}); its message is above (it needs python3 with unicorn 2.1.4 and pyelftools 0.33: scripts/setup.sh)"
+        ),
+    }
+}
+
+pub fn run(args: &TwinArgs) -> Result<()> {
+    if !(args.beam_us.is_finite() && args.beam_us > 0.0) {
+        bail!("--beam-us must be a positive number of microseconds");
+    }
+    if !(args.settle_ms.is_finite() && args.settle_ms >= 0.0) {
+        bail!("--settle-ms must be a non-negative number of milliseconds");
+    }
+    // The emulated board's scan file: the same reading, validation,
+    // settings and warnings as `dmap emulate` and `dmap stream`.
+    let (emufile, warnings) = scan_file_and_warnings(&EmulateArgs {
+        scan: args.scan.clone(),
+        scoring: args.scoring.clone(),
+        output: args.output.clone(),
+        elf: None,
+        icount: false,
+    })?;
+    let header = ScanHeader::parse(&emufile).map_err(|e| anyhow::anyhow!(e.message()))?;
+    let beams = u64::from(header.rows) * u64::from(header.cols);
+    for f in &args.faults {
+        check_fault(f, beams)?;
+    }
+    let config = h743_config(&header)?;
+    let file = twin_file(&header, &emufile)?;
+    drop(emufile);
+    for w in &warnings {
+        crate::out::warn(w);
+    }
+    let elf = match &args.elf {
+        Some(p) => p.clone(),
+        None => build_elf(&config)?,
+    };
+    if !elf.is_file() {
+        bail!("firmware ELF {} not found", elf.display());
+    }
+    let dir = tempfile::Builder::new()
+        .prefix("dmap-twin-")
+        .tempdir()
+        .context("creating a temporary directory")?;
+    let scan_path = dir.path().join("scan.twin");
+    std::fs::write(&scan_path, &file)
+        .with_context(|| format!("writing {}", scan_path.display()))?;
+    let (stats, line) = run_model(&elf, &scan_path, dir, args, &mut |bytes| {
+        crate::out::stdout(bytes)
+    })?;
+    if stats["status"] == "time" {
+        crate::out::warn(&format!(
+            "the firmware sent no complete end line within --settle-ms {} after the last beam",
+            fmt_num(args.settle_ms)
+        ));
+    }
+    // The counters stay the last line, as the model prints them.
+    let _ = writeln!(std::io::stderr(), "{line}");
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn faults_are_checked_before_the_build() {
+        assert!(check_fault("gap@3:5", 10).is_ok());
+        assert!(check_fault("burst@0:4:20.5", 10).is_ok());
+        assert!(check_fault("wedge@9", 10).is_ok());
+        assert!(check_fault("wedge@10", 10).is_err());
+        assert!(check_fault("gap@3", 10).is_err());
+        assert!(check_fault("wedge@3:1", 10).is_err());
+        assert!(check_fault("jam@3", 10).is_err());
+        assert!(check_fault("gap", 10).is_err());
+        assert!(check_fault("gap@-1:5", 10).is_err());
+        assert!(check_fault("gap@1:x", 10).is_err());
+    }
+
+    #[test]
+    fn config_hash_is_stable() {
+        // FNV-1a 64 check values: the cache names must not change between
+        // toolchains.
+        assert_eq!(config_hash(""), 0xcbf2_9ce4_8422_2325);
+        assert_eq!(config_hash("a"), 0xaf63_dc4c_8601_ec8c);
+    }
+}

@@ -1,0 +1,354 @@
+//! `dmap twin`: the H743 release firmware, unmodified, on the chip model
+//! (host-tests/twin). Its UART bytes equal `dmap stream`'s for the same
+//! scan and settings; under every fault of the detector model every
+//! position is accounted in the end line, the firmware neither hangs nor
+//! resets, and a wedged firmware is reset by the watchdog. Needs python3
+//! with unicorn and pyelftools and the `thumbv7em-none-eabihf` target
+//! (scripts/setup.sh); each configuration's ELF is built once and cached in
+//! target/twin/elf.
+
+use cvm_reference::Geometry;
+use dmap::npy::write_scan_u16;
+use std::collections::HashMap;
+use std::path::Path;
+use std::process::{Command, Output};
+
+const ROWS: usize = 6;
+const COLS: usize = 12;
+
+/// A scan with a planted bright blob, a dark map and a saturated map over
+/// a random background.
+fn write_scan(path: &Path, j1: usize, j2: usize, seed: u64) {
+    let mut state = seed;
+    let mut rnd = move || {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (state >> 33) as u32
+    };
+    let cells = j1 * j2;
+    let mut data = Vec::with_capacity(ROWS * COLS * cells);
+    for r in 0..ROWS {
+        for c in 0..COLS {
+            for k in 0..cells {
+                let mut v = 500 + (rnd() % 300) as u16;
+                if (r, c) == (ROWS / 2, COLS / 3) && k % 2 == 0 {
+                    v += 6000;
+                }
+                if (r, c) == (1, COLS - 2) {
+                    v = 0;
+                }
+                if (r, c) == (ROWS - 2, 1) {
+                    v = u16::MAX;
+                }
+                data.push(v);
+            }
+        }
+    }
+    write_scan_u16(path, ROWS, COLS, Geometry::new(j1, j2).unwrap(), &data).unwrap();
+}
+
+fn dmap(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_dmap"))
+        .args(args)
+        .output()
+        .expect("running dmap")
+}
+
+fn ok(args: &[&str], out: &Output) {
+    assert!(
+        out.status.success(),
+        "dmap {args:?} failed ({}):\n{}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// The model's counters: the last line of standard error.
+fn counters(out: &Output) -> serde_json::Value {
+    let err = String::from_utf8_lossy(&out.stderr);
+    let last = err.lines().rfind(|l| !l.trim().is_empty()).unwrap_or("");
+    serde_json::from_str(last).unwrap_or_else(|e| panic!("no JSON counters ({e}) in:\n{err}"))
+}
+
+/// The configuration of the fault scenarios: 9x9 maps, paper kernels,
+/// score lines, a threshold the planted blob exceeds.
+const FAULT_OPTS: [&str; 3] = ["--scores", "--threshold", "0.05"];
+
+/// `dmap stream` and `dmap twin` over the same scan with `opts`: the twin
+/// must print the same bytes. The only documented difference is the `fw`
+/// field of the header (the H743 firmware announces `cvm-fw-<version>`,
+/// `dmap stream` the scoring code's `<version>`), so the header may differ
+/// in exactly that field and its checksum.
+fn compare(j1: usize, j2: usize, opts: &[&str]) {
+    let dir = tempfile::tempdir().unwrap();
+    let scan = dir.path().join("scan.npy");
+    write_scan(&scan, j1, j2, (j1 * 100 + j2) as u64);
+    let scan = scan.to_str().unwrap();
+    let stream_args = [&["stream", scan], opts].concat();
+    let host = dmap(&stream_args);
+    ok(&stream_args, &host);
+    let twin_args = [&["twin", scan], opts].concat();
+    let twin = dmap(&twin_args);
+    ok(&twin_args, &twin);
+    let text = String::from_utf8(host.stdout.clone()).unwrap();
+    assert!(
+        text.starts_with("H,") && text.contains("\nE,"),
+        "unexpected stream output: {text}"
+    );
+    assert!(
+        text.lines().any(|l| l.starts_with("D,")),
+        "the planted defect must show"
+    );
+    let version = cvm_core::VERSION;
+    let header_end = text.find('\n').unwrap() + 1;
+    let header = &text[..header_end];
+    let body = header[..header.find('*').unwrap()].replacen(
+        &format!(",fw={version},"),
+        &format!(",fw=cvm-fw-{version},"),
+        1,
+    );
+    let crc = cvm_core::protocol::crc16(body.as_bytes());
+    let firmware = format!("{body}*{crc:04X}\n{}", &text[header_end..]);
+    assert!(
+        twin.stdout == host.stdout || twin.stdout == firmware.as_bytes(),
+        "the H743 firmware and the host pipeline differ for {opts:?}:\n--- stream\n{text}\n--- twin\n{}",
+        String::from_utf8_lossy(&twin.stdout)
+    );
+    let c = counters(&twin);
+    assert_eq!(c["status"], "done", "{c}");
+    assert_eq!(c["resets"], serde_json::json!([]), "{c}");
+    assert_eq!(c["beams"], (ROWS * COLS) as u64, "{c}");
+}
+
+#[test]
+fn twin_matches_stream_paper_9x9_scores() {
+    compare(9, 9, &FAULT_OPTS);
+}
+
+#[test]
+fn twin_matches_stream_square_raw_5x7() {
+    compare(
+        5,
+        7,
+        &[
+            "--kernels",
+            "square",
+            "--bmax",
+            "3",
+            "--raw",
+            "--threshold",
+            "1e11",
+            "--max-defect-lines",
+            "2",
+        ],
+    );
+}
+
+/// The end line's values by key.
+fn end_line(stdout: &[u8]) -> HashMap<String, u64> {
+    let text = String::from_utf8_lossy(stdout);
+    let line = text
+        .lines()
+        .rfind(|l| l.starts_with("E,"))
+        .unwrap_or_else(|| panic!("no end line in:\n{text}"));
+    let line = &line[2..line.find('*').unwrap_or(line.len())];
+    line.split(',')
+        .map(|kv| {
+            let (k, v) = kv.split_once('=').unwrap();
+            (k.to_string(), v.parse().unwrap())
+        })
+        .collect()
+}
+
+/// The fault scenario `faults` on the 9x9 configuration; returns the run.
+fn twin_with(faults: &[&str], extra: &[&str]) -> (Output, serde_json::Value) {
+    let dir = tempfile::tempdir().unwrap();
+    let scan = dir.path().join("scan.npy");
+    write_scan(&scan, 9, 9, 909);
+    let mut args = vec!["twin", scan.to_str().unwrap()];
+    args.extend_from_slice(&FAULT_OPTS);
+    for f in faults {
+        args.extend_from_slice(&["--fault", f]);
+    }
+    args.extend_from_slice(extra);
+    let out = dmap(&args);
+    ok(&args, &out);
+    let c = counters(&out);
+    (out, c)
+}
+
+/// One fault: injected, the scan ends (no hang: the end line comes within
+/// the settle time), no reset and no second boot, every position placed or
+/// reported missing, and acquisition recovers (at most a row's worth of
+/// positions lost to one fault).
+fn survives(fault: &str) {
+    let kind = &fault[..fault.find('@').unwrap()];
+    let (out, c) = twin_with(&[fault], &[]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        c["faults_injected"][kind].as_u64() >= Some(1),
+        "{fault} not injected: {c}"
+    );
+    assert_eq!(
+        c["status"], "done",
+        "{fault}: no end line within the settle time:\n{text}\n{c}"
+    );
+    assert_eq!(c["resets"], serde_json::json!([]), "{fault}: reset: {c}");
+    assert_eq!(
+        text.lines().filter(|l| l.starts_with("H,")).count(),
+        1,
+        "{fault}: one boot, one header:\n{text}"
+    );
+    let e = end_line(&out.stdout);
+    let n = (ROWS * COLS) as u64;
+    assert_eq!(e["rows"], ROWS as u64, "{fault}: {e:?}");
+    assert_eq!(
+        e["frames"] + e["missing"],
+        n,
+        "{fault}: positions unaccounted: {e:?}"
+    );
+    assert!(e["misplaced"] <= e["frames"], "{fault}: {e:?}");
+    assert!(
+        e["missing"] <= COLS as u64,
+        "{fault}: acquisition did not recover: {e:?}"
+    );
+}
+
+#[test]
+fn twin_fault_drdy_gap() {
+    survives("gap@20:50");
+}
+
+#[test]
+fn twin_fault_drdy_burst_faster_than_spi() {
+    survives("burst@20:6:20");
+}
+
+#[test]
+fn twin_fault_line_sync_glitch() {
+    survives("sync-glitch@17");
+}
+
+#[test]
+fn twin_fault_line_sync_miss() {
+    survives("sync-miss@24");
+}
+
+#[test]
+fn twin_fault_uart_busy() {
+    survives("uart-busy@10:30");
+}
+
+#[test]
+fn twin_fault_spi_overrun() {
+    survives("overrun@30");
+}
+
+#[test]
+fn twin_fault_dma_transfer_error() {
+    survives("dma-error@30");
+}
+
+#[test]
+fn twin_fault_dma_stall() {
+    survives("dma-stall@30");
+}
+
+#[test]
+fn twin_wedged_firmware_is_reset_by_the_watchdog() {
+    let (_, c) = twin_with(&["wedge@30"], &[]);
+    assert_eq!(c["faults_injected"]["wedge"], 1, "{c}");
+    let resets = c["resets"].as_array().expect("resets list");
+    assert!(
+        resets.iter().any(|r| r["cause"] == "watchdog"),
+        "no watchdog reset after the wedge: {c}"
+    );
+}
+
+#[test]
+fn twin_refuses_a_bad_fault_before_building() {
+    let dir = tempfile::tempdir().unwrap();
+    let scan = dir.path().join("scan.npy");
+    write_scan(&scan, 3, 3, 1);
+    let scan = scan.to_str().unwrap();
+    for (spec, what) in [
+        ("jam@3", "unknown kind"),
+        ("gap@3", "takes 1 number"),
+        ("wedge@72", "past the scan's last beam"),
+    ] {
+        let out = dmap(&["twin", scan, "--fault", spec]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{spec}: {err}");
+        assert_eq!(err.lines().count(), 1, "{spec}: one line: {err}");
+        assert!(err.contains(what), "{spec}: {err}");
+    }
+}
+
+/// The model never outlives `dmap`: killed by SIGTERM mid-run, `dmap`
+/// kills and reaps the model and removes its scan file before it dies.
+#[test]
+fn twin_model_dies_with_dmap() {
+    let dir = tempfile::tempdir().unwrap();
+    let scan = dir.path().join("scan.npy");
+    write_scan(&scan, 9, 9, 909);
+    let mut args = vec!["twin", scan.to_str().unwrap()];
+    args.extend_from_slice(&FAULT_OPTS);
+    // A beam a second: the model runs for over a minute.
+    args.extend_from_slice(&["--beam-us", "1000000"]);
+    let mut dmap = Command::new(env!("CARGO_BIN_EXE_dmap"))
+        .args(&args)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let parent = dmap.id();
+    let started = std::time::Instant::now();
+    // The model: a child of dmap running python3 (after the build, if any).
+    let (model, cmdline) = loop {
+        let found = std::fs::read_dir("/proc").unwrap().flatten().find_map(|e| {
+            let pid: u32 = e.file_name().to_str()?.parse().ok()?;
+            let stat = std::fs::read_to_string(e.path().join("stat")).ok()?;
+            let ppid: u32 = stat
+                .rsplit(')')
+                .next()?
+                .split_whitespace()
+                .nth(1)?
+                .parse()
+                .ok()?;
+            let cmd = std::fs::read(e.path().join("cmdline")).ok()?;
+            let cmd = String::from_utf8_lossy(&cmd).replace('\0', " ");
+            (ppid == parent && cmd.contains("h743twin")).then_some((pid, cmd))
+        });
+        if let Some(f) = found {
+            break f;
+        }
+        assert!(
+            dmap.try_wait().unwrap().is_none(),
+            "dmap ended before the model started"
+        );
+        assert!(started.elapsed().as_secs() < 300, "the model did not start");
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    };
+    let scan_file = cmdline
+        .split_whitespace()
+        .skip_while(|a| *a != "--scan")
+        .nth(1)
+        .unwrap()
+        .to_string();
+    assert!(Path::new(&scan_file).exists(), "{cmdline}");
+    std::thread::sleep(std::time::Duration::from_millis(300));
+    // SAFETY: kill(2) on the pid of our own child.
+    assert_eq!(unsafe { libc::kill(parent as i32, libc::SIGTERM) }, 0);
+    let status = dmap.wait().unwrap();
+    use std::os::unix::process::ExitStatusExt;
+    assert_eq!(status.signal(), Some(libc::SIGTERM), "{status}");
+    assert!(
+        !Path::new(&format!("/proc/{model}")).exists(),
+        "the model (pid {model}) outlived dmap"
+    );
+    assert!(
+        !Path::new(&scan_file).exists(),
+        "the model's scan file {scan_file} is left behind"
+    );
+}
