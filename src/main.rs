@@ -18,6 +18,7 @@ compile_error!(
 
 mod config;
 mod frames;
+mod sink;
 
 #[cfg(feature = "emulated")]
 mod emulated;

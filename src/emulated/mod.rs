@@ -22,12 +22,12 @@ use core::fmt::Write as _;
 
 use cortex_m_rt::entry;
 use cvm_core::pipeline::{Pipeline, Settings};
-use cvm_core::protocol::{LineSink, MAX_LINE, Priority};
+use cvm_core::protocol::MAX_LINE;
 use cvm_core::stream::row_words;
 use cvm_core::{MAX_J, Scorer};
 use cvm_fw_app::acquire::Acquisition;
 use cvm_fw_app::decode::frame_bytes;
-use cvm_fw_app::driver::{CountingSink, ScanDriver};
+use cvm_fw_app::driver::ScanDriver;
 use cvm_fw_app::emufile::{HEADER_LEN, ScanHeader};
 use cvm_fw_app::queue::LineQueue;
 use embassy_executor::{Executor, Spawner};
@@ -39,6 +39,7 @@ use static_cell::{ConstStaticCell, StaticCell};
 use crate::config::emulated::{KEEP_RESERVE, MAX_COLS, QUEUE_BYTES};
 use crate::config::{BEAM_LOG, FIRMWARE_VERSION, FRAME_BUFFERS};
 use crate::frames::{Decoder, FrameBuffers};
+use crate::sink::{QueueSink, SharedQueue};
 use cycles::Stopwatch;
 use semihosting::{File, Stderr, exit};
 
@@ -52,8 +53,7 @@ const EXIT_INTERNAL: u32 = 3;
 type Queue = LineQueue<QUEUE_BYTES>;
 
 static EXECUTOR: StaticCell<Executor> = StaticCell::new();
-static QUEUE: Mutex<ThreadModeRawMutex, RefCell<Queue>> =
-    Mutex::new(RefCell::new(Queue::new(KEEP_RESERVE)));
+static QUEUE: SharedQueue<QUEUE_BYTES> = Mutex::new(RefCell::new(Queue::new(KEEP_RESERVE)));
 /// Lines were queued (scoring -> UART task).
 static KICK: Signal<ThreadModeRawMutex, ()> = Signal::new();
 /// The queue ran empty (UART task -> scoring).
@@ -105,20 +105,6 @@ async fn uart_task(mut uart: uart::Uart0) {
 }
 
 /// The queue as the pipeline's line sink.
-struct QueueSink;
-
-impl LineSink for QueueSink {
-    fn line(&mut self, line: &[u8], priority: Priority) {
-        QUEUE.lock(|q| q.borrow_mut().push(line, priority));
-    }
-}
-
-impl CountingSink for QueueSink {
-    fn dropped(&self) -> u32 {
-        QUEUE.lock(|q| q.borrow().dropped())
-    }
-}
-
 /// Waits until the UART task has sent everything queued.
 async fn drain() {
     while !QUEUE.lock(|q| q.borrow().is_empty()) {
@@ -207,7 +193,7 @@ async fn scan_task(syst: cortex_m::peripheral::SYST) {
     let mut released = [false; FRAME_BUFFERS];
     let mut stopwatch = Stopwatch::new(syst);
     let mut beam: u64 = 0;
-    let mut sink = QueueSink;
+    let mut sink = QueueSink(&QUEUE);
 
     let Some(file_len) = file.len() else {
         fail(EXIT_INPUT, "cannot size the scan file")

@@ -20,27 +20,29 @@
 //! (frame buffers, the UART line buffer), never the DTCM stack.
 
 mod clocks;
+mod drdy;
 mod frame_reader;
 mod resets;
+mod tasks;
 
 use core::cell::RefCell;
 
 use cortex_m_rt::entry;
 use cvm_core::Scorer;
 use cvm_core::pipeline::{Pipeline, Settings};
-use cvm_core::protocol::{LineSink, MAX_LINE, Priority};
+use cvm_core::protocol::MAX_LINE;
 use cvm_core::stream::row_words;
 use cvm_fw_app::acquire::Acquisition;
-use cvm_fw_app::driver::{CountingSink, ScanDriver};
+use cvm_fw_app::driver::ScanDriver;
 use cvm_fw_app::queue::LineQueue;
-use defmt::{error, info, warn};
+use defmt::info;
 use defmt_rtt as _;
 use embassy_executor::{Executor, InterruptExecutor};
 use embassy_stm32::exti::blocking::ExtiGroupMask;
 use embassy_stm32::exti::{ExtiInput, TriggerEdge};
 use embassy_stm32::gpio::{Input, Level, Output, Pull, Speed};
 use embassy_stm32::interrupt::{InterruptExt, Priority as IrqPriority};
-use embassy_stm32::mode::{Async, Blocking};
+
 use embassy_stm32::peripherals::{self, IWDG1};
 use embassy_stm32::time::Hertz;
 use embassy_stm32::usart::UartTx;
@@ -49,17 +51,19 @@ use embassy_stm32::{Peri, bind_interrupts, dma, interrupt, spi, usart};
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::{CriticalSectionRawMutex, ThreadModeRawMutex};
 use embassy_sync::signal::Signal;
-use embassy_time::{Duration, Instant, with_timeout};
+
+use drdy::{DRDY_IO, DrdyIo};
 use frame_reader::FrameReader;
 use static_cell::StaticCell;
+use tasks::{acquire_task, score_task, uart_task};
 
 use crate::config::h743::{
-    BAUD, COLS, CORE, FEED_MS, IDLE_END_MS, J1, J2, KEEP_RESERVE, MAX_COLS,
-    MAX_DEFECT_LINES_PER_ROW, QUEUE_BYTES, READ_TIMEOUT_US, ROWS, SCORE_BURST, SCORES, SPI_DIV,
-    SPI_HZ, SYSCLK_HZ, THRESHOLD_UNITS, WATCHDOG_US,
+    BAUD, COLS, CORE, J1, J2, KEEP_RESERVE, MAX_COLS, MAX_DEFECT_LINES_PER_ROW, QUEUE_BYTES, ROWS,
+    SCORES, SPI_DIV, SPI_HZ, SYSCLK_HZ, THRESHOLD_UNITS, WATCHDOG_US,
 };
 use crate::config::{BEAM_LOG, FIRMWARE_VERSION, FRAME_BUFFERS};
-use crate::frames::{SampleBuffers, Samples};
+use crate::frames::SampleBuffers;
+use crate::sink::SharedQueue;
 
 bind_interrupts!(struct Irqs {
     DMA1_STREAM2 => dma::InterruptHandler<peripherals::DMA1_CH2>;
@@ -93,7 +97,7 @@ static SCORER: Scorer = match Scorer::new(&CORE) {
 /// Row buffer A in AXI SRAM (.bss), row buffer B in SRAM1..3: at 300
 /// columns of 15x15 maps each is 270 KB, too much for one bank together.
 struct RowBuffer(core::cell::UnsafeCell<[i32; ROW_WORDS]>);
-// SAFETY: handed out once, by `take_rows`, before any task runs.
+// SAFETY: handed out once, by `main`, before any task runs.
 unsafe impl Sync for RowBuffer {}
 static ROW_A: RowBuffer = RowBuffer(core::cell::UnsafeCell::new([0; ROW_WORDS]));
 #[unsafe(link_section = ".sram123")]
@@ -105,25 +109,13 @@ type Queue = LineQueue<QUEUE_BYTES>;
 static ACQ: Mutex<CriticalSectionRawMutex, RefCell<Acq>> = Mutex::new(RefCell::new(Acq::new()));
 #[unsafe(link_section = ".dma_buffers")]
 static FRAMES: SampleBuffers<FRAME_BUFFERS> = SampleBuffers::new();
-static QUEUE: Mutex<ThreadModeRawMutex, RefCell<Queue>> =
-    Mutex::new(RefCell::new(Queue::new(KEEP_RESERVE)));
+static QUEUE: SharedQueue<QUEUE_BYTES> = Mutex::new(RefCell::new(Queue::new(KEEP_RESERVE)));
 /// The DMA source of the line being sent (AXI SRAM, not the DTCM stack).
 struct TxLine(core::cell::UnsafeCell<[u8; MAX_LINE]>);
 // SAFETY: only the UART task touches it.
 unsafe impl Sync for TxLine {}
 #[unsafe(link_section = ".dma_buffers")]
 static TX_LINE: TxLine = TxLine(core::cell::UnsafeCell::new([0; MAX_LINE]));
-
-/// The DRDY line's EXTI mask and the LINE_SYNC input, for the interrupt.
-struct DrdyIo {
-    _drdy: ExtiInput<'static, Blocking>,
-    mask: ExtiGroupMask,
-    line_sync: Input<'static>,
-}
-static DRDY_IO: Mutex<CriticalSectionRawMutex, RefCell<Option<DrdyIo>>> =
-    Mutex::new(RefCell::new(None));
-/// DRDY is PE9: EXTI line 9.
-const DRDY_LINE: usize = 9;
 
 /// DRDY interrupt -> acquisition task: the buffer to fill.
 static START: Signal<CriticalSectionRawMutex, usize> = Signal::new();
@@ -135,24 +127,6 @@ static ROOM: Signal<ThreadModeRawMutex, ()> = Signal::new();
 
 static EXECUTOR_ACQ: InterruptExecutor = InterruptExecutor::new();
 static EXECUTOR: StaticCell<Executor> = StaticCell::new();
-
-#[interrupt]
-fn EXTI9_5() {
-    // Clear DRDY's pending bit first, whatever happens next: a pending bit
-    // left set re-enters this handler for ever.
-    embassy_stm32::pac::EXTI
-        .pr(0)
-        .write(|w| w.set_line(DRDY_LINE, true));
-    DRDY_IO.lock(|io| {
-        let io = io.borrow();
-        let Some(io) = io.as_ref() else { return };
-        io.mask.clear();
-        let sync = io.line_sync.is_high();
-        if let Some(buf) = ACQ.lock(|a| a.borrow_mut().drdy(sync)) {
-            START.signal(buf);
-        }
-    });
-}
 
 #[interrupt]
 unsafe fn UART4() {
@@ -263,184 +237,4 @@ fn main() -> ! {
         }
         _ => defmt::panic!("thread tasks already running"),
     })
-}
-
-/// Reads one frame per START into the buffer it names.
-#[embassy_executor::task]
-async fn acquire_task(mut reader: FrameReader, mut cs: Output<'static>) {
-    let timeout = Duration::from_micros(READ_TIMEOUT_US);
-    loop {
-        let buf = START.wait().await;
-        // SAFETY: `buf` is Filling: this task owns it until `read_done`.
-        let samples = unsafe { FRAMES.buffer(buf) };
-        cs.set_low();
-        let result = reader.read(&mut samples[..CELLS], timeout).await;
-        cs.set_high();
-        ACQ.lock(|a| a.borrow_mut().read_done(buf, result.is_ok()));
-        BEAMS.signal(());
-        if let Err(e) = result {
-            warn!("frame lost: {} ({})", e, reader.counts());
-        }
-    }
-}
-
-/// Sends queued lines with DMA.
-#[embassy_executor::task]
-async fn uart_task(mut uart: UartTx<'static, Async>) {
-    let mut errors: u32 = 0;
-    // SAFETY: this task is TX_LINE's only user, and it is spawned once.
-    let line = unsafe { &mut *TX_LINE.0.get() };
-    loop {
-        let n = QUEUE.lock(|q| q.borrow_mut().pop_into(line));
-        let Some(n) = n else {
-            KICK.wait().await;
-            continue;
-        };
-        ROOM.signal(());
-        if uart.write(&line[..n]).await.is_err() {
-            errors = errors.wrapping_add(1);
-            warn!(
-                "USART3 TX error ({} so far): a result line was lost",
-                errors
-            );
-        }
-    }
-}
-
-struct QueueSink;
-
-impl LineSink for QueueSink {
-    fn line(&mut self, line: &[u8], priority: Priority) {
-        QUEUE.lock(|q| q.borrow_mut().push(line, priority));
-    }
-}
-
-impl CountingSink for QueueSink {
-    fn dropped(&self) -> u32 {
-        QUEUE.lock(|q| q.borrow().dropped())
-    }
-}
-
-#[embassy_executor::task]
-async fn score_task(
-    mut driver: ScanDriver<'static, MAX_COLS>,
-    mut wdg: IndependentWatchdog<'static, IWDG1>,
-) {
-    let mut frames = Samples {
-        bufs: &FRAMES,
-        cells: CELLS,
-        release: |b: usize| ACQ.lock(|a| a.borrow_mut().release(b)),
-    };
-    let mut burst = 0u32;
-    let mut sink = QueueSink;
-    let mut last_beam = Instant::now();
-    let mut idle_ended = true;
-    let mut reported = ACQ.lock(|a| *a.borrow().counts());
-
-    loop {
-        let _ = with_timeout(Duration::from_millis(FEED_MS), BEAMS.wait()).await;
-        wdg.pet();
-
-        loop {
-            if !QUEUE.lock(|q| q.borrow().keep_room()) {
-                // Scoring waits for the UART; acquisition keeps counting.
-                KICK.signal(());
-                let _ = with_timeout(Duration::from_millis(FEED_MS), ROOM.wait()).await;
-                wdg.pet();
-                continue;
-            }
-            let rec = if driver.busy() {
-                None
-            } else {
-                ACQ.lock(|a| a.borrow_mut().take_next())
-            };
-            if rec.is_none() && !driver.busy() {
-                break;
-            }
-            last_beam = Instant::now();
-            idle_ended = false;
-            if driver.step(rec, &mut frames, &mut sink) {
-                report_scan(&driver);
-            }
-            KICK.signal(());
-            // A backlog of beams must not keep the UART task and the
-            // watchdog feed waiting: yield every SCORE_BURST steps.
-            burst += 1;
-            if burst >= SCORE_BURST {
-                burst = 0;
-                wdg.pet();
-                embassy_futures::yield_now().await;
-            }
-        }
-
-        if !idle_ended && last_beam.elapsed() >= Duration::from_millis(IDLE_END_MS) {
-            loop {
-                if !QUEUE.lock(|q| q.borrow().keep_room()) {
-                    KICK.signal(());
-                    let _ = with_timeout(Duration::from_millis(FEED_MS), ROOM.wait()).await;
-                    wdg.pet();
-                    continue;
-                }
-                let (more, finished) = driver.end_of_data(&mut frames, &mut sink);
-                KICK.signal(());
-                if finished {
-                    warn!("no beam for {} ms: scan ended early", IDLE_END_MS);
-                    report_scan(&driver);
-                }
-                if !more {
-                    break;
-                }
-            }
-            idle_ended = true;
-        }
-
-        let now = ACQ.lock(|a| *a.borrow().counts());
-        if now.overruns != reported.overruns || now.spi_errors != reported.spi_errors {
-            warn!(
-                "acquisition: {} overruns, {} SPI/DMA errors so far",
-                now.overruns, now.spi_errors
-            );
-        }
-        reported = now;
-    }
-}
-
-fn report_scan(driver: &ScanDriver<'static, MAX_COLS>) {
-    let Some((t, dropped)) = driver.last_scan() else {
-        return;
-    };
-    let s = driver.sequence_counts();
-    let a = ACQ.lock(|a| *a.borrow().counts());
-    let q = QUEUE.lock(|q| *q.borrow().counts());
-    info!(
-        "scan done: rows {} frames {} missing {} defects {} dark {} sat {} rejected {} extra {} misplaced {} dropped lines {}",
-        t.rows,
-        t.frames,
-        t.missing,
-        t.defects,
-        t.dark,
-        t.saturated,
-        t.rejected,
-        t.extra,
-        t.misplaced,
-        dropped
-    );
-    info!(
-        "since start: beams {} overruns {} spi errors {} short rows {} misplaced {} sync missing {} sync extra {} extra beams {} queue high water {} B",
-        a.drdy,
-        a.overruns,
-        a.spi_errors,
-        s.short_rows,
-        s.misplaced,
-        s.sync_missing,
-        s.sync_extra,
-        s.extra,
-        q.high_water
-    );
-    if q.dropped_keep > 0 {
-        error!(
-            "{} keep lines dropped: the queue reserve is too small",
-            q.dropped_keep
-        );
-    }
 }

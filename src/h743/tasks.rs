@@ -1,0 +1,182 @@
+//! The three tasks: acquisition (interrupt executor), scoring and UART
+//! (thread mode).
+
+use cvm_fw_app::driver::ScanDriver;
+use defmt::{error, info, warn};
+use embassy_stm32::gpio::Output;
+use embassy_stm32::mode::Async;
+use embassy_stm32::peripherals::IWDG1;
+use embassy_stm32::usart::UartTx;
+use embassy_stm32::wdg::IndependentWatchdog;
+use embassy_time::{Duration, Instant, with_timeout};
+
+use super::frame_reader::FrameReader;
+use super::{ACQ, BEAMS, CELLS, FRAMES, KICK, QUEUE, ROOM, START, TX_LINE};
+use crate::config::h743::{FEED_MS, IDLE_END_MS, MAX_COLS, READ_TIMEOUT_US, SCORE_BURST};
+use crate::frames::Samples;
+use crate::sink::QueueSink;
+
+/// Reads one frame per START into the buffer it names.
+#[embassy_executor::task]
+pub async fn acquire_task(mut reader: FrameReader, mut cs: Output<'static>) {
+    let timeout = Duration::from_micros(READ_TIMEOUT_US);
+    loop {
+        let buf = START.wait().await;
+        // SAFETY: `buf` is Filling: this task owns it until `read_done`.
+        let samples = unsafe { FRAMES.buffer(buf) };
+        cs.set_low();
+        let result = reader.read(&mut samples[..CELLS], timeout).await;
+        cs.set_high();
+        ACQ.lock(|a| a.borrow_mut().read_done(buf, result.is_ok()));
+        BEAMS.signal(());
+        if let Err(e) = result {
+            warn!("frame lost: {} ({})", e, reader.counts());
+        }
+    }
+}
+
+/// Sends queued lines with DMA.
+#[embassy_executor::task]
+pub async fn uart_task(mut uart: UartTx<'static, Async>) {
+    let mut errors: u32 = 0;
+    // SAFETY: this task is TX_LINE's only user, and it is spawned once.
+    let line = unsafe { &mut *TX_LINE.0.get() };
+    loop {
+        let n = QUEUE.lock(|q| q.borrow_mut().pop_into(line));
+        let Some(n) = n else {
+            KICK.wait().await;
+            continue;
+        };
+        ROOM.signal(());
+        if uart.write(&line[..n]).await.is_err() {
+            errors = errors.wrapping_add(1);
+            warn!(
+                "USART3 TX error ({} so far): a result line was lost",
+                errors
+            );
+        }
+    }
+}
+
+/// Waits until the queue has its keep reserve free: scoring waits for the
+/// UART while acquisition keeps counting beams.
+async fn wait_for_room(wdg: &mut IndependentWatchdog<'static, IWDG1>) {
+    while !QUEUE.lock(|q| q.borrow().keep_room()) {
+        KICK.signal(());
+        let _ = with_timeout(Duration::from_millis(FEED_MS), ROOM.wait()).await;
+        wdg.pet();
+    }
+}
+
+#[embassy_executor::task]
+pub async fn score_task(
+    mut driver: ScanDriver<'static, MAX_COLS>,
+    mut wdg: IndependentWatchdog<'static, IWDG1>,
+) {
+    let mut frames = Samples {
+        bufs: &FRAMES,
+        cells: CELLS,
+        release: |b: usize| ACQ.lock(|a| a.borrow_mut().release(b)),
+    };
+    let mut burst = 0u32;
+    let mut sink = QueueSink(&QUEUE);
+    let mut last_beam = Instant::now();
+    let mut idle_ended = true;
+    let mut reported = ACQ.lock(|a| *a.borrow().counts());
+
+    loop {
+        let _ = with_timeout(Duration::from_millis(FEED_MS), BEAMS.wait()).await;
+        wdg.pet();
+
+        loop {
+            wait_for_room(&mut wdg).await;
+            let rec = if driver.busy() {
+                None
+            } else {
+                ACQ.lock(|a| a.borrow_mut().take_next())
+            };
+            if rec.is_none() && !driver.busy() {
+                break;
+            }
+            last_beam = Instant::now();
+            idle_ended = false;
+            if driver.step(rec, &mut frames, &mut sink) {
+                report_scan(&driver);
+            }
+            KICK.signal(());
+            // A backlog of beams must not keep the UART task and the
+            // watchdog feed waiting: yield every SCORE_BURST steps.
+            burst += 1;
+            if burst >= SCORE_BURST {
+                burst = 0;
+                wdg.pet();
+                embassy_futures::yield_now().await;
+            }
+        }
+
+        if !idle_ended && last_beam.elapsed() >= Duration::from_millis(IDLE_END_MS) {
+            loop {
+                wait_for_room(&mut wdg).await;
+                let (more, finished) = driver.end_of_data(&mut frames, &mut sink);
+                KICK.signal(());
+                if finished {
+                    warn!("no beam for {} ms: scan ended early", IDLE_END_MS);
+                    report_scan(&driver);
+                }
+                if !more {
+                    break;
+                }
+            }
+            idle_ended = true;
+        }
+
+        let now = ACQ.lock(|a| *a.borrow().counts());
+        if now.overruns != reported.overruns || now.spi_errors != reported.spi_errors {
+            warn!(
+                "acquisition: {} overruns, {} SPI/DMA errors so far",
+                now.overruns, now.spi_errors
+            );
+        }
+        reported = now;
+    }
+}
+
+fn report_scan(driver: &ScanDriver<'static, MAX_COLS>) {
+    let Some((t, dropped)) = driver.last_scan() else {
+        return;
+    };
+    let s = driver.sequence_counts();
+    let a = ACQ.lock(|a| *a.borrow().counts());
+    let q = QUEUE.lock(|q| *q.borrow().counts());
+    info!(
+        "scan done: rows {} frames {} missing {} defects {} dark {} sat {} rejected {} extra {} misplaced {} dropped lines {}",
+        t.rows,
+        t.frames,
+        t.missing,
+        t.defects,
+        t.dark,
+        t.saturated,
+        t.rejected,
+        t.extra,
+        t.misplaced,
+        dropped
+    );
+    info!(
+        "since start: beams {} overruns {} spi errors {} short rows {} misplaced {} sync missing {} sync extra {} extra beams {} queue high water {} B",
+        a.drdy,
+        a.overruns,
+        a.spi_errors,
+        s.short_rows,
+        s.misplaced,
+        s.sync_missing,
+        s.sync_extra,
+        s.extra,
+        q.high_water
+    );
+    if q.dropped_keep > 0 {
+        error!(
+            "{} keep lines dropped: the queue reserve is too small",
+            q.dropped_keep
+        );
+    }
+}
