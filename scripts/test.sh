@@ -37,7 +37,7 @@ trap 'rm -f "$log"' EXIT
 step "panic-free per-beam path (link-time check)"
 bash scripts/nopanic.sh
 
-step "fuzz: every target for 20 s (the long runs: README, Reliability)"
+step "fuzz: every target for 20 s (the long runs: docs/reliability.md)"
 bash scripts/fuzz.sh 20
 
 step "link-check and fuzz crates: lints"

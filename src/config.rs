@@ -135,8 +135,9 @@ pub mod h743 {
     pub const WATCHDOG_US: u32 = 1_000_000;
     pub const FEED_MS: u64 = 100;
 
-    /// Pins (NUCLEO-H743ZI2 Zio connector names in the README's table).
-    /// Changing one means changing its peripheral type in `pins!` too.
+    /// Pins (NUCLEO-H743ZI2 Zio connector names in docs/firmware.md's
+    /// wiring table). Changing one means changing its peripheral type in
+    /// `h743::Pins` too.
     #[macro_export]
     macro_rules! pins {
         ($p:ident) => {

@@ -1,9 +1,10 @@
-//! Frames as they come off the SPI bus.
+//! Frames as bytes in bus order.
 //!
 //! The detector clocks out `J1*J2` 16-bit samples, most significant byte
-//! first, row-major `(j1, j2)` (design.md §5). The SPI peripheral runs with
-//! 8-bit words so that the DMA writes bytes in bus order whatever the MCU's
-//! endianness; this module turns those bytes into samples.
+//! first, row-major `(j1, j2)` (docs/method.md §5). Where a frame arrives
+//! as bytes in that order (the emulated board's scan file, a byte-wide
+//! bus), this module turns them into samples. (The H743 reads 16-bit SPI
+//! frames straight into `u16` samples and needs no decoding.)
 
 /// The byte buffer does not hold exactly two bytes per sample.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
