@@ -25,6 +25,8 @@ def main(argv=None):
     ap.add_argument("--debugger", action="store_true", help="a debugger is attached (DBGMCU freeze applies)")
     ap.add_argument("--scans", type=int, default=1, help="end lines to wait for (default 1)")
     ap.add_argument("--max-instructions", type=int, help="stop after this many instructions")
+    ap.add_argument("--profile", action="store_true",
+                    help="instructions per function from the first beam on (in the JSON)")
     args = ap.parse_args(argv)
 
     try:
@@ -40,6 +42,10 @@ def main(argv=None):
             scan = Scan.read_raw(args.scan)
             det = Detector(m, scan, args.beam_us, args.start_ms, faults)
             m.attach(det)
+            if args.profile:
+                # Boot first, then count: the profile is of the beams.
+                m.run(max(det.times[0] - 1000, 0) if det.times else 0)
+                m.start_profile()
             end = det.done_at + cycles_of_ms(args.settle_ms)
 
             def done():

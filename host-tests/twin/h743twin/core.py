@@ -252,6 +252,8 @@ class Core:
         self.block_counts = {}
         self.on_exception = None  # callback(exc) for counters
         self.uc = None
+        self.profile = None  # {function: instructions} when profiling
+        self.symbolize = None  # fn(address) -> function name
 
     # --- set-up
     def load(self, image):
@@ -317,9 +319,12 @@ class Core:
         n = self.block_counts.get((addr, size))
         if n is None:
             n = count_thumb(bytes(uc.mem_read(addr, size)))
-            self.block_counts[(addr, size)] = n
             if size == 2 and n == 1 and struct.unpack("<H", uc.mem_read(addr, 2))[0] == OP_B_SELF:
                 n = -1
+            self.block_counts[(addr, size)] = n
+        if self.profile is not None and n > 0:
+            name = self.symbolize(addr)
+            self.profile[name] = self.profile.get(name, 0) + n
         if n < 0:
             # `b .`: nothing changes until an interrupt or a reset.
             self.sleeping = "stuck"

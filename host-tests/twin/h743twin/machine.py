@@ -27,6 +27,7 @@ class Machine:
         self.debugger = debugger
         self.bus = Bus()
         self.core = Core(self.bus)
+        self.elf_path = elf_path
         self.image, self.text = load_elf(elf_path)
         self.core.load(self.image)
         self.core.watch_opcodes(self.text)
@@ -66,6 +67,11 @@ class Machine:
     def _gpiod_changed(self, pin, level):
         if pin == 14 and self.detector:
             self.detector.chip_select(level)
+
+    def start_profile(self):
+        """Counts instructions per function from now on."""
+        self.core.symbolize = symbolizer(self.elf_path)
+        self.core.profile = {}
 
     def attach(self, detector):
         self.detector = detector
@@ -160,6 +166,54 @@ class NoSlave:
         pass
 
 
+def symbolizer(path):
+    """fn(address) -> the name of the function that holds it (demangled
+    roughly: the path without the hash), cached per address."""
+    import bisect
+
+    with open(path, "rb") as f:
+        elf = ELFFile(f)
+        funcs = sorted((s["st_value"] & ~1, s["st_size"], s.name)
+                       for s in elf.get_section_by_name(".symtab").iter_symbols()
+                       if s["st_info"]["type"] == "STT_FUNC" and s["st_size"])
+    starts = [a for a, _, _ in funcs]
+    cache = {}
+
+    def name_of(addr):
+        hit = cache.get(addr)
+        if hit is None:
+            i = bisect.bisect_right(starts, addr) - 1
+            if i >= 0 and addr < funcs[i][0] + funcs[i][1]:
+                hit = demangle(funcs[i][2])
+            else:
+                hit = f"?{addr:#x}"
+            cache[addr] = hit
+        return hit
+
+    return name_of
+
+
+def demangle(sym):
+    """Legacy Rust mangling (_ZN...E) to a path, without the hash."""
+    if not sym.startswith("_ZN"):
+        return sym
+    parts, i = [], 3
+    while i < len(sym) and sym[i].isdigit():
+        j = i
+        while sym[j].isdigit():
+            j += 1
+        n = int(sym[i:j])
+        parts.append(sym[j:j + n])
+        i = j + n
+    if parts and parts[-1].startswith("h") and len(parts[-1]) == 17:
+        parts.pop()
+    path = "::".join(parts)
+    for a, b in (("$LT$", "<"), ("$GT$", ">"), ("$u20$", " "), ("$RF$", "&"),
+                 ("$C$", ","), ("..", "::"), ("$u7b$", "{"), ("$u7d$", "}")):
+        path = path.replace(a, b)
+    return path
+
+
 def load_elf(path):
     """PT_LOAD segments at their load (physical) addresses, and the
     executable ones' bytes for the opcode scan."""
@@ -207,6 +261,8 @@ def _stats(self):
         "sysclk_hz": self.rcc.sysclk_hz(),
         "fault": core.fault,
     }
+    if core.profile is not None:
+        s["profile"] = dict(sorted(core.profile.items(), key=lambda kv: -kv[1]))
     if det is not None:
         s["beams"] = det.sent
         s["faults_injected"] = det.injected
