@@ -1,8 +1,8 @@
 """Boots a built H743 ELF on the chip model without a detector:
 `python3 -m h743twin.smoke ELF`. Passes when the firmware gets through
 its reset path and `embassy_stm32::init` without touching anything the
-model does not model, unleashes the watchdog and keeps feeding it, and the
-chip never resets."""
+model does not model, runs its core at 400 MHz, freezes the watchdog under
+a debugger, unleashes it and keeps feeding it, and the chip never resets."""
 
 import sys
 
@@ -31,6 +31,8 @@ def main(argv=None):
         problems.append("the watchdog was never started")
     if s["watchdog_feeds"] < RUN_MS // 200:
         problems.append(f"only {s['watchdog_feeds']} watchdog feeds in {RUN_MS} ms")
+    if not s["iwdg_frozen_in_debug"]:
+        problems.append("the watchdog is not frozen under a debugger (DBGMCU_APB4FZ1.IWDG1)")
     if s["sysclk_hz"] != 400e6:
         problems.append(f"core clock {s['sysclk_hz'] / 1e6} MHz, not 400")
     print(f"smoke: {argv[0]}: {s['instructions']} instructions in {RUN_MS} ms, "
