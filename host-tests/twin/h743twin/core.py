@@ -252,6 +252,7 @@ class Core:
         self.block_counts = {}
         self.on_exception = None  # callback(exc) for counters
         self.uc = None
+        self.last_block = (0, 0)
         self.profile = None  # {function: instructions} when profiling
         self.symbolize = None  # fn(address) -> function name
 
@@ -330,10 +331,14 @@ class Core:
             self.sleeping = "stuck"
             uc.emu_stop()
             return
+        if self.cycles >= self.deadline:
+            # Stopped from its block hook, Unicorn has not run the block: it
+            # runs (and is counted) when the run resumes.
+            uc.emu_stop()
+            return
         self.cycles += n
         self.instructions += n
-        if self.cycles >= self.deadline:
-            uc.emu_stop()
+        self.last_block = (addr, size)
 
     def _on_intr(self, uc, intno, _):
         if intno == 8:  # exception return (EXC_RETURN loaded into PC)
@@ -360,6 +365,7 @@ class Core:
             if e.errno == UC_ERR_INSN_INVALID:
                 hw = struct.unpack("<H", uc.mem_read(pc - 2, 2))[0]
                 if hw == OP_WFE:
+                    self._uncount_after(pc)
                     self.pc = pc | 1
                     self.wfe += 1
                     if self.event:
@@ -376,7 +382,20 @@ class Core:
             return
         hw = struct.unpack("<H", uc.mem_read(self.pc - 3, 2))[0]
         if hw == OP_WFI:
+            self._uncount_after(self.pc & ~1)
             self.sleeping = "wfi"
+
+    def _uncount_after(self, pc):
+        """The block that was counted whole stopped at `pc` (after a WFE or
+        WFI): its instructions from `pc` on have not run yet."""
+        addr, size = self.last_block
+        if addr < pc < addr + size:
+            rest = count_thumb(bytes(self.uc.mem_read(pc, addr + size - pc)))
+            self.cycles -= rest
+            self.instructions -= rest
+            if self.profile is not None and rest:
+                name = self.symbolize(addr)
+                self.profile[name] = self.profile.get(name, 0) - rest
 
     def wake_if_pending(self):
         """Takes the interrupt that may be taken now; returns True if one was."""
