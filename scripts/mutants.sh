@@ -34,7 +34,9 @@
 #   MUTANTS_OUT    where <pass>/mutants.out/ go (default target/mutants)
 #   MUTANTS_STAGE  the staging workspace (default $TMPDIR/cvm-mutants-stage;
 #                  its build cache is kept next to it, in .target)
-#   MUTANTS_TIMEOUT, MUTANTS_BUILD_TIMEOUT  seconds (default 240, 600)
+#   MUTANTS_TIMEOUT  test timeout in seconds (default 30 for the fw-app
+#                  pass, whose tests take a second, 240 for the others)
+#   MUTANTS_BUILD_TIMEOUT  seconds (default 600)
 #   CARGO_BUILD_JOBS  cargo's parallelism per build (default 1)
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
@@ -101,7 +103,7 @@ status=0
 baselined=
 for pass in "${passes[@]}"; do
     case $pass in
-    fw-app) args=(--package cvm-fw-app --test-package cvm-fw-app-tests
+    fw-app) args=(--timeout "${MUTANTS_TIMEOUT:-30}" --package cvm-fw-app --test-package cvm-fw-app-tests
         --file fw-app/src/sequence.rs --file fw-app/src/queue.rs) ;;
     stream) args=(--package cvm-core "${core_tests[@]}" --file cvm-core/src/stream.rs) ;;
     embed) args=(--package cvm-core "${core_tests[@]}" --file cvm-core/src/scorer/embed.rs
@@ -120,6 +122,7 @@ for pass in "${passes[@]}"; do
         exit 2
         ;;
     esac
+    [ "$pass" = fw-app ] || args=(--timeout "${MUTANTS_TIMEOUT:-240}" "${args[@]}")
     # The unmutated tree is tested once per test set and invocation.
     tests_of_pass=$(printf '%s\n' "${args[@]}" | grep -A1 -e '--test-' | tr '\n' ' ')
     case " $baselined " in
@@ -135,7 +138,6 @@ for pass in "${passes[@]}"; do
         --dir "$stage" \
         --in-place \
         "${args[@]}" \
-        --timeout "${MUTANTS_TIMEOUT:-240}" \
         --build-timeout "${MUTANTS_BUILD_TIMEOUT:-600}" \
         --output "$out/$pass" \
         "$@" || s=$?
