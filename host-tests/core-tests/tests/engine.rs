@@ -284,3 +284,54 @@ fn window_size_table() {
         2 * 300 * 225 * 4 + 300 * (2 + 2 * std::mem::size_of::<PositionScore>())
     );
 }
+
+/// Set-up is refused without columns, beyond the engine's capacity and
+/// with a row buffer one word short; a good set-up reports its columns and
+/// threshold.
+#[test]
+fn engine_set_up_is_checked() {
+    use cvm_core::stream::{EngineError, row_words};
+    let scorer = dmap::options::ScoringArgs::default().scorer(3, 3).unwrap();
+    // Four columns of 3x3 maps: 36 words per row buffer.
+    let words = row_words(4, 3, 3);
+    assert_eq!(words, 36);
+    let (mut a, mut b) = (vec![0i32; words], vec![0i32; words]);
+    let (mut short, mut c) = (vec![0i32; words - 1], vec![0i32; words]);
+    let err = |r: Result<cvm_core::Engine<'_, 4>, EngineError>| r.err();
+    assert_eq!(
+        err(cvm_core::Engine::new(&scorer, 0, 1, &mut a, &mut b)),
+        Some(EngineError::Columns)
+    );
+    assert_eq!(
+        err(cvm_core::Engine::new(&scorer, 5, 1, &mut a, &mut b)),
+        Some(EngineError::Columns)
+    );
+    assert_eq!(
+        err(cvm_core::Engine::new(&scorer, 4, 1, &mut short, &mut c)),
+        Some(EngineError::Buffer)
+    );
+    assert_eq!(
+        err(cvm_core::Engine::new(&scorer, 4, 1, &mut c, &mut short)),
+        Some(EngineError::Buffer)
+    );
+    let e = cvm_core::Engine::<4>::new(&scorer, 4, 77, &mut a, &mut b).unwrap();
+    assert_eq!((e.cols(), e.threshold()), (4, 77));
+    assert_eq!(e.totals(), &cvm_core::Totals::default());
+}
+
+/// A frame `MAX_ROW_JUMP` rows beyond the next expected row is placed,
+/// the rows in between reported without data; one row further is rejected.
+#[test]
+fn row_jump_limit_is_inclusive() {
+    use cvm_core::stream::MAX_ROW_JUMP;
+    let scorer = dmap::options::ScoringArgs::default().scorer(2, 2).unwrap();
+    let map = vec![1u16, 2, 3, 4];
+    let at = |row: u32| (Position { row, col: 0 }, Some(map.clone()));
+    // After row 0 (one column) the next expected row is 1.
+    let (out, totals) = run_engine(&scorer, 1, 1, &[at(0), at(1 + MAX_ROW_JUMP)]);
+    assert_eq!(out.len() as u32, MAX_ROW_JUMP + 2);
+    assert_eq!((totals.missing, totals.rejected), (MAX_ROW_JUMP, 0));
+    let (out, totals) = run_engine(&scorer, 1, 1, &[at(0), at(2 + MAX_ROW_JUMP)]);
+    assert_eq!(out.len(), 1);
+    assert_eq!((totals.missing, totals.rejected), (0, 1));
+}
