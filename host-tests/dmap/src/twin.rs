@@ -254,6 +254,9 @@ pub fn build_elf(config: &str) -> Result<PathBuf> {
     {
         return Ok(elf);
     }
+    // The cached copy is dated from before the build, so that a source
+    // edited while cargo runs makes it stale.
+    let started = SystemTime::now();
     let status = Command::new(std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into()))
         .current_dir(&root)
         .args(["build", "--release", "--target-dir"])
@@ -274,6 +277,11 @@ pub fn build_elf(config: &str) -> Result<PathBuf> {
     let built = target_dir.join("thumbv7em-none-eabihf/release/cvm-fw");
     let tmp = cache.join(format!("{name}.elf.tmp"));
     std::fs::copy(&built, &tmp).with_context(|| format!("copying {}", built.display()))?;
+    std::fs::File::options()
+        .write(true)
+        .open(&tmp)
+        .and_then(|f| f.set_modified(started))
+        .with_context(|| format!("dating {}", tmp.display()))?;
     std::fs::rename(&tmp, &elf).with_context(|| format!("renaming {}", tmp.display()))?;
     // The configuration beside its ELF, for whoever looks in the cache.
     let _ = std::fs::write(cache.join(format!("{name}.cfg")), format!("{config}\n"));
@@ -464,9 +472,10 @@ pub fn run_model(
                 .map_or("?".into(), |(c, hz)| fmt_num((c / hz * 1e3).round()))
         ),
         (Some(2), _) => bail!("the chip model refused its arguments; its message is above"),
-        _ => bail!(
-            "the chip model failed ({status}); its message is above (it needs python3 with unicorn 2.1.4 and pyelftools 0.33: scripts/setup.sh)"
+        _ if last.contains("ModuleNotFoundError") => bail!(
+            "the chip model failed ({status}): it needs python3 with unicorn 2.1.4 and pyelftools 0.33 (scripts/setup.sh installs them)"
         ),
+        _ => bail!("the chip model failed ({status}); its message is above"),
     }
 }
 

@@ -287,6 +287,7 @@ fn twin_refuses_a_bad_fault_before_building() {
 
 /// The model never outlives `dmap`: killed by SIGTERM mid-run, `dmap`
 /// kills and reaps the model and removes its scan file before it dies.
+#[cfg(target_os = "linux")]
 #[test]
 fn twin_model_dies_with_dmap() {
     let dir = tempfile::tempdir().unwrap();
@@ -327,7 +328,7 @@ fn twin_model_dies_with_dmap() {
             dmap.try_wait().unwrap().is_none(),
             "dmap ended before the model started"
         );
-        assert!(started.elapsed().as_secs() < 300, "the model did not start");
+        assert!(started.elapsed().as_secs() < 900, "the model did not start");
         std::thread::sleep(std::time::Duration::from_millis(50));
     };
     let scan_file = cmdline
