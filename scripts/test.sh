@@ -19,7 +19,8 @@ cargo build --release
 cargo clippy --release --workspace -- -D warnings
 
 step "firmware: the H743 release ELF's memory layout, and its boot on the chip model"
-(cd host-tests/twin && python3 -m h743twin.layout ../../target/thumbv7em-none-eabihf/release/cvm-fw &&
+(cd host-tests/twin && python3 -m unittest discover -s tests &&
+    python3 -m h743twin.layout ../../target/thumbv7em-none-eabihf/release/cvm-fw &&
     python3 -m h743twin.smoke ../../target/thumbv7em-none-eabihf/release/cvm-fw)
 
 step "firmware: emulated board build and lints"

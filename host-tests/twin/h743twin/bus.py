@@ -45,10 +45,25 @@ class Bus:
         self.events = []
         self.seq = 0
         self.accesses = 0
+        self.clocks = {}
+        self.rcc = None
 
-    def add(self, base, size, model):
+    def add(self, base, size, model, clock=None):
+        """`clock`: (RCC enable register offset, bit, name) that must be set
+        for the peripheral's registers to answer (RM0433 §8.5)."""
         self.periphs.append((base, size, model))
+        if clock is not None:
+            self.clocks[base] = clock
         return model
+
+    def _check_clock(self, base, addr, uc):
+        clock = self.clocks.get(base)
+        if clock is None or self.rcc is None:
+            return
+        reg, bit, name = clock
+        if not self.rcc.enabled(reg, bit):
+            raise Stop(f"{name} register {addr:#010x} accessed while its clock is off "
+                       f"(RCC register {reg:#x} bit {bit}) at pc {uc.reg_read(UC_ARM_REG_PC):#010x}")
 
     def attach(self, core):
         self.core = core
@@ -104,6 +119,7 @@ class Bus:
             base, model = self._find(addr)
             if model is None:
                 raise KeyError
+            self._check_clock(base, addr, uc)
             return model.read(addr - base, size) & ((1 << (8 * size)) - 1)
         except KeyError:
             self._fail(Unmodelled(f"read of unmodelled register {addr:#010x} "
@@ -124,6 +140,7 @@ class Bus:
             base, model = self._find(addr)
             if model is None:
                 raise KeyError
+            self._check_clock(base, addr, uc)
             model.write(addr - base, size, value)
         except KeyError:
             self._fail(Unmodelled(f"write of {value:#x} to unmodelled register {addr:#010x} "

@@ -43,25 +43,30 @@ class Machine:
     def _build(self, rsr):
         bus, nvic = self.bus, self.core.nvic
         bus.periphs = []
+        bus.clocks = {}
         self.rcc = bus.add(0x5802_4400, 0x400, system.Rcc(rsr))
+        bus.rcc = self.rcc
         self.pwr = bus.add(0x5802_4800, 0x400, system.Pwr())
         self.flash = bus.add(0x5200_2000, 0x1000, system.Flash())
-        self.syscfg = bus.add(0x5800_0400, 0x400, system.Syscfg())
+        self.syscfg = bus.add(0x5800_0400, 0x400, system.Syscfg(), clock=(0xF4, 1, "SYSCFG"))
         self.exti = bus.add(0x5800_0000, 0x400, system.Exti(nvic))
         self.dbgmcu = bus.add(0x5C00_1000, 0x400, system.Dbgmcu())
         self.gpio = {}
         for i, port in enumerate(GPIO_PORTS):
             g = system.Gpio(port, GPIO_RESET.get(port))
-            self.gpio[port] = bus.add(0x5802_0000 + 0x400 * i, 0x400, g)
+            self.gpio[port] = bus.add(0x5802_0000 + 0x400 * i, 0x400, g,
+                                      clock=(0xE0, i, f"GPIO{port}"))
         self.iwdg = bus.add(0x5800_4800, 0x400, system.Iwdg(bus, self.dbgmcu, self.debugger))
         self.tim12 = bus.add(0x4000_1800, 0x400, system.Timer(
-            bus, nvic, TIM12_IRQ, self.rcc.apb1_timer_hz, bits=16))
-        self.dma = bus.add(0x4002_0000, 0x400, Dma(bus, nvic))
+            bus, nvic, TIM12_IRQ, self.rcc.apb1_timer_hz, bits=16), clock=(0xE8, 6, "TIM12"))
+        self.dma = bus.add(0x4002_0000, 0x400, Dma(bus, nvic), clock=(0xD8, 0, "DMA1"))
         bus.add(0x4002_0800, 0x400, Dmamux(self.dma))
         slave = self.detector if self.detector else NoSlave()
-        self.spi = bus.add(0x4001_3000, 0x400, Spi(bus, nvic, self.dma, self.rcc, slave))
+        self.spi = bus.add(0x4001_3000, 0x400, Spi(bus, nvic, self.dma, self.rcc, slave),
+                           clock=(0xF0, 12, "SPI1"))
         self.usart = bus.add(0x4000_4800, 0x400, Usart(
-            bus, nvic, self.dma, self.rcc, lambda b, t: self.uart.append((b, t))))
+            bus, nvic, self.dma, self.rcc, lambda b, t: self.uart.append((b, t))),
+            clock=(0xE8, 18, "USART3"))
         self.gpio["D"].listeners.append(self._gpiod_changed)
 
     def _gpiod_changed(self, pin, level):

@@ -181,8 +181,10 @@ class Rcc(Registers):
         return self.hclk_hz() / self._apb_div((self.r[0x1C] >> 4) & 7)
 
     def apb1_timer_hz(self):
+        """Timers on APB1 run at PCLK1, or twice PCLK1 when the APB1
+        prescaler divides (RCC_CFGR.TIMPRE = 0)."""
         div = self._apb_div((self.r[0x1C] >> 4) & 7)
-        return self.hclk_hz() * (1 if div == 1 else 2)
+        return self.pclk1_hz() * (1 if div == 1 else 2)
 
     def spi123_kernel_hz(self):
         sel = (self.r[0x50] >> 12) & 7  # D2CCIP1R.SPI123SEL
