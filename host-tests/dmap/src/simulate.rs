@@ -44,7 +44,8 @@ pub struct SimulateArgs {
     /// Output truth mask (.npy, bool, rows x cols); default: SCAN with `.truth.npy`
     #[arg(long, value_name = "MASK.npy")]
     pub truth: Option<PathBuf>,
-    /// Remove all bubbles and surface defects (the reference part)
+    /// Remove all bubbles and surface defects (the reference part): with another
+    /// --seed, the same part with other noise (shot, read, laser), no defects
     #[arg(long)]
     pub defect_free: bool,
     /// Random seed (same seed, same scan, whatever the thread count)
@@ -141,6 +142,12 @@ pub struct SimulateArgs {
     /// No Poisson shot noise
     #[arg(long)]
     pub no_shot_noise: bool,
+    /// Laser power fluctuation from beam to beam, % rms (preset: 1; 0 = steady)
+    #[arg(long, value_name = "PCT")]
+    pub power_rms_pct: Option<f64>,
+    /// Slow laser power drift over the scan, % peak (preset: 2; 0 = none)
+    #[arg(long, value_name = "PCT")]
+    pub power_drift_pct: Option<f64>,
     /// Reflection/refraction at interfaces
     #[arg(long, value_enum)]
     pub interaction: Option<InteractionArg>,
@@ -316,6 +323,19 @@ pub fn config(a: &SimulateArgs) -> Result<Config> {
     n.bits = a.bits.unwrap_or(n.bits);
     n.bias = a.bias.unwrap_or(n.bias);
     n.shot = !a.no_shot_noise;
+    for (v, flag, max) in [
+        (a.power_rms_pct, "--power-rms-pct", 20.0),
+        (a.power_drift_pct, "--power-drift-pct", 50.0),
+    ] {
+        if let Some(v) = v
+            && !(v.is_finite() && (0.0..max).contains(&v))
+        {
+            bail!("{flag} must be at least 0 and under {max} (percent), got {v}");
+        }
+    }
+    let l = &mut c.laser;
+    l.rms = a.power_rms_pct.map_or(l.rms, |v| v / 100.0);
+    l.drift = a.power_drift_pct.map_or(l.drift, |v| v / 100.0);
     if let Some(i) = a.interaction {
         c.trace.interaction = match i {
             InteractionArg::Split => Interaction::Split,

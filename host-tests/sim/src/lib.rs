@@ -3,11 +3,13 @@
 //! through a transparent part (refraction by Snell's law at every surface,
 //! Fresnel reflection, air bubbles, rough surface patches), collected by a
 //! receiving lens that maps ray angle to detector position `f tan(alpha)`,
-//! and read out by a noisy detector. Produces `scan[row, col, j1, j2]` and
+//! and read out by a noisy detector, the laser's power fluctuating from
+//! beam to beam and drifting over the scan. Produces `scan[row, col, j1, j2]` and
 //! a ground-truth defect mask.
 
 pub mod beam;
 pub mod detector;
+pub mod laser;
 pub mod optics;
 pub mod part;
 pub mod preset;
@@ -17,6 +19,7 @@ pub mod trace;
 pub mod vec3;
 
 pub use detector::Noise;
+pub use laser::Laser;
 pub use part::{Bubble, Face, Part, Shape, SurfaceDefect};
 pub use scan::{Config, Raster, Scan, simulate, truth_mask};
 pub use trace::{Budget, Interaction, Receiver, TraceOptions, Tracer};

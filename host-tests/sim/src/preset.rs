@@ -2,11 +2,12 @@
 //!
 //! Values the paper gives: raster size, detector size, pitch, part type,
 //! bubble radii and places, surface defect sizes. The rest (lens
-//! prescriptions, beam waist, receiver optics, noise) is chosen here so the
+//! prescriptions, beam waist, receiver optics, noise, laser power) is chosen here so the
 //! part's own deflection sweeps the spot over a good part of the detector
 //! without leaving it, as in the paper's maps.
 
 use crate::detector::Noise;
+use crate::laser::Laser;
 use crate::part::{Bubble, Face, Part, Shape, SurfaceDefect};
 use crate::scan::{Config, Raster};
 use crate::trace::{Receiver, TraceOptions};
@@ -63,6 +64,7 @@ pub fn paper_sim(defect_free: bool) -> Config {
             spot: 0.0,
         },
         noise: default_noise(),
+        laser: default_laser(),
         trace: TraceOptions::default(),
         footprint: 1.0,
         seed: 1,
@@ -113,6 +115,7 @@ pub fn prototype(defect_free: bool) -> Config {
             spot: 0.5,
         },
         noise: default_noise(),
+        laser: default_laser(),
         trace: TraceOptions::default(),
         footprint: 1.0,
         seed: 1,
@@ -143,5 +146,17 @@ pub fn default_noise() -> Noise {
         bits: 12,
         bias: 0.0,
         shot: true,
+    }
+}
+
+/// The source: 1 % rms power fluctuation from beam to beam and a slow drift
+/// of up to +-2 % over a scan (see docs/experiments.md, "Noise model"):
+/// the upper end of what an unstabilised laser-diode module delivers with
+/// a part reflecting some 4 % back into it, chosen so that comparisons of
+/// normalised and raw maps do not flatter raw maps.
+pub fn default_laser() -> Laser {
+    Laser {
+        rms: 0.01,
+        drift: 0.02,
     }
 }

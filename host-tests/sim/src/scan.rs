@@ -5,6 +5,7 @@ use rayon::prelude::*;
 
 use crate::beam;
 use crate::detector::Noise;
+use crate::laser::Laser;
 use crate::optics::refract;
 use crate::part::{Face, Part};
 use crate::rng::position_rng;
@@ -43,6 +44,8 @@ pub struct Config {
     pub part: Part,
     pub receiver: Receiver,
     pub noise: Noise,
+    /// Power fluctuation and drift of the source.
+    pub laser: Laser,
     pub trace: TraceOptions,
     /// Radius around the beam axis, in units of the waist, within which a
     /// defect counts as touching the beam in the truth mask.
@@ -101,6 +104,7 @@ impl Config {
             ));
         }
         self.part.validate()?;
+        self.laser.validate()?;
         self.noise.validate()
     }
 }
@@ -173,6 +177,12 @@ pub fn simulate(cfg: &Config, progress: &(dyn Fn() + Sync)) -> Result<Scan, Stri
                     &mut rays,
                     &mut map,
                 ));
+                let power = cfg
+                    .laser
+                    .factor(cfg.seed, cfg.raster.rows, cfg.raster.cols, row, col);
+                if power != 1.0 {
+                    map.iter_mut().for_each(|m| *m *= power);
+                }
                 cfg.noise
                     .digitize(&map, &mut rng, &mut out[col * cells..(col + 1) * cells]);
             }

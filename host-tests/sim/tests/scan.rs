@@ -15,6 +15,15 @@ fn small(
     cfg
 }
 
+/// [`small`] with a source of constant power, for tests that check map
+/// counts against the optics.
+fn steady(cfg: cvm_sim::Config, rows: usize, cols: usize, center: (f64, f64)) -> cvm_sim::Config {
+    cvm_sim::Config {
+        laser: cvm_sim::Laser::NONE,
+        ..small(cfg, rows, cols, center)
+    }
+}
+
 #[test]
 fn scan_is_identical_for_one_and_two_threads() {
     let cfg = small(preset::paper_sim(false), 12, 12, (0.0, 0.0));
@@ -80,7 +89,7 @@ fn prototype_truth_regions_have_the_defect_sizes() {
 fn defect_free_lens_scan_is_one_bright_cell_per_beam() {
     // Away from cell boundaries, the whole beam lands on one detector cell:
     // (1 - 0.04)^2 of the photons, i.e. 1e5 * 0.9216 / 32 = 2880 counts, +- shot noise.
-    let mut cfg = small(preset::paper_sim(true), 3, 3, (0.0, 0.0));
+    let mut cfg = steady(preset::paper_sim(true), 3, 3, (0.0, 0.0));
     cfg.raster.rays = 256;
     let scan = cvm_sim::simulate(&cfg, &|| {}).unwrap();
     for pos in scan.data.chunks(225) {
@@ -128,11 +137,118 @@ fn small_bubble_removes_the_power_falling_on_its_disc() {
     // and all of it is scattered far off the centre cell (the bubble is a
     // diverging ball lens of focal length about -r). The centre cell keeps
     // 2880 * (1 - 0.198) = 2310 counts.
-    let mut cfg = small(preset::paper_sim(false), 1, 1, (-5.0, 0.0));
+    let mut cfg = steady(preset::paper_sim(false), 1, 1, (-5.0, 0.0));
     cfg.raster.rays = 4096;
     let hit = cvm_sim::simulate(&cfg, &|| {}).unwrap();
     let lost = 1.0 - (-2.0 * 0.083f64.powi(2) / 0.25f64.powi(2)).exp();
     let expect = 1e5 * 0.96 * 0.96 / 32.0 * (1.0 - lost);
     let got = f64::from(hit.data[7 * 15 + 7]);
     assert!((got - expect).abs() < 0.02 * expect, "{got} vs {expect}");
+}
+
+/// Per position: total counts and the count-weighted centroid (cells).
+fn sums_and_centroids(scan: &cvm_sim::Scan) -> Vec<(f64, f64, f64)> {
+    let n = scan.j1 * scan.j2;
+    scan.data
+        .chunks(n)
+        .map(|m| {
+            let (mut s, mut a, mut b) = (0.0, 0.0, 0.0);
+            for (k, &v) in m.iter().enumerate() {
+                let v = f64::from(v);
+                s += v;
+                a += v * (k / scan.j2) as f64;
+                b += v * (k % scan.j2) as f64;
+            }
+            (s, a / s.max(1.0), b / s.max(1.0))
+        })
+        .collect()
+}
+
+#[test]
+fn defect_free_part_differs_only_by_defects_and_noise() {
+    // 18x18 positions over the upper-left rough patch of the prototype.
+    let cfg = small(preset::prototype(false), 18, 18, (-3.0, 3.0));
+    let defective = cvm_sim::simulate(&cfg, &|| {}).unwrap();
+    let free_cfg = small(preset::prototype(true), 18, 18, (-3.0, 3.0));
+    let free = cvm_sim::simulate(&free_cfg, &|| {}).unwrap();
+    assert!(free.truth.iter().all(|&t| !t));
+    // Same seed: a beam that reaches no defect reads the same counts,
+    // laser noise included. Away from the truth mask (two positions: the
+    // rays extend to two waists, 1.5 pitches) most maps are bit-identical;
+    // the rest got light that an internal reflection carried onto the
+    // patch, which changes a few counts (and the order of later draws).
+    let (rows, cols) = (18usize, 18usize);
+    let (a, b) = (sums_and_centroids(&defective), sums_and_centroids(&free));
+    let (mut far, mut same) = (0, 0);
+    for r in 0..rows {
+        for c in 0..cols {
+            let near = (r.saturating_sub(2)..=(r + 2).min(rows - 1)).any(|rr| {
+                (c.saturating_sub(2)..=(c + 2).min(cols - 1))
+                    .any(|cc| defective.truth[rr * cols + cc])
+            });
+            if !near {
+                let i = r * cols + c;
+                far += 1;
+                same += usize::from(
+                    defective.data[i * 81..(i + 1) * 81] == free.data[i * 81..(i + 1) * 81],
+                );
+                assert!((a[i].0 / b[i].0 - 1.0).abs() < 0.01, "({r},{c})");
+                assert!((a[i].1 - b[i].1).abs() < 0.02 && (a[i].2 - b[i].2).abs() < 0.02);
+            }
+        }
+    }
+    assert!(far > 40 && same * 4 > far * 3, "{same} of {far}");
+    // Another seed: the same part, other noise. Totals agree to the laser's
+    // 1 % rms, 2 % drift and shot noise; spots land at the same place.
+    let other = cvm_sim::simulate(
+        &cvm_sim::Config {
+            seed: 7,
+            ..free_cfg.clone()
+        },
+        &|| {},
+    )
+    .unwrap();
+    assert_ne!(other.data, free.data);
+    for (a, b) in sums_and_centroids(&free)
+        .iter()
+        .zip(sums_and_centroids(&other))
+    {
+        assert!((a.0 / b.0 - 1.0).abs() < 0.1, "{a:?} {b:?}");
+        assert!(
+            (a.1 - b.1).abs() < 0.05 && (a.2 - b.2).abs() < 0.05,
+            "{a:?} {b:?}"
+        );
+    }
+}
+
+#[test]
+fn laser_power_scales_each_map() {
+    // A defect-free 6x6 patch of paper-sim with 5 % fluctuation against a
+    // steady source: each map's total follows the beam's power factor (to
+    // its shot noise, about 0.35 % of the total).
+    let steady_cfg = steady(preset::paper_sim(true), 6, 6, (10.0, 10.0));
+    let laser = cvm_sim::Laser {
+        rms: 0.05,
+        drift: 0.02,
+    };
+    let noisy_cfg = cvm_sim::Config {
+        laser,
+        ..steady_cfg.clone()
+    };
+    let a = sums_and_centroids(&cvm_sim::simulate(&steady_cfg, &|| {}).unwrap());
+    let b = sums_and_centroids(&cvm_sim::simulate(&noisy_cfg, &|| {}).unwrap());
+    let mut spread = 0.0;
+    for (i, (x, y)) in a.iter().zip(&b).enumerate() {
+        let f = laser.factor(noisy_cfg.seed, 6, 6, i / 6, i % 6);
+        assert!(
+            (y.0 / x.0 / f - 1.0).abs() < 0.015,
+            "{i}: {} vs {f}",
+            y.0 / x.0
+        );
+        spread += (f - 1.0).powi(2);
+    }
+    // The factors do vary (at 5 % rms) and default presets have laser noise.
+    assert!((spread / 36.0).sqrt() > 0.02);
+    assert_eq!(preset::prototype(false).laser, preset::default_laser());
+    assert_eq!(preset::paper_sim(true).laser, preset::default_laser());
 }
