@@ -341,16 +341,21 @@ impl Supervised {
                 std::process::exit(128 + sig);
             }
         });
-        let mut child = cmd
+        // Held from before the spawn until the child is in it, so that a
+        // signal in between finds the child to end.
+        let mut slot = lock(&me.shared);
+        let child = cmd
             .stdin(Stdio::null())
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
             .spawn()
             .context("starting python3 (the chip model needs python3 with unicorn and pyelftools: scripts/setup.sh)")?;
-        let (Some(stdout), Some(stderr)) = (child.stdout.take(), child.stderr.take()) else {
+        let running = slot.insert(Running { child, _dir: dir });
+        let pipes = (running.child.stdout.take(), running.child.stderr.take());
+        drop(slot);
+        let (Some(stdout), Some(stderr)) = pipes else {
             bail!("the chip model's output pipes are missing");
         };
-        *lock(&me.shared) = Some(Running { child, _dir: dir });
         Ok((me, stdout, stderr))
     }
 
