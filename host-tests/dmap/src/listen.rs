@@ -881,3 +881,65 @@ pub fn run(args: &ListenArgs) -> Result<()> {
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn all_lines(input: &[u8], max: usize) -> Vec<(NextLine, Vec<u8>)> {
+        let mut r = BufReader::with_capacity(7, input);
+        let mut buf = Vec::new();
+        let mut out = Vec::new();
+        loop {
+            let next = next_line(&mut r, &mut buf, max).unwrap();
+            if next == NextLine::End {
+                return out;
+            }
+            out.push((next, buf.clone()));
+        }
+    }
+
+    #[test]
+    fn lines_longer_than_the_limit_are_measured_and_dropped() {
+        let input = b"abc\n0123456789abcdef\nxyz\n\nlast";
+        assert_eq!(
+            all_lines(input, 8),
+            vec![
+                (NextLine::Line, b"abc\n".to_vec()),
+                (NextLine::TooLong(17), Vec::new()),
+                (NextLine::Line, b"xyz\n".to_vec()),
+                (NextLine::Line, b"\n".to_vec()),
+                (NextLine::Line, b"last".to_vec()),
+            ]
+        );
+        // Exactly the limit, newline included, is a line.
+        assert_eq!(
+            all_lines(b"1234567\n12345678\n", 8),
+            vec![
+                (NextLine::Line, b"1234567\n".to_vec()),
+                (NextLine::TooLong(9), Vec::new()),
+            ]
+        );
+    }
+
+    #[test]
+    fn a_line_of_max_line_bytes_is_whole_one_more_is_damage() {
+        // A valid frame padded with digits in a field to the exact length.
+        let line = |len: usize| {
+            let body = "R,0,0,-,0,0,0,0,";
+            let mut b = body.to_string();
+            while b.len() + 6 < len {
+                b.push('0');
+            }
+            format!("{b}*{:04X}\n", protocol::crc16(b.as_bytes()))
+        };
+        for (len, damaged) in [(protocol::MAX_LINE, false), (protocol::MAX_LINE + 1, true)] {
+            let mut d = Decoder::new();
+            let l = line(len);
+            assert_eq!(l.len(), len);
+            d.feed(l.as_bytes());
+            let too_long = d.errors.iter().any(|e| e.what.contains("longer than"));
+            assert_eq!(too_long, damaged, "{len}");
+        }
+    }
+}

@@ -275,6 +275,26 @@ fn bench_to_closed_or_full_stdout() {
     assert!(!stderr(&out).contains("panicked"));
 }
 
+/// `bench --seconds` either holds (within its fixed floor of half a
+/// second) or the run says how long it took instead.
+#[test]
+fn bench_keeps_its_budget_or_says_so() {
+    let start = std::time::Instant::now();
+    let out = dmap(&["bench", "--json", "--seconds", "0.2", "--geometry", "5x5"]);
+    let took = start.elapsed().as_secs_f64();
+    assert_ok(&out);
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    for (key, sample) in v["samples"].as_object().unwrap() {
+        let runs = sample["runs"].as_u64().unwrap();
+        assert!((1..=5).contains(&runs), "{key}: {runs} runs");
+    }
+    let err = stderr(&out);
+    assert!(
+        took < 1.5 * 0.2 + 0.8 || err.contains("more than --seconds 0.2"),
+        "took {took:.1} s without a word: {err}"
+    );
+}
+
 // ---------------------------------------------------------------- item 4
 
 /// An output naming an input is refused, through any path to the same
@@ -523,27 +543,34 @@ fn scans_written_per_run_are_capped() {
     );
 }
 
-/// A few lines with valid CRCs claiming row 1 677 720 of 20 columns: the
-/// 805 MB image the claim implies is not written.
+/// Lines with valid CRCs claiming row 1 677 720 of a 9-column scan: the
+/// 362 MB image the claim implies is not written.
 #[test]
 fn claimed_size_is_checked_against_what_arrived() {
     let dir = workdir("forged");
+    // A real scan's lines (header of the current protocol), with a row
+    // line moved to row 1 677 720 and an end line claiming the rows up to
+    // it, every CRC valid.
+    let real = String::from_utf8(stream_lines(&dir, false)).unwrap();
+    let recrc = |line: &str| line_with_crc(line.split('*').next().unwrap());
     let mut stream = String::new();
-    stream += &line_with_crc(
-        "H,v=2,fw=0.1.0,j=3x3,cols=20,k=P,b=0,w=uniform,norm=1,fs=65535,thr=1,q=20,scores=0",
-    );
-    stream += &line_with_crc("R,0,5,3,0,0,0,0,0");
-    stream += &line_with_crc("R,1677720,5,3,0,0,0,0,0");
-    stream += &line_with_crc(
-        "E,rows=1677721,frames=2,missing=0,dark=0,sat=0,defects=0,rejected=0,extra=0,bad=0,clipped=0,misplaced=0,dropped=0",
-    );
+    for line in real.lines() {
+        if let Some(rest) = line.strip_prefix("R,4,") {
+            stream += &recrc(&format!("R,1677720,{rest}"));
+        } else if line.starts_with("E,") {
+            stream += &recrc(&line.replacen("rows=5,", "rows=1677721,", 1));
+        } else {
+            stream += &format!("{line}\n");
+        }
+    }
+    assert!(stream.contains("R,1677720,") && stream.contains("rows=1677721,"));
     let log = dir.join("forged.txt");
     std::fs::write(&log, &stream).unwrap();
     let img = dir.join("img.npy");
     let out = dmap(&["listen", "--input", s(&log), "-o", s(&img)]);
-    assert_one_line_error(&out, "claims 1677721 rows but only 2 arrived");
+    assert_one_line_error(&out, "claims 1677721 rows but only 5 arrived");
     assert!(!img.exists());
-    assert_eq!(files_starting(&dir, "").len(), 1);
+    assert_eq!(files_starting(&dir, "img"), Vec::<String>::new());
 }
 
 // ---------------------------------------------------------------- item 7
@@ -843,4 +870,54 @@ fn render_refuses_an_oversized_image_before_reading_it() {
         ]),
         "65",
     );
+}
+
+// ---------------------------------------------------------------- item 6
+
+/// `score` and `stream` work a band of rows at a time from a mapped file:
+/// on a scan of several bands their output is the whole-scan computation's,
+/// bit for bit.
+#[test]
+fn banded_scoring_equals_whole_scan_scoring() {
+    let dir = workdir("banded");
+    let (rows, cols, j1, j2) = (120, 100, 15, 15);
+    // More than one band (and the stream's 64 KiB pieces).
+    assert!(dmap::npy::band_rows(cols, j1 * j2) < rows / 2);
+    let data = scan_data(rows, cols, j1, j2, 17);
+    let scan = dir.join("scan.npy");
+    let geometry = Geometry::new(j1, j2).unwrap();
+    dmap::npy::write_scan_u16(&scan, rows, cols, geometry, &data).unwrap();
+    let scoring = dmap::options::ScoringArgs::default();
+    // f64 CVM against the reference crate's whole-scan gradient.
+    let g = dir.join("cvm.npy");
+    assert_ok(&dmap(&["score", s(&scan), "-o", s(&g)]));
+    let values: Vec<f64> = data.iter().map(|&v| f64::from(v)).collect();
+    let embedding = cvm_reference::CvmEmbedding::new(&scoring.reference_config(j1, j2).unwrap());
+    let want = cvm_reference::gradient_image(&values, rows, cols, geometry, &embedding);
+    let got = dmap::npy::read_gradient(&g).unwrap().data;
+    assert_eq!(got.len(), want.len());
+    for (i, (a, b)) in got.chunks(3).zip(want.chunks(3)).enumerate() {
+        // The same distances bit for bit; the magnitude is sqrt(g0² + g1²)
+        // here and hypot there, which may differ in the last bit.
+        assert_eq!(a[..2], b[..2], "position {i}");
+        assert!((a[2] - b[2]).abs() <= 1e-15 * b[2], "position {i}");
+    }
+    // Fixed point against the batch scorer.
+    let scorer = scoring.scorer(j1, j2).unwrap();
+    let g = dir.join("fixed.npy");
+    assert_ok(&dmap(&["score", s(&scan), "-o", s(&g), "--distance", "cvm-fixed"]));
+    let want = dmap::fixed::to_image(&scorer, &dmap::fixed::score_scan(&scorer, rows, cols, &data));
+    assert_eq!(dmap::npy::read_gradient(&g).unwrap().data, want);
+    // The pipeline against the in-memory stream.
+    let out = dmap(&["stream", s(&scan), "--scores", "--threshold", "0.05"]);
+    assert_ok(&out);
+    let output = dmap::stream::OutputArgs {
+        threshold: Some(0.05),
+        scores: true,
+        ..Default::default()
+    };
+    let want = dmap::stream::stream_scan(&scorer, output.settings(&scorer, cols).unwrap(), rows, &data)
+        .unwrap();
+    assert!(want.len() > 1 << 16);
+    assert!(out.stdout == want, "stream output differs");
 }

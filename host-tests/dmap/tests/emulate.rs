@@ -5,8 +5,9 @@
 
 use cvm_reference::Geometry;
 use dmap::npy::write_scan_u16;
+use std::io::Read;
 use std::path::Path;
-use std::process::Command;
+use std::process::{Command, Stdio};
 
 /// A scan with a planted bright blob, a dark map and a saturated map,
 /// over a random background.
@@ -100,4 +101,99 @@ fn emulated_firmware_matches_host_pipeline_non_square_unit_weights() {
         6,
         &["--weights", "unit", "--bmax", "3"],
     );
+}
+
+/// Running `qemu-system-arm` processes whose command line mentions `needle`.
+fn qemu_processes(needle: &str) -> Vec<u32> {
+    let mut out = Vec::new();
+    for entry in std::fs::read_dir("/proc").unwrap().flatten() {
+        let Ok(pid) = entry.file_name().to_string_lossy().parse::<u32>() else {
+            continue;
+        };
+        let Ok(cmdline) = std::fs::read(entry.path().join("cmdline")) else {
+            continue;
+        };
+        let cmdline = String::from_utf8_lossy(&cmdline);
+        if cmdline.starts_with("qemu-system-arm") && cmdline.contains(needle) {
+            out.push(pid);
+        }
+    }
+    out
+}
+
+/// `dmap emulate` with its temporary files in a directory of the test's
+/// own, so that its QEMU can be told from any other.
+fn emulate_in(name: &str, rows: usize) -> (std::path::PathBuf, Command) {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("emulate-edges-{name}"));
+    let _ = std::fs::remove_dir_all(&dir);
+    let tmp = dir.join("tmp");
+    std::fs::create_dir_all(&tmp).unwrap();
+    let scan = dir.join("scan.npy");
+    // Enough score lines (about 2 kB a row) to outlast a pipe's buffer.
+    write_scan(&scan, 9, 9, 300, rows, 5);
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_dmap"));
+    cmd.args(["emulate", "--scores", "--threshold", "0.05"])
+        .arg(&scan)
+        .env("TMPDIR", &tmp);
+    (tmp, cmd)
+}
+
+/// Nothing of a run is left: no QEMU, no scan file.
+fn assert_nothing_left(tmp: &Path) {
+    let needle = tmp.to_str().unwrap();
+    assert_eq!(qemu_processes(needle), Vec::<u32>::new(), "QEMU outlived dmap");
+    let left: Vec<_> = std::fs::read_dir(tmp).unwrap().flatten().collect();
+    assert!(left.is_empty(), "temporary files left: {left:?}");
+}
+
+/// Standard output on a full disk: a one-line error, QEMU gone with it.
+#[test]
+fn emulate_to_a_full_stdout_leaves_no_qemu() {
+    let (tmp, mut cmd) = emulate_in("full", 60);
+    let full = std::fs::OpenOptions::new().write(true).open("/dev/full").unwrap();
+    let out = cmd.stdout(full).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("No space left on device"), "{err}");
+    assert_nothing_left(&tmp);
+}
+
+/// `dmap emulate ... | head -c 100`: a quiet exit 141, QEMU gone with it.
+#[test]
+fn emulate_into_a_closed_pipe_leaves_no_qemu() {
+    let (tmp, mut cmd) = emulate_in("pipe", 200);
+    let mut child = cmd.stdout(Stdio::piped()).spawn().unwrap();
+    let mut stdout = child.stdout.take().unwrap();
+    let mut first = [0u8; 100];
+    stdout.read_exact(&mut first).unwrap();
+    assert!(first.starts_with(b"H,"));
+    drop(stdout);
+    let status = child.wait().unwrap();
+    assert_eq!(status.code(), Some(141));
+    assert_nothing_left(&tmp);
+}
+
+/// SIGTERM while QEMU runs (and dmap is blocked writing to a pipe nobody
+/// reads): dmap kills and reaps QEMU, removes its scan file, and dies of
+/// the signal.
+#[test]
+fn emulate_terminated_by_a_signal_leaves_no_qemu() {
+    use std::os::unix::process::ExitStatusExt;
+    let (tmp, mut cmd) = emulate_in("signal", 200);
+    let mut child = cmd.stdout(Stdio::piped()).spawn().unwrap();
+    let mut stdout = child.stdout.take().unwrap();
+    let mut first = [0u8; 100];
+    stdout.read_exact(&mut first).unwrap();
+    let qemu = qemu_processes(tmp.to_str().unwrap());
+    assert_eq!(qemu.len(), 1, "one QEMU while the run goes on");
+    let status = Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let status = child.wait().unwrap();
+    assert_eq!(status.signal(), Some(15), "{status}");
+    assert!(!Path::new(&format!("/proc/{}", qemu[0])).exists(), "QEMU still there");
+    assert_nothing_left(&tmp);
+    drop(stdout);
 }
