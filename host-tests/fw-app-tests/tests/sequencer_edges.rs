@@ -103,3 +103,40 @@ fn beams_resuming_after_end_of_data_start_the_opened_row() {
     assert_eq!((c.sync_extra, c.short_rows, c.misplaced), (0, 0, 0));
     assert_eq!((c.sync_missing, c.extra, c.unfinished_positions), (0, 0, 0));
 }
+
+fn end(seq: &mut Sequencer<u32>) -> (bool, Vec<Action<u32>>) {
+    let mut acts = vec![];
+    let more = seq.end_of_data(&mut |a| acts.push(a));
+    (more, acts)
+}
+
+/// A beam held after a full row when the data stops is taken as the next
+/// row's first (a lost LINE_SYNC, counted); `end_of_data` then reports
+/// whether the scan still needs calls, one row of missing positions each.
+#[test]
+fn end_of_data_places_a_held_beam_as_the_next_rows_first() {
+    use Action::Missing;
+    let mut seq = Sequencer::<u32>::new(2, 3);
+    let mut acts = vec![];
+    for (b, sync) in [(0, true), (1, false), (2, false)] {
+        seq.beam(sync, Frame(b), &mut |a| acts.push(a));
+    }
+    assert_eq!(acts, [Begin, Place(at(0, 0), 0), Place(at(0, 1), 1)]);
+    assert!(seq.holding());
+    assert_eq!(end(&mut seq), (true, vec![Place(at(1, 0), 2)]));
+    assert_eq!(seq.counts().sync_missing, 1);
+    assert_eq!(end(&mut seq), (true, vec![Missing(at(1, 1))]));
+    assert_eq!(end(&mut seq), (true, vec![]));
+    assert_eq!(end(&mut seq), (false, vec![Missing(at(2, 1)), Finish]));
+    assert_eq!(end(&mut seq), (false, vec![]));
+    let c = seq.counts();
+    assert_eq!((c.sync_missing, c.unfinished_positions), (1, 3));
+    assert_eq!((c.scans_begun, c.scans_finished), (1, 1));
+
+    // When the held beam completes the scan, nothing is left to do.
+    let mut seq = Sequencer::<u32>::new(1, 2);
+    assert_eq!(beam(&mut seq, true, Frame(0)), [Begin, Place(at(0, 0), 0)]);
+    assert_eq!(beam(&mut seq, false, Frame(1)), []);
+    assert_eq!(end(&mut seq), (false, vec![Place(at(1, 0), 1), Finish]));
+    assert_eq!(seq.counts().sync_missing, 1);
+}
