@@ -905,8 +905,18 @@ fn banded_scoring_equals_whole_scan_scoring() {
     // Fixed point against the batch scorer.
     let scorer = scoring.scorer(j1, j2).unwrap();
     let g = dir.join("fixed.npy");
-    assert_ok(&dmap(&["score", s(&scan), "-o", s(&g), "--distance", "cvm-fixed"]));
-    let want = dmap::fixed::to_image(&scorer, &dmap::fixed::score_scan(&scorer, rows, cols, &data));
+    assert_ok(&dmap(&[
+        "score",
+        s(&scan),
+        "-o",
+        s(&g),
+        "--distance",
+        "cvm-fixed",
+    ]));
+    let want = dmap::fixed::to_image(
+        &scorer,
+        &dmap::fixed::score_scan(&scorer, rows, cols, &data),
+    );
     assert_eq!(dmap::npy::read_gradient(&g).unwrap().data, want);
     // The pipeline against the in-memory stream.
     let out = dmap(&["stream", s(&scan), "--scores", "--threshold", "0.05"]);
@@ -916,8 +926,13 @@ fn banded_scoring_equals_whole_scan_scoring() {
         scores: true,
         ..Default::default()
     };
-    let want = dmap::stream::stream_scan(&scorer, output.settings(&scorer, cols).unwrap(), rows, &data)
-        .unwrap();
+    let want = dmap::stream::stream_scan(
+        &scorer,
+        output.settings(&scorer, cols).unwrap(),
+        rows,
+        &data,
+    )
+    .unwrap();
     assert!(want.len() > 1 << 16);
     assert!(out.stdout == want, "stream output differs");
 }

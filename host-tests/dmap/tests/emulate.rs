@@ -141,7 +141,11 @@ fn emulate_in(name: &str, rows: usize) -> (std::path::PathBuf, Command) {
 /// Nothing of a run is left: no QEMU, no scan file.
 fn assert_nothing_left(tmp: &Path) {
     let needle = tmp.to_str().unwrap();
-    assert_eq!(qemu_processes(needle), Vec::<u32>::new(), "QEMU outlived dmap");
+    assert_eq!(
+        qemu_processes(needle),
+        Vec::<u32>::new(),
+        "QEMU outlived dmap"
+    );
     let left: Vec<_> = std::fs::read_dir(tmp).unwrap().flatten().collect();
     assert!(left.is_empty(), "temporary files left: {left:?}");
 }
@@ -150,7 +154,10 @@ fn assert_nothing_left(tmp: &Path) {
 #[test]
 fn emulate_to_a_full_stdout_leaves_no_qemu() {
     let (tmp, mut cmd) = emulate_in("full", 60);
-    let full = std::fs::OpenOptions::new().write(true).open("/dev/full").unwrap();
+    let full = std::fs::OpenOptions::new()
+        .write(true)
+        .open("/dev/full")
+        .unwrap();
     let out = cmd.stdout(full).output().unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{err}");
@@ -193,7 +200,10 @@ fn emulate_terminated_by_a_signal_leaves_no_qemu() {
     assert!(status.success());
     let status = child.wait().unwrap();
     assert_eq!(status.signal(), Some(15), "{status}");
-    assert!(!Path::new(&format!("/proc/{}", qemu[0])).exists(), "QEMU still there");
+    assert!(
+        !Path::new(&format!("/proc/{}", qemu[0])).exists(),
+        "QEMU still there"
+    );
     assert_nothing_left(&tmp);
     drop(stdout);
 }
