@@ -183,6 +183,11 @@ impl ScanResult {
 pub const DEFAULT_MAX_SCANS: u32 = 64;
 pub const MAX_SCANS: u32 = 4096;
 
+/// Row lines, defects and scores one run holds, over all its scans (the
+/// largest image's worth, about 1.5 GB at most): memory does not grow with
+/// the number of scans either.
+pub const MAX_KEPT: usize = MAX_IMAGE_POSITIONS;
+
 /// Line errors kept (and listed); beyond, they are only counted.
 pub const MAX_ERRORS: usize = 1000;
 /// Problems kept per scan; beyond, they are only counted.
@@ -207,6 +212,9 @@ pub struct Decoder {
     pub scans_skipped: usize,
     skipping: bool,
     max_scans: usize,
+    /// Row lines, defects and scores held, over all scans, and at most.
+    kept: usize,
+    max_kept: usize,
 }
 
 impl Default for Decoder {
@@ -231,7 +239,16 @@ impl Decoder {
             scans_skipped: 0,
             skipping: false,
             max_scans: max_scans.max(1),
+            kept: 0,
+            max_kept: MAX_KEPT,
         }
+    }
+
+    /// The same decoder holding at most `kept` row lines, defects and
+    /// scores over all its scans (default [`MAX_KEPT`]).
+    pub fn with_budget(mut self, kept: usize) -> Self {
+        self.max_kept = kept;
+        self
     }
 
     /// Line errors in all, listed or not.
@@ -379,11 +396,12 @@ impl Decoder {
                 if s.rows.contains_key(&summary.row) {
                     return self.problem(format!("row {} reported twice", summary.row));
                 }
-                if s.rows.len() >= MAX_IMAGE_POSITIONS {
+                if s.rows.len() >= MAX_IMAGE_POSITIONS || self.kept >= self.max_kept {
                     return self.problem("more row lines than an image can hold; the rest ignored");
                 }
                 s.unlisted_defects += (summary.defects - listed.min(summary.defects)) as u64;
                 s.rows.insert(summary.row, summary);
+                self.kept += 1;
             }
             Line::Defect {
                 row,
@@ -394,10 +412,11 @@ impl Decoder {
                 let Some(s) = self.current.as_mut() else {
                     return self.error("defect line outside a scan (header lost?)");
                 };
-                if s.defects.len() >= MAX_DEFECTS {
+                if s.defects.len() >= MAX_DEFECTS || self.kept >= self.max_kept {
                     return self
                         .problem("more defect lines than an image can hold; the rest ignored");
                 }
+                self.kept += 1;
                 let score = s.units(mag);
                 s.defects.push(Defect {
                     row,
@@ -416,7 +435,7 @@ impl Decoder {
                     return self
                         .problem(format!("score line for row {row} runs past column {cols}"));
                 }
-                if s.n_scores + n > MAX_IMAGE_POSITIONS {
+                if s.n_scores + n > MAX_IMAGE_POSITIONS || self.kept + n > self.max_kept {
                     return self.problem("more scores than an image can hold; the rest ignored");
                 }
                 let mut added = 0;
@@ -431,6 +450,7 @@ impl Decoder {
                     }
                 }
                 s.n_scores += added;
+                self.kept += added;
                 if dup {
                     self.problem(format!(
                         "scores of row {row} from column {col0} received twice"
@@ -897,6 +917,38 @@ mod tests {
             }
             out.push((next, buf.clone()));
         }
+    }
+
+    #[test]
+    fn the_run_holds_a_bounded_number_of_scores_over_all_scans() {
+        let scorer = crate::options::ScoringArgs::default().scorer(3, 3).unwrap();
+        let settings = crate::stream::OutputArgs {
+            threshold: Some(0.0),
+            scores: true,
+            ..Default::default()
+        }
+        .settings(&scorer, 10)
+        .unwrap();
+        // Two rows of ten columns: 2 row lines, 20 scores, 20 defects a scan.
+        let frames: Vec<u16> = (0..20 * 9).map(|i| (i * 37 % 1000) as u16).collect();
+        let one = crate::stream::stream_scan(&scorer, settings, 2, &frames).unwrap();
+        let mut dec = Decoder::new().with_budget(100);
+        for line in one.repeat(3).split_inclusive(|&b| b == b'\n') {
+            dec.feed(line);
+        }
+        dec.finish();
+        assert_eq!(dec.scans.len(), 3);
+        let held: Vec<usize> = dec
+            .scans
+            .iter()
+            .map(|s| s.rows.len() + s.defects.len() + s.n_scores)
+            .collect();
+        // 42 each, until the budget of 100 runs out in the third scan.
+        assert_eq!(held[..2], [42, 42]);
+        assert!(held[2] <= 16, "{held:?}");
+        assert!(dec.scans[0].problems.is_empty() && dec.scans[1].problems.is_empty());
+        assert!(dec.scans[2].problem_count() > 0);
+        assert!(!dec.damage().is_empty());
     }
 
     #[test]
