@@ -140,3 +140,26 @@ fn end_of_data_places_a_held_beam_as_the_next_rows_first() {
     assert_eq!(end(&mut seq), (false, vec![Place(at(1, 0), 1), Finish]));
     assert_eq!(seq.counts().sync_missing, 1);
 }
+
+/// The scan's last row complete but with an unsettled suspect LINE_SYNC:
+/// the scan stays open for the next beam (rule 3); when the data stops
+/// instead, it ends at once, the suspect unsettled and nothing missing.
+#[test]
+fn end_of_data_ends_a_full_last_row_with_a_suspect() {
+    let mut seq = Sequencer::<u32>::new(3, 1);
+    let mut acts = vec![];
+    for (b, sync) in [(0, true), (1, true), (2, false)] {
+        seq.beam(sync, Frame(b), &mut |a| acts.push(a));
+    }
+    let placed: Vec<_> = (0..3).map(|c| Place(at(0, c), c)).collect();
+    assert_eq!(acts[0], Begin);
+    assert_eq!(acts[1..], placed[..]);
+    assert_eq!(end(&mut seq), (false, vec![Finish]));
+    assert_eq!(end(&mut seq), (false, vec![]));
+    let c = seq.counts();
+    assert_eq!(
+        (c.unfinished_positions, c.sync_extra, c.short_rows),
+        (0, 0, 0)
+    );
+    assert_eq!((c.scans_begun, c.scans_finished), (1, 1));
+}
