@@ -101,3 +101,14 @@ pub enum ConfigError {
     /// No fixed-point scaling keeps every accumulator in range.
     Range,
 }
+
+impl core::fmt::Display for ConfigError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(match self {
+            ConfigError::Geometry => "detector axis outside 1..=16",
+            ConfigError::KernelSize => "square kernel size K above 15",
+            ConfigError::Weights => "a weight is negative or not finite, or all weights are zero",
+            ConfigError::Range => "no fixed-point scaling keeps every accumulator in range",
+        })
+    }
+}

@@ -2,7 +2,7 @@
 //! `dmap stream` and both firmware boards drive exactly this type, which is
 //! what makes their output byte-identical.
 
-use crate::protocol::{HeaderInfo, LineSink, encode_end, encode_header, encode_row};
+use crate::protocol::{HeaderInfo, LineSink, ResetCause, encode_end, encode_header, encode_row};
 use crate::scorer::Scorer;
 use crate::stream::{Engine, EngineError, Position, PushOutcome, Totals};
 
@@ -15,10 +15,15 @@ pub struct Settings {
     pub threshold: u32,
     /// Emit per-position score (`S`) lines.
     pub scores: bool,
-    /// At most this many defect (`D`) lines per row; the row line carries
-    /// the full count, so a truncated list is visible.
+    /// At most this many defect (`D`) lines per row, the strongest; the row
+    /// line carries the full count, so a truncated list is visible, and the
+    /// header the cap (`dcap`).
     pub max_defect_lines_per_row: u16,
     pub firmware_version: &'static str,
+    /// Why the board last started (`rst`; [`ResetCause::PowerOn`] on the host).
+    pub reset_cause: ResetCause,
+    /// Starts since power-on, this one included (`boots`; 1 on the host).
+    pub boots: u32,
 }
 
 pub struct Pipeline<'a, const MAX_COLS: usize> {
@@ -43,14 +48,7 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
 
     /// Starts a scan: the header line.
     pub fn begin(&mut self, sink: &mut impl LineSink) {
-        let s = &self.settings;
-        let h = HeaderInfo::new(
-            self.engine.scorer(),
-            s.cols,
-            s.threshold,
-            s.scores,
-            s.firmware_version,
-        );
+        let h = HeaderInfo::new(self.engine.scorer(), &self.settings);
         encode_header(&h, sink);
     }
 

@@ -7,11 +7,12 @@
 //! from the line it is given, so both run on the target and on the host.
 
 use crate::config::{Config, Kernels, Weights};
+use crate::pipeline::Settings;
 use crate::scorer::Scorer;
 use crate::stream::{PositionScore, RowSummary, RowView, Totals};
 
 /// Protocol version written in the header.
-pub const VERSION: u32 = 2;
+pub const VERSION: u32 = 3;
 /// Upper bound on the length of any line, newline included.
 pub const MAX_LINE: usize = 256;
 /// Positions per score (`S`) line.
@@ -73,12 +74,11 @@ const HEX: &[u8; 16] = b"0123456789ABCDEF";
 const B64: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789-_";
 
 /// A line under construction in a fixed buffer. Writes past `MAX_LINE`
-/// are dropped and remembered (they cannot happen for the lines this module
-/// writes; the length bounds are tested).
+/// are dropped (they cannot happen for the lines this module writes; the
+/// length bounds are tested).
 pub struct LineBuf {
     buf: [u8; MAX_LINE],
     len: usize,
-    overflow: bool,
 }
 
 impl LineBuf {
@@ -86,7 +86,6 @@ impl LineBuf {
         let mut l = LineBuf {
             buf: [0; MAX_LINE],
             len: 0,
-            overflow: false,
         };
         l.byte(kind);
         l
@@ -99,9 +98,7 @@ impl LineBuf {
         {
             *slot = b;
             self.len += 1;
-            return;
         }
-        self.overflow = true;
     }
 
     pub fn bytes(&mut self, s: &[u8]) {
@@ -148,10 +145,6 @@ impl LineBuf {
         self.bytes(key);
         self.byte(b'=');
         self.u64(v);
-    }
-
-    pub fn overflowed(&self) -> bool {
-        self.overflow
     }
 
     /// Appends `*XXXX\n` and returns the whole line.
@@ -207,7 +200,51 @@ pub fn decode_score(chars: &[u8]) -> Option<(u32, u8)> {
     Some((v as u32, (v >> 32) as u8))
 }
 
-/// What the header says about the scan and the scoring.
+/// Why the board last started, as the header's `rst` carries it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ResetCause {
+    /// Power-on or brown-out (`por`); also `dmap stream` and the emulated board.
+    PowerOn,
+    /// A watchdog (`wdg`).
+    Watchdog,
+    /// A software reset: after a panic, or a debugger's request (`sw`).
+    Software,
+    /// The reset pin (`pin`).
+    Pin,
+    /// Anything else (`other`).
+    Other,
+}
+
+impl ResetCause {
+    /// Every cause, in the order of the protocol document.
+    pub const ALL: [ResetCause; 5] = [
+        ResetCause::PowerOn,
+        ResetCause::Watchdog,
+        ResetCause::Software,
+        ResetCause::Pin,
+        ResetCause::Other,
+    ];
+
+    /// The value of `rst=`.
+    pub const fn as_str(self) -> &'static str {
+        match self {
+            ResetCause::PowerOn => "por",
+            ResetCause::Watchdog => "wdg",
+            ResetCause::Software => "sw",
+            ResetCause::Pin => "pin",
+            ResetCause::Other => "other",
+        }
+    }
+
+    fn parse(s: &[u8]) -> Option<Self> {
+        ResetCause::ALL
+            .into_iter()
+            .find(|c| c.as_str().as_bytes() == s)
+    }
+}
+
+/// What the header says about the scan, the scoring and the board's start.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct HeaderInfo<'s> {
     pub version: u32,
@@ -227,16 +264,17 @@ pub struct HeaderInfo<'s> {
     /// Score format: a score `s` is `s / 2^q` distance units.
     pub q: i32,
     pub scores: bool,
+    /// Most `D` lines per row (`dcap`).
+    pub max_defect_lines: u16,
+    /// Why the board last started (`rst`).
+    pub reset_cause: ResetCause,
+    /// Starts since power-on, this one included (`boots`; 1 after power-on).
+    pub boots: u32,
 }
 
-impl<'s> HeaderInfo<'s> {
-    pub fn new(
-        scorer: &Scorer,
-        cols: u32,
-        threshold: u32,
-        scores: bool,
-        firmware: &'s str,
-    ) -> Self {
+impl HeaderInfo<'static> {
+    /// The header of a pipeline with these settings.
+    pub fn new(scorer: &Scorer, settings: &Settings) -> Self {
         let cfg: &Config = scorer.config();
         let (kernels, kernel_size) = match cfg.kernels {
             Kernels::Paper { bmax } => (b'P', bmax),
@@ -249,23 +287,26 @@ impl<'s> HeaderInfo<'s> {
         };
         HeaderInfo {
             version: VERSION,
-            firmware,
+            firmware: settings.firmware_version,
             j1: cfg.geometry.j1,
             j2: cfg.geometry.j2,
-            cols,
+            cols: settings.cols,
             kernels,
             kernel_size,
             weights,
             normalise: cfg.normalise,
             full_scale: cfg.full_scale,
-            threshold,
+            threshold: settings.threshold,
             q: scorer.score_frac_bits(),
-            scores,
+            scores: settings.scores,
+            max_defect_lines: settings.max_defect_lines_per_row,
+            reset_cause: settings.reset_cause,
+            boots: settings.boots,
         }
     }
 }
 
-/// `H,v=2,fw=..,j=15x15,cols=300,k=P,b=0,w=uniform,norm=1,fs=65535,thr=..,q=23,scores=0`
+/// `H,v=3,fw=..,j=15x15,cols=300,k=P,b=0,w=uniform,norm=1,fs=65535,thr=..,q=23,scores=0,dcap=16,rst=por,boots=1`
 pub fn encode_header(h: &HeaderInfo, sink: &mut impl LineSink) {
     let mut l = LineBuf::new(b'H');
     l.kv_u64(b"v", h.version as u64);
@@ -295,14 +336,19 @@ pub fn encode_header(h: &HeaderInfo, sink: &mut impl LineSink) {
     l.field(b"q=");
     l.i64(h.q as i64);
     l.kv_u64(b"scores", h.scores as u64);
+    l.kv_u64(b"dcap", h.max_defect_lines as u64);
+    l.field(b"rst=");
+    l.bytes(h.reset_cause.as_str().as_bytes());
+    l.kv_u64(b"boots", h.boots as u64);
     sink.line(l.finish(), Priority::Keep);
 }
 
-/// Encodes a finished row: the `R` summary, up to `max_defects` `D` lines,
-/// and with `scores` its `S` lines.
-pub fn encode_row(view: &RowView, max_defects: u16, scores: bool, sink: &mut impl LineSink) {
+/// Encodes a finished row: the `R` summary, up to `max_defect_lines` `D`
+/// lines (the strongest defects, strongest first; equal magnitudes by
+/// column, leftmost first), and with `scores` its `S` lines.
+pub fn encode_row(view: &RowView, max_defect_lines: u16, scores: bool, sink: &mut impl LineSink) {
     let s = &view.summary;
-    let listed = s.defects.min(max_defects as u32);
+    let listed = s.defects.min(max_defect_lines as u32);
     let mut l = LineBuf::new(b'R');
     l.byte(b',');
     l.u64(s.row as u64);
@@ -319,20 +365,18 @@ pub fn encode_row(view: &RowView, max_defects: u16, scores: bool, sink: &mut imp
     }
     sink.line(l.finish(), Priority::Keep);
 
-    let mut left = listed;
-    for (c, p) in view.scores.iter().enumerate() {
-        if left == 0 {
+    let mut last = None;
+    for _ in 0..listed {
+        let Some((c, p)) = next_defect(view, last) else {
             break;
+        };
+        let mut l = LineBuf::new(b'D');
+        for v in [s.row, c as u32, p.mag, p.flags as u32] {
+            l.byte(b',');
+            l.u64(v as u64);
         }
-        if p.flags & crate::flags::NO_DATA == 0 && p.mag >= view.threshold {
-            let mut l = LineBuf::new(b'D');
-            for v in [s.row, c as u32, p.mag, p.flags as u32] {
-                l.byte(b',');
-                l.u64(v as u64);
-            }
-            sink.line(l.finish(), Priority::Keep);
-            left -= 1;
-        }
+        sink.line(l.finish(), Priority::Keep);
+        last = Some((p.mag, c));
     }
 
     if scores {
@@ -351,31 +395,58 @@ pub fn encode_row(view: &RowView, max_defects: u16, scores: bool, sink: &mut imp
     }
 }
 
+/// The defect listed after `last` (magnitude, column): the strongest one
+/// below it in the order of `D` lines (magnitude down, then column up).
+/// One pass over the row per line: no buffer, and at most the cap passes.
+fn next_defect(view: &RowView, last: Option<(u32, usize)>) -> Option<(usize, PositionScore)> {
+    let mut best: Option<(usize, PositionScore)> = None;
+    for (c, p) in view.scores.iter().enumerate() {
+        let defect = p.flags & crate::flags::NO_DATA == 0 && p.mag >= view.threshold;
+        let after = match last {
+            None => true,
+            Some((m, lc)) => p.mag < m || (p.mag == m && c > lc),
+        };
+        // Columns ascend: a tie keeps the leftmost.
+        if defect && after && best.is_none_or(|(_, b)| p.mag > b.mag) {
+            best = Some((c, *p));
+        }
+    }
+    best
+}
+
 /// `E,rows=..,frames=..,missing=..,dark=..,sat=..,defects=..,rejected=..,extra=..,bad=..,clipped=..,misplaced=..,dropped=..`
 pub fn encode_end(t: &Totals, dropped: u32, sink: &mut impl LineSink) {
     let mut l = LineBuf::new(b'E');
-    for (k, v) in end_fields(t, dropped) {
-        l.kv_u64(k, v as u64);
+    let mut t = *t;
+    for (key, field) in END_FIELDS {
+        l.kv_u64(key.as_bytes(), *field(&mut t) as u64);
     }
+    l.kv_u64(DROPPED.as_bytes(), dropped as u64);
     sink.line(l.finish(), Priority::Keep);
 }
 
-fn end_fields(t: &Totals, dropped: u32) -> [(&'static [u8], u32); 12] {
-    [
-        (b"rows", t.rows),
-        (b"frames", t.frames),
-        (b"missing", t.missing),
-        (b"dark", t.dark),
-        (b"sat", t.saturated),
-        (b"defects", t.defects),
-        (b"rejected", t.rejected),
-        (b"extra", t.extra),
-        (b"bad", t.bad),
-        (b"clipped", t.clipped),
-        (b"misplaced", t.misplaced),
-        (b"dropped", dropped),
-    ]
-}
+/// The end line's keys and the [`Totals`] field each one carries, in the
+/// order of the line; [`DROPPED`] follows them. The encoder, the parser and
+/// `dmap listen` read this one list.
+pub const END_FIELDS: [(&str, TotalsField); 11] = [
+    ("rows", |t| &mut t.rows),
+    ("frames", |t| &mut t.frames),
+    ("missing", |t| &mut t.missing),
+    ("dark", |t| &mut t.dark),
+    ("sat", |t| &mut t.saturated),
+    ("defects", |t| &mut t.defects),
+    ("rejected", |t| &mut t.rejected),
+    ("extra", |t| &mut t.extra),
+    ("bad", |t| &mut t.bad),
+    ("clipped", |t| &mut t.clipped),
+    ("misplaced", |t| &mut t.misplaced),
+];
+
+/// One field of [`Totals`], for reading and writing.
+pub type TotalsField = fn(&mut Totals) -> &mut u32;
+
+/// The end line's last key: score lines the link could not carry.
+pub const DROPPED: &str = "dropped";
 
 /// Totals as the end line carries them.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -420,6 +491,17 @@ pub enum ParseError {
     Type,
 }
 
+impl core::fmt::Display for ParseError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(match self {
+            ParseError::NoChecksum => "no checksum (truncated or garbled line)",
+            ParseError::Checksum => "checksum mismatch (corrupted line)",
+            ParseError::Format => "malformed fields",
+            ParseError::Type => "unknown line type",
+        })
+    }
+}
+
 fn parse_u64(s: &[u8]) -> Option<u64> {
     if s.is_empty() || s.len() > 20 {
         return None;
@@ -452,8 +534,46 @@ fn kv<'s>(field: Option<&'s [u8]>, key: &[u8]) -> Option<&'s [u8]> {
     rest.strip_prefix(b"=")
 }
 
-/// Parses one line (with or without its trailing `\r\n`/`\n`).
-pub fn parse(line: &[u8]) -> Result<Line<'_>, ParseError> {
+/// The fields of a line, read in order; every read fails as [`ParseError::Format`].
+struct Fields<'s, I: Iterator<Item = &'s [u8]>>(I);
+
+impl<'s, I: Iterator<Item = &'s [u8]>> Fields<'s, I> {
+    fn next(&mut self) -> Result<&'s [u8], ParseError> {
+        self.0.next().ok_or(ParseError::Format)
+    }
+
+    fn u32(&mut self) -> Result<u32, ParseError> {
+        parse_u32(self.next()?).ok_or(ParseError::Format)
+    }
+
+    /// The value of the next field, which must be `key=value`.
+    fn key(&mut self, key: &str) -> Result<&'s [u8], ParseError> {
+        kv(self.0.next(), key.as_bytes()).ok_or(ParseError::Format)
+    }
+
+    fn key_u32(&mut self, key: &str) -> Result<u32, ParseError> {
+        parse_u32(self.key(key)?).ok_or(ParseError::Format)
+    }
+
+    fn key_u8(&mut self, key: &str) -> Result<u8, ParseError> {
+        u8::try_from(self.key_u32(key)?).map_err(|_| ParseError::Format)
+    }
+
+    fn key_str(&mut self, key: &str) -> Result<&'s str, ParseError> {
+        core::str::from_utf8(self.key(key)?).map_err(|_| ParseError::Format)
+    }
+
+    /// Succeeds when no field is left.
+    fn end(mut self) -> Result<(), ParseError> {
+        match self.0.next() {
+            Some(_) => Err(ParseError::Format),
+            None => Ok(()),
+        }
+    }
+}
+
+/// The body of a line (before its `*`), once its CRC has been checked.
+fn checked_body(line: &[u8]) -> Result<&[u8], ParseError> {
     let line = line.strip_suffix(b"\n").unwrap_or(line);
     let line = line.strip_suffix(b"\r").unwrap_or(line);
     let star = line
@@ -477,152 +597,136 @@ pub fn parse(line: &[u8]) -> Result<Line<'_>, ParseError> {
     if crc16(body) != want {
         return Err(ParseError::Checksum);
     }
+    Ok(body)
+}
+
+/// Parses one line (with or without its trailing `\r\n`/`\n`).
+pub fn parse(line: &[u8]) -> Result<Line<'_>, ParseError> {
+    let body = checked_body(line)?;
     let mut it = body.split(|&b| b == b',');
     let kind = it.next().ok_or(ParseError::Format)?;
-    let f = ParseError::Format;
-    match kind {
-        b"H" => {
-            let version = parse_u32(kv(it.next(), b"v").ok_or(f)?).ok_or(f)?;
-            let fw = core::str::from_utf8(kv(it.next(), b"fw").ok_or(f)?).map_err(|_| f)?;
-            let j = kv(it.next(), b"j").ok_or(f)?;
-            let x = j.iter().position(|&b| b == b'x').ok_or(f)?;
-            let (a, b) = j.split_at(x);
-            let j1 = parse_u32(a).and_then(|v| u8::try_from(v).ok()).ok_or(f)?;
-            let j2 = parse_u32(b.get(1..).ok_or(f)?)
-                .and_then(|v| u8::try_from(v).ok())
-                .ok_or(f)?;
-            let cols = parse_u32(kv(it.next(), b"cols").ok_or(f)?).ok_or(f)?;
-            let kernels = match kv(it.next(), b"k").ok_or(f)? {
-                b"P" => b'P',
-                b"S" => b'S',
-                _ => return Err(f),
-            };
-            let kernel_size = parse_u32(kv(it.next(), b"b").ok_or(f)?)
-                .and_then(|v| u8::try_from(v).ok())
-                .ok_or(f)?;
-            let weights = core::str::from_utf8(kv(it.next(), b"w").ok_or(f)?).map_err(|_| f)?;
-            let normalise = parse_u32(kv(it.next(), b"norm").ok_or(f)?).ok_or(f)? != 0;
-            let full_scale = parse_u32(kv(it.next(), b"fs").ok_or(f)?)
-                .and_then(|v| u16::try_from(v).ok())
-                .ok_or(f)?;
-            let threshold = parse_u32(kv(it.next(), b"thr").ok_or(f)?).ok_or(f)?;
-            let q = parse_i32(kv(it.next(), b"q").ok_or(f)?).ok_or(f)?;
-            let scores = parse_u32(kv(it.next(), b"scores").ok_or(f)?).ok_or(f)? != 0;
-            if it.next().is_some() {
-                return Err(f);
-            }
-            Ok(Line::Header(HeaderInfo {
-                version,
-                firmware: fw,
-                j1,
-                j2,
-                cols,
-                kernels,
-                kernel_size,
-                weights,
-                normalise,
-                full_scale,
-                threshold,
-                q,
-                scores,
-            }))
-        }
-        b"R" => {
-            let mut v = [0u32; 8];
-            let mut argmax = None;
-            for (i, slot) in v.iter_mut().enumerate() {
-                let field = it.next().ok_or(f)?;
-                if i == 2 && field == b"-" {
-                    continue;
-                }
-                *slot = parse_u32(field).ok_or(f)?;
-                if i == 2 {
-                    argmax = Some(*slot);
-                }
-            }
-            if it.next().is_some() {
-                return Err(f);
-            }
-            let [row, max, _, defects, listed, no_data, dark, saturated] = v;
-            Ok(Line::Row {
-                summary: RowSummary {
-                    row,
-                    max,
-                    argmax,
-                    defects,
-                    no_data,
-                    dark,
-                    saturated,
-                },
-                listed,
-            })
-        }
-        b"D" => {
-            let mut v = [0u32; 4];
-            for slot in v.iter_mut() {
-                *slot = parse_u32(it.next().ok_or(f)?).ok_or(f)?;
-            }
-            if it.next().is_some() || v[3] > 0xFF {
-                return Err(f);
-            }
-            Ok(Line::Defect {
-                row: v[0],
-                col: v[1],
-                mag: v[2],
-                flags: v[3] as u8,
-            })
-        }
-        b"S" => {
-            let row = parse_u32(it.next().ok_or(f)?).ok_or(f)?;
-            let col0 = parse_u32(it.next().ok_or(f)?).ok_or(f)?;
-            let chars = it.next().ok_or(f)?;
-            if it.next().is_some() || chars.is_empty() || chars.len() % SCORE_CHARS != 0 {
-                return Err(f);
-            }
-            if chars.chunks(SCORE_CHARS).any(|c| decode_score(c).is_none()) {
-                return Err(f);
-            }
-            Ok(Line::Scores { row, col0, chars })
-        }
-        b"E" => {
-            let mut vals = [0u32; 12];
-            for (slot, (key, _)) in vals.iter_mut().zip(end_fields(&Totals::default(), 0)) {
-                *slot = parse_u32(kv(it.next(), key).ok_or(f)?).ok_or(f)?;
-            }
-            if it.next().is_some() {
-                return Err(f);
-            }
-            let [
-                rows,
-                frames,
-                missing,
-                dark,
-                saturated,
-                defects,
-                rejected,
-                extra,
-                bad,
-                clipped,
-                misplaced,
-                dropped,
-            ] = vals;
-            Ok(Line::End(EndInfo {
-                totals: Totals {
-                    rows,
-                    frames,
-                    missing,
-                    dark,
-                    saturated,
-                    defects,
-                    rejected,
-                    extra,
-                    bad,
-                    clipped,
-                    misplaced,
-                },
-                dropped,
-            }))
-        }
-        _ => Err(ParseError::Type),
+    let mut f = Fields(it);
+    let line = match kind {
+        b"H" => Line::Header(parse_header(&mut f)?),
+        b"R" => parse_row(&mut f)?,
+        b"D" => parse_defect(&mut f)?,
+        b"S" => parse_scores(&mut f)?,
+        b"E" => Line::End(parse_end(&mut f)?),
+        _ => return Err(ParseError::Type),
+    };
+    f.end()?;
+    Ok(line)
+}
+
+fn parse_header<'s>(
+    f: &mut Fields<'s, impl Iterator<Item = &'s [u8]>>,
+) -> Result<HeaderInfo<'s>, ParseError> {
+    let e = ParseError::Format;
+    let version = f.key_u32("v")?;
+    let firmware = f.key_str("fw")?;
+    let (j1, j2) = {
+        let j = f.key("j")?;
+        let x = j.iter().position(|&b| b == b'x').ok_or(e)?;
+        let (a, b) = j.split_at(x);
+        let axis = |s: &[u8]| parse_u32(s).and_then(|v| u8::try_from(v).ok()).ok_or(e);
+        (axis(a)?, axis(b.get(1..).ok_or(e)?)?)
+    };
+    let cols = f.key_u32("cols")?;
+    let kernels = match f.key("k")? {
+        b"P" => b'P',
+        b"S" => b'S',
+        _ => return Err(e),
+    };
+    let kernel_size = f.key_u8("b")?;
+    let weights = f.key_str("w")?;
+    let normalise = f.key_u32("norm")? != 0;
+    let full_scale = u16::try_from(f.key_u32("fs")?).map_err(|_| e)?;
+    let threshold = f.key_u32("thr")?;
+    let q = parse_i32(f.key("q")?).ok_or(e)?;
+    let scores = f.key_u32("scores")? != 0;
+    let max_defect_lines = u16::try_from(f.key_u32("dcap")?).map_err(|_| e)?;
+    let reset_cause = ResetCause::parse(f.key("rst")?).ok_or(e)?;
+    let boots = f.key_u32("boots")?;
+    Ok(HeaderInfo {
+        version,
+        firmware,
+        j1,
+        j2,
+        cols,
+        kernels,
+        kernel_size,
+        weights,
+        normalise,
+        full_scale,
+        threshold,
+        q,
+        scores,
+        max_defect_lines,
+        reset_cause,
+        boots,
+    })
+}
+
+fn parse_row<'s>(
+    f: &mut Fields<'s, impl Iterator<Item = &'s [u8]>>,
+) -> Result<Line<'s>, ParseError> {
+    let row = f.u32()?;
+    let max = f.u32()?;
+    let argmax = match f.next()? {
+        b"-" => None,
+        v => Some(parse_u32(v).ok_or(ParseError::Format)?),
+    };
+    let [defects, listed, no_data, dark, saturated] =
+        [f.u32()?, f.u32()?, f.u32()?, f.u32()?, f.u32()?];
+    Ok(Line::Row {
+        summary: RowSummary {
+            row,
+            max,
+            argmax,
+            defects,
+            no_data,
+            dark,
+            saturated,
+        },
+        listed,
+    })
+}
+
+fn parse_defect<'s>(
+    f: &mut Fields<'s, impl Iterator<Item = &'s [u8]>>,
+) -> Result<Line<'s>, ParseError> {
+    let [row, col, mag] = [f.u32()?, f.u32()?, f.u32()?];
+    let flags = u8::try_from(f.u32()?).map_err(|_| ParseError::Format)?;
+    Ok(Line::Defect {
+        row,
+        col,
+        mag,
+        flags,
+    })
+}
+
+fn parse_scores<'s>(
+    f: &mut Fields<'s, impl Iterator<Item = &'s [u8]>>,
+) -> Result<Line<'s>, ParseError> {
+    let row = f.u32()?;
+    let col0 = f.u32()?;
+    let chars = f.next()?;
+    if chars.is_empty()
+        || chars.len() % SCORE_CHARS != 0
+        || chars.chunks(SCORE_CHARS).any(|c| decode_score(c).is_none())
+    {
+        return Err(ParseError::Format);
     }
+    Ok(Line::Scores { row, col0, chars })
+}
+
+fn parse_end<'s>(
+    f: &mut Fields<'s, impl Iterator<Item = &'s [u8]>>,
+) -> Result<EndInfo, ParseError> {
+    let mut totals = Totals::default();
+    for (key, field) in END_FIELDS {
+        *field(&mut totals) = f.key_u32(key)?;
+    }
+    let dropped = f.key_u32(DROPPED)?;
+    Ok(EndInfo { totals, dropped })
 }

@@ -108,6 +108,15 @@ pub enum EngineError {
     Buffer,
 }
 
+impl core::fmt::Display for EngineError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(match self {
+            EngineError::Columns => "no columns, or more than the engine holds",
+            EngineError::Buffer => "a row buffer is too short for the columns and maps",
+        })
+    }
+}
+
 /// What happened to a pushed frame.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]

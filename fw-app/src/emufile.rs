@@ -56,6 +56,12 @@ pub enum HeaderError {
     Version,
 }
 
+impl core::fmt::Display for HeaderError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(self.message())
+    }
+}
+
 impl HeaderError {
     pub fn message(self) -> &'static str {
         match self {

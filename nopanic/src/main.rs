@@ -113,6 +113,8 @@ pub extern "C" fn _start() -> ! {
         scores: black_box(true),
         max_defect_lines_per_row: black_box(8),
         firmware_version: "nopanic",
+        reset_cause: cvm_core::protocol::ResetCause::Watchdog,
+        boots: black_box(2),
     };
     // SAFETY: `_start` runs once and is the only user of these statics.
     let (row_a, row_b, queue, bus) = unsafe {

@@ -22,7 +22,7 @@ use core::fmt::Write as _;
 
 use cortex_m_rt::entry;
 use cvm_core::pipeline::{Pipeline, Settings};
-use cvm_core::protocol::MAX_LINE;
+use cvm_core::protocol::{MAX_LINE, ResetCause};
 use cvm_core::stream::row_words;
 use cvm_core::{MAX_J, Scorer};
 use cvm_fw_app::acquire::Acquisition;
@@ -174,6 +174,9 @@ async fn scan_task(syst: cortex_m::peripheral::SYST) {
         scores: header.scores,
         max_defect_lines_per_row: header.max_defect_lines_per_row,
         firmware_version,
+        // QEMU starts the board from power-on, once per run.
+        reset_cause: ResetCause::PowerOn,
+        boots: 1,
     };
     let words = row_words(
         header.cols as usize,

@@ -145,6 +145,7 @@ fn main() -> ! {
     interrupt::EXTI9_5.disable();
     resets::freeze_watchdog_in_debug();
     let cause = resets::take_cause();
+    let boots = resets::count_boot(cause);
     // SRAM1..3 hold row buffer B; their clocks are off after reset.
     embassy_stm32::pac::RCC.ahb2enr().modify(|w| {
         w.set_sram1en(true);
@@ -153,7 +154,7 @@ fn main() -> ! {
     });
     let pins = crate::pins!(p);
 
-    info!("reset cause: {}", cause);
+    info!("reset cause: {}, start {} since power-on", cause, boots);
     info!(
         "{} start: {}x{} maps, {} cols x {} rows, kernels {}, threshold {} units, scores {}, SPI {} Hz, UART {} baud, core {} Hz",
         FIRMWARE_VERSION,
@@ -201,6 +202,8 @@ fn main() -> ! {
         scores: SCORES,
         max_defect_lines_per_row: MAX_DEFECT_LINES_PER_ROW,
         firmware_version: FIRMWARE_VERSION,
+        reset_cause: cause,
+        boots,
     };
     let pipeline = match Pipeline::<MAX_COLS>::new(&SCORER, settings, row_a, row_b) {
         Ok(p) => p,

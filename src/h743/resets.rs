@@ -1,21 +1,54 @@
-//! Why the chip started, and what it does when the firmware panics.
+//! Why the chip started, how often since power-on, and what it does when
+//! the firmware panics.
 //!
 //! A panic logs its message over defmt and resets the chip at once
 //! (instead of waiting for the watchdog, or for ever before the watchdog
-//! runs). The next start reads the cause from RCC_RSR, logs it and clears
-//! the flags.
+//! runs). The next start reads the cause from RCC_RSR, logs it, clears the
+//! flags and counts the start; both go into every header line (`rst`,
+//! `boots`). A software reset is a panic or a debugger's reset request;
+//! a pin reset is the reset button or the ST-LINK.
 
+use core::mem::MaybeUninit;
+use core::ptr::{addr_of_mut, read_volatile, write_volatile};
+
+use cvm_core::protocol::ResetCause;
 use embassy_stm32::pac;
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq, defmt::Format)]
-pub enum ResetCause {
-    PowerOn,
-    Watchdog,
-    /// A software reset: after a panic, or a debugger's reset request.
-    Software,
-    /// The NRST pin (the reset button, or the ST-LINK).
-    Pin,
-    Other,
+/// Starts since power-on, in RAM that the start-up code neither zeroes nor
+/// initialises (`.uninit`), so that it survives a warm reset. Its content
+/// counts only while `magic` holds [`BOOT_MAGIC`]: after power-on the RAM
+/// holds noise.
+#[repr(C)]
+struct BootCount {
+    magic: u32,
+    count: u32,
+}
+
+const BOOT_MAGIC: u32 = 0xB007_C0DE;
+
+#[unsafe(link_section = ".uninit.cvm_boots")]
+static mut BOOTS: MaybeUninit<BootCount> = MaybeUninit::uninit();
+
+/// Counts this start: 1 after power-on (or when the count was not
+/// kept), one more than before after any other reset.
+pub fn count_boot(cause: ResetCause) -> u32 {
+    // SAFETY: called once, from `main` before any task or interrupt
+    // runs; every bit pattern is a valid `u32`, so reading the
+    // uninitialised words is a read of noise, not undefined behaviour,
+    // through volatile raw pointers.
+    unsafe {
+        let b = addr_of_mut!(BOOTS).cast::<BootCount>();
+        let magic = read_volatile(addr_of_mut!((*b).magic));
+        let count = read_volatile(addr_of_mut!((*b).count));
+        let boots = if cause == ResetCause::PowerOn || magic != BOOT_MAGIC {
+            1
+        } else {
+            count.saturating_add(1)
+        };
+        write_volatile(addr_of_mut!((*b).count), boots);
+        write_volatile(addr_of_mut!((*b).magic), BOOT_MAGIC);
+        boots
+    }
 }
 
 /// Reads and clears the reset flags.

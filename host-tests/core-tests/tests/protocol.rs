@@ -2,8 +2,8 @@
 //! line length bounds.
 
 use cvm_core::protocol::{
-    self, HeaderInfo, Line, LineSink, MAX_LINE, ParseError, Priority, crc16, decode_score,
-    encode_end, encode_header, encode_row, encode_score,
+    self, HeaderInfo, Line, LineSink, MAX_LINE, ParseError, Priority, ResetCause, crc16,
+    decode_score, encode_end, encode_header, encode_row, encode_score,
 };
 use cvm_core::{PositionScore, RowSummary, RowView, Totals};
 use proptest::prelude::*;
@@ -38,14 +38,20 @@ fn header(fw: &'static str, q: i32) -> HeaderInfo<'static> {
         threshold: 12345,
         q,
         scores: true,
+        max_defect_lines: 16,
+        reset_cause: ResetCause::Watchdog,
+        boots: 3,
     }
 }
 
 #[test]
 fn header_round_trip() {
-    for q in [-40, 0, 23, 62] {
+    for (q, cause) in [-40, 0, 23, 62, 1].into_iter().zip(ResetCause::ALL) {
         let mut s = Lines::default();
-        let h = header("0.1.0", q);
+        let h = HeaderInfo {
+            reset_cause: cause,
+            ..header("0.1.0", q)
+        };
         encode_header(&h, &mut s);
         let (line, p) = &s.0[0];
         assert_eq!(*p, Priority::Keep);
@@ -69,7 +75,7 @@ proptest! {
     /// score lines are droppable.
     #[test]
     fn row_lines_round_trip(row in any::<u32>(), scores in prop::collection::vec(arb_score(), 1..100), thr in any::<u32>(), max_def in 0u16..5) {
-        let defects: Vec<usize> = (0..scores.len()).filter(|&c| scores[c].flags & 1 == 0 && scores[c].mag >= thr).collect();
+        let mut defects: Vec<usize> = (0..scores.len()).filter(|&c| scores[c].flags & 1 == 0 && scores[c].mag >= thr).collect();
         let summary = RowSummary { row, max: 77, argmax: Some(3), defects: defects.len() as u32, no_data: 1, dark: 2, saturated: 3 };
         let view = RowView { summary, scores: &scores, threshold: thr };
         let mut s = Lines::default();
@@ -101,6 +107,8 @@ proptest! {
                 other => prop_assert!(false, "unexpected line {:?}", other),
             }
         }
+        // The strongest defects, strongest first, equal magnitudes leftmost first.
+        defects.sort_by_key(|&c| (std::cmp::Reverse(scores[c].mag), c));
         prop_assert_eq!(&got_defects[..], &defects[..defects.len().min(max_def as usize)]);
         let want: Vec<_> = scores.iter().map(|s| Some((s.mag, s.flags))).collect();
         prop_assert_eq!(got_scores, want);
@@ -156,6 +164,9 @@ fn worst_case_lines_fit() {
     h.cols = u32::MAX;
     h.threshold = u32::MAX;
     h.weights = "separable";
+    h.max_defect_lines = u16::MAX;
+    h.reset_cause = ResetCause::Other;
+    h.boots = u32::MAX;
     encode_header(&h, &mut s);
     let scores = vec![
         PositionScore {
@@ -219,4 +230,47 @@ fn garbage_is_rejected_with_a_reason() {
     let mut l = s.0[0].0.clone();
     l[0] = b'X';
     assert_eq!(protocol::parse(&l), Err(ParseError::Checksum));
+}
+
+/// At the cap, the strongest defects are listed, strongest first; equal
+/// magnitudes by column, leftmost first; positions without data never.
+#[test]
+fn cap_lists_the_strongest_defects_with_ties_by_column() {
+    let mags = [5u32, 9, 7, 9, 3, 9, 8, 100, 1];
+    let mut scores: Vec<PositionScore> = mags
+        .iter()
+        .map(|&mag| PositionScore {
+            mag,
+            ..PositionScore::default()
+        })
+        .collect();
+    scores[7].flags = cvm_core::flags::NO_DATA;
+    let summary = RowSummary {
+        row: 4,
+        defects: 7,
+        ..RowSummary::default()
+    };
+    let view = RowView {
+        summary,
+        scores: &scores,
+        threshold: 3,
+    };
+    for (cap, want) in [
+        (0u16, vec![]),
+        (1, vec![1]),
+        (4, vec![1, 3, 5, 6]),
+        (7, vec![1, 3, 5, 6, 2, 0, 4]),
+        (20, vec![1, 3, 5, 6, 2, 0, 4]),
+    ] {
+        let mut s = Lines::default();
+        encode_row(&view, cap, false, &mut s);
+        let cols: Vec<u32> =
+            s.0.iter()
+                .filter_map(|(l, _)| match protocol::parse(l) {
+                    Ok(Line::Defect { col, .. }) => Some(col),
+                    _ => None,
+                })
+                .collect();
+        assert_eq!(cols, want, "cap {cap}");
+    }
 }

@@ -316,6 +316,8 @@ impl Kernels {
             scores,
             max_defect_lines_per_row: 16,
             firmware_version: cvm_core::VERSION,
+            reset_cause: cvm_core::protocol::ResetCause::PowerOn,
+            boots: 1,
         };
         let n = scan.cells();
         let words = cvm_core::stream::row_words(scan.cols, n, 1);

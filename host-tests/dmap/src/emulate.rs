@@ -105,7 +105,7 @@ pub fn scan_file_and_warnings(args: &EmulateArgs) -> Result<(Vec<u8>, Vec<String
     }
     v[..version.len()].copy_from_slice(version);
     let header = ScanHeader {
-        config: args.scoring.core_config(j1, j2)?,
+        config: crate::stream::core_config(&args.scoring, &args.output, j1, j2)?,
         cols: settings.cols,
         rows: scan.rows as u32,
         threshold_units: args.output.threshold_units(&args.scoring)?,

@@ -7,7 +7,7 @@ use crate::stream::fmt_num;
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use cvm_core::flags;
-use cvm_core::protocol::{self, EndInfo, Line, ParseError};
+use cvm_core::protocol::{self, EndInfo, Line, ResetCause};
 use std::collections::BTreeMap;
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
@@ -65,6 +65,8 @@ pub struct Defect {
 /// Everything decoded about one scan.
 #[derive(Clone, Debug, Default)]
 pub struct ScanResult {
+    /// Protocol version of the header.
+    pub version: u32,
     pub firmware: String,
     pub geometry: (u8, u8),
     pub cols: usize,
@@ -72,6 +74,13 @@ pub struct ScanResult {
     pub q: i32,
     pub threshold: f64,
     pub scores_enabled: bool,
+    /// Full scale of the samples (`fs`).
+    pub full_scale: u16,
+    /// Most defect lines per row (`dcap`).
+    pub max_defect_lines: u16,
+    /// Why the board last started (`rst`), and its starts since power-on (`boots`).
+    pub reset_cause: Option<ResetCause>,
+    pub boots: u32,
     /// Magnitudes and flags received, by row then column (integer scores).
     /// Sparse, so that memory follows the lines received, never the
     /// geometry a (possibly corrupted) header claims.
@@ -89,6 +98,21 @@ pub struct ScanResult {
     pub problems_not_listed: usize,
     /// Scores held in `scores`.
     pub n_scores: usize,
+    /// Where the scan's lines have got to, to check their order.
+    order: Order,
+}
+
+/// The line order of docs/protocol.md: rows ascending, each its `R` line,
+/// its `D` lines strongest first, its `S` lines by column.
+#[derive(Clone, Copy, Debug, Default)]
+struct Order {
+    /// The row of the last `R` line, its `listed` count and the `D` lines
+    /// that arrived for it.
+    row: Option<(u32, u32, u32)>,
+    /// Magnitude and column of the row's last `D` line.
+    last_defect: Option<(u32, u32)>,
+    /// `col0` of the row's last `S` line.
+    last_scores: Option<u32>,
 }
 
 impl ScanResult {
@@ -340,13 +364,7 @@ impl Decoder {
         let line = match protocol::parse(trimmed) {
             Ok(l) => l,
             Err(e) => {
-                let what = match e {
-                    ParseError::NoChecksum => "no checksum (truncated or garbled line)",
-                    ParseError::Checksum => "checksum mismatch (corrupted line)",
-                    ParseError::Format => "malformed fields",
-                    ParseError::Type => "unknown line type",
-                };
-                self.error(what);
+                self.error(e.to_string());
                 return;
             }
         };
@@ -369,11 +387,16 @@ impl Decoder {
                     return;
                 }
                 let mut s = ScanResult {
+                    version: h.version,
                     firmware: h.firmware.to_string(),
                     geometry: (h.j1, h.j2),
                     cols: h.cols as usize,
                     q: h.q,
                     scores_enabled: h.scores,
+                    full_scale: h.full_scale,
+                    max_defect_lines: h.max_defect_lines,
+                    reset_cause: Some(h.reset_cause),
+                    boots: h.boots,
                     ..ScanResult::default()
                 };
                 s.threshold = s.units(h.threshold);
@@ -396,6 +419,23 @@ impl Decoder {
                 if s.rows.contains_key(&summary.row) {
                     return self.problem(format!("row {} reported twice", summary.row));
                 }
+                let order = s.order;
+                s.order = Order {
+                    row: Some((summary.row, listed, 0)),
+                    ..Order::default()
+                };
+                if let Some((prev, ..)) = order.row
+                    && summary.row < prev
+                {
+                    self.problem(format!(
+                        "row line of row {} after row {prev} (rows out of order)",
+                        summary.row
+                    ));
+                }
+                self.check_defects_arrived(order);
+                let Some(s) = self.current.as_mut() else {
+                    return;
+                };
                 if s.rows.len() >= MAX_IMAGE_POSITIONS || self.kept >= self.max_kept {
                     return self.problem("more row lines than an image can hold; the rest ignored");
                 }
@@ -424,10 +464,58 @@ impl Decoder {
                     score,
                     flags,
                 });
+                let order = &mut s.order;
+                let what = match order.row {
+                    Some((r, ..)) if r != row => Some(format!(
+                        "defect line of row {row} among the lines of row {r} (out of order)"
+                    )),
+                    None => Some(format!(
+                        "defect line of row {row} before any row line (out of order)"
+                    )),
+                    Some(_) if order.last_scores.is_some() => Some(format!(
+                        "defect line of row {row} after its score lines (out of order)"
+                    )),
+                    Some((_, listed, arrived)) if arrived >= listed => Some(format!(
+                        "row {row} lists {listed} defect line(s); more arrived"
+                    )),
+                    Some(_) => match order.last_defect {
+                        Some((m, c)) if mag > m || (mag == m && col <= c) => Some(format!(
+                            "defect lines of row {row} not strongest first (column {col} after column {c})"
+                        )),
+                        _ => None,
+                    },
+                };
+                if let Some((_, _, arrived)) = order.row.as_mut() {
+                    *arrived += 1;
+                }
+                order.last_defect = Some((mag, col));
+                if let Some(what) = what {
+                    self.problem(what);
+                }
             }
             Line::Scores { row, col0, chars } => {
                 let Some(s) = self.current.as_mut() else {
                     return self.error("score line outside a scan (header lost?)");
+                };
+                let order = &mut s.order;
+                let misplaced = match (order.row, order.last_scores) {
+                    (Some((r, ..)), _) if r != row => Some(format!(
+                        "score line of row {row} among the lines of row {r} (out of order)"
+                    )),
+                    (None, _) => Some(format!(
+                        "score line of row {row} before any row line (out of order)"
+                    )),
+                    (_, Some(c)) if col0 <= c => Some(format!(
+                        "score line of row {row} from column {col0} after the one from column {c} (out of order)"
+                    )),
+                    _ => None,
+                };
+                order.last_scores = Some(col0);
+                if let Some(what) = misplaced {
+                    self.problem(what);
+                }
+                let Some(s) = self.current.as_mut() else {
+                    return;
                 };
                 let cols = s.cols;
                 let n = chars.len() / protocol::SCORE_CHARS;
@@ -462,9 +550,26 @@ impl Decoder {
                     return self.error("end line outside a scan (header lost?)");
                 };
                 s.end = Some(e);
+                let order = s.order;
+                self.current = Some(s);
+                self.check_defects_arrived(order);
+                let Some(mut s) = self.current.take() else {
+                    return;
+                };
                 self.check_complete(&mut s);
                 self.scans.push(s);
             }
+        }
+    }
+
+    /// After the last line of a row: as many `D` lines as its `R` line listed.
+    fn check_defects_arrived(&mut self, order: Order) {
+        if let Some((row, listed, arrived)) = order.row
+            && arrived < listed
+        {
+            self.problem(format!(
+                "row {row} lists {listed} defect line(s), {arrived} arrived"
+            ));
         }
     }
 
@@ -680,6 +785,15 @@ pub fn summary_text(dec: &Decoder) -> String {
             s.cols,
             fmt_num(s.threshold)
         );
+        let _ = writeln!(
+            o,
+            "  protocol v{}, full scale {}, at most {} defect line(s) per row, reset cause {}, start {} since power-on",
+            s.version,
+            s.full_scale,
+            s.max_defect_lines,
+            s.reset_cause.map_or("-", |c| c.as_str()),
+            s.boots
+        );
         let total: u64 = s.rows.values().map(|r| r.defects as u64).sum();
         let _ = writeln!(o, "  defects: {total} ({} listed)", s.defects.len());
         for d in s.defects.iter().take(20) {
@@ -700,23 +814,7 @@ pub fn summary_text(dec: &Decoder) -> String {
         }
         match &s.end {
             Some(e) => {
-                let t = &e.totals;
-                let _ = writeln!(
-                    o,
-                    "  totals: rows {} frames {} missing {} dark {} saturated {} defects {} rejected {} extra {} bad {} clipped {} misplaced {} dropped {}",
-                    t.rows,
-                    t.frames,
-                    t.missing,
-                    t.dark,
-                    t.saturated,
-                    t.defects,
-                    t.rejected,
-                    t.extra,
-                    t.bad,
-                    t.clipped,
-                    t.misplaced,
-                    e.dropped
-                );
+                let _ = writeln!(o, "  totals: {}", totals_text(e));
             }
             None => {
                 let _ = writeln!(o, "  totals: none (no end line)");
@@ -749,6 +847,25 @@ pub fn summary_text(dec: &Decoder) -> String {
     o
 }
 
+/// The end line's key in JSON: `sat` is written out.
+fn json_key(key: &str) -> &str {
+    match key {
+        "sat" => "saturated",
+        k => k,
+    }
+}
+
+/// `rows 300 frames 90000 ... dropped 0`: the end line's totals in its order.
+fn totals_text(e: &EndInfo) -> String {
+    let mut t = e.totals;
+    let mut parts: Vec<String> = protocol::END_FIELDS
+        .iter()
+        .map(|(key, field)| format!("{} {}", json_key(key), field(&mut t)))
+        .collect();
+    parts.push(format!("{} {}", protocol::DROPPED, e.dropped));
+    parts.join(" ")
+}
+
 /// One JSON object per scan (each with the stream's line errors and
 /// whether the stream was damaged); a stream without any scan still gets
 /// one object, with `"firmware": null`, so that its damage is never silent.
@@ -773,13 +890,21 @@ pub fn summary_json(dec: &Decoder) -> Vec<serde_json::Value> {
         .iter()
         .map(|s| {
             let end = s.end.map(|e| {
-                let t = e.totals;
-                serde_json::json!({"rows": t.rows, "frames": t.frames, "missing": t.missing, "dark": t.dark,
-                    "saturated": t.saturated, "defects": t.defects, "rejected": t.rejected, "extra": t.extra,
-                    "bad": t.bad, "clipped": t.clipped, "misplaced": t.misplaced, "dropped": e.dropped})
+                let mut t = e.totals;
+                let mut m = serde_json::Map::new();
+                for (key, field) in protocol::END_FIELDS {
+                    m.insert(json_key(key).into(), (*field(&mut t)).into());
+                }
+                m.insert(protocol::DROPPED.into(), e.dropped.into());
+                serde_json::Value::Object(m)
             });
             serde_json::json!({
+                "version": s.version,
                 "firmware": s.firmware,
+                "full_scale": s.full_scale,
+                "max_defect_lines": s.max_defect_lines,
+                "reset_cause": s.reset_cause.map(|c| c.as_str()),
+                "boots": s.boots,
                 "geometry": [s.geometry.0, s.geometry.1],
                 "rows": s.n_rows(),
                 "cols": s.cols,

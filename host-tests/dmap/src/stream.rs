@@ -37,9 +37,18 @@ pub struct OutputArgs {
     /// Also emit every position's score (S lines)
     #[arg(long)]
     pub scores: bool,
-    /// At most this many defect lines per row (the row line has the full count)
+    /// At most this many defect lines per row, the strongest (the row line has the full count)
     #[arg(long, default_value_t = 16)]
     pub max_defect_lines: u16,
+    /// Threshold from a calibration file (`dmap calibrate`), the same integer as the
+    /// calibration's; refused unless these scoring options are the ones it was made for
+    #[arg(long, value_name = "CAL.json", conflicts_with = "threshold")]
+    pub calibration: Option<PathBuf>,
+    /// Full scale of the detector: a sample at or above it flags its map saturated
+    /// (header `fs`; 4095 for a 12-bit ADC)
+    #[arg(long, value_name = "N", default_value_t = u16::MAX,
+          value_parser = clap::value_parser!(u16).range(1..))]
+    pub full_scale: u16,
 }
 
 impl Default for OutputArgs {
@@ -48,6 +57,8 @@ impl Default for OutputArgs {
             threshold: None,
             scores: false,
             max_defect_lines: 16,
+            calibration: None,
+            full_scale: u16::MAX,
         }
     }
 }
@@ -58,6 +69,10 @@ impl OutputArgs {
     /// distances scale with the square of the counts), so `--raw` needs
     /// `--threshold`.
     pub fn threshold_units(&self, scoring: &ScoringArgs) -> Result<f64> {
+        // `configure` has checked the calibration against the configuration.
+        if let Some(path) = &self.calibration {
+            return Ok(crate::calibrate::Calibration::load(path)?.threshold);
+        }
         let t = match self.threshold {
             Some(t) => t,
             None if scoring.raw => bail!(
@@ -122,8 +137,24 @@ impl OutputArgs {
             scores: self.scores,
             max_defect_lines_per_row: self.max_defect_lines,
             firmware_version: cvm_core::VERSION,
+            reset_cause: cvm_core::protocol::ResetCause::PowerOn,
+            boots: 1,
         })
     }
+}
+
+/// The core's configuration of a `stream`, `emulate` or `twin` run on
+/// `j1 x j2` maps: the scoring options and the full scale.
+pub fn core_config(
+    scoring: &ScoringArgs,
+    output: &OutputArgs,
+    j1: usize,
+    j2: usize,
+) -> Result<cvm_core::Config> {
+    Ok(cvm_core::Config {
+        full_scale: output.full_scale,
+        ..scoring.core_config(j1, j2)?
+    })
 }
 
 /// The scorer, settings and warnings of a `stream` or `emulate` run on a
@@ -135,7 +166,12 @@ pub fn configure(
     j2: usize,
     cols: usize,
 ) -> Result<(Scorer, Settings, Vec<String>)> {
-    let scorer = scoring.scorer(j1, j2)?;
+    let scorer = Scorer::new(&core_config(scoring, output, j1, j2)?)
+        .map_err(|e| anyhow::anyhow!("fixed-point scorer refused the configuration: {e}"))?;
+    if let Some(path) = &output.calibration {
+        // Refuses a calibration made for another configuration.
+        crate::calibrate::threshold_units(path, &core_config(scoring, output, j1, j2)?)?;
+    }
     let units = output.threshold_units(scoring)?;
     let settings = OutputArgs {
         threshold: Some(units),

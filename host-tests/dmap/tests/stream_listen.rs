@@ -77,6 +77,8 @@ fn stream_then_listen_reproduces_cvm_fixed() {
                 threshold: Some(0.05),
                 scores: true,
                 max_defect_lines: 1000,
+                calibration: None,
+                ..OutputArgs::default()
             };
             let bytes =
                 stream_scan(&scorer, out.settings(&scorer, cols).unwrap(), rows, &data).unwrap();
@@ -99,7 +101,9 @@ fn stream_then_listen_reproduces_cvm_fixed() {
                 .filter(|(_, p)| p.mag >= thr)
                 .map(|(i, _)| ((i / cols) as u32, (i % cols) as u32))
                 .collect();
-            let got_def: Vec<(u32, u32)> = s.defects.iter().map(|d| (d.row, d.col)).collect();
+            let mut got_def: Vec<(u32, u32)> = s.defects.iter().map(|d| (d.row, d.col)).collect();
+            // D lines come strongest first within a row.
+            got_def.sort();
             assert_eq!(got_def, want_def);
             let e = s.end.unwrap();
             assert_eq!(e.totals.frames as usize, rows * cols);
@@ -117,6 +121,8 @@ fn sample_stream() -> (Scorer, Vec<u8>, usize, usize) {
         threshold: Some(0.05),
         scores: true,
         max_defect_lines: 1000,
+        calibration: None,
+        ..OutputArgs::default()
     };
     let bytes = stream_scan(&scorer, out.settings(&scorer, cols).unwrap(), rows, &data).unwrap();
     (scorer, bytes, rows, cols)
@@ -214,6 +220,8 @@ fn duplicated_and_missing_frames_reach_the_totals() {
         threshold: Some(0.05),
         scores: true,
         max_defect_lines: 100,
+        calibration: None,
+        ..OutputArgs::default()
     }
     .settings(&scorer, cols)
     .unwrap();
@@ -332,6 +340,8 @@ fn bandwidth_figures_of_the_protocol_document() {
         threshold: Some(1e9),
         scores: true,
         max_defect_lines: 16,
+        calibration: None,
+        ..OutputArgs::default()
     };
     let bytes = stream_scan(&scorer, out.settings(&scorer, cols).unwrap(), rows, &data).unwrap();
     let ls = lines(&bytes);
@@ -397,7 +407,7 @@ fn absurd_geometry_in_valid_lines_costs_no_memory() {
     // keeps only the scores that arrived.
     let mut dec = Decoder::new();
     for body in [
-        "H,v=2,fw=x,j=3x3,cols=4000000000,k=P,b=0,w=uniform,norm=1,fs=65535,thr=1,q=20,scores=1",
+        "H,v=3,fw=x,j=3x3,cols=4000000000,k=P,b=0,w=uniform,norm=1,fs=65535,thr=1,q=20,scores=1,dcap=16,rst=por,boots=1",
         "R,2,0,-,0,0,1,0,0",
         "S,2,3999999999,AAAAAB",
         "E,rows=4000000000,frames=0,missing=0,dark=0,sat=0,defects=0,rejected=0,extra=0,bad=0,clipped=0,misplaced=0,dropped=0",
@@ -426,7 +436,16 @@ fn absurd_geometry_in_valid_lines_costs_no_memory() {
 fn absurd_claimed_size_is_refused() {
     let mut sink = dmap::stream::VecSink::default();
     let scorer = ScoringArgs::default().scorer(9, 9).unwrap();
-    let h = cvm_core::protocol::HeaderInfo::new(&scorer, 4_000_000, 1, true, "0.1.0");
+    let settings = cvm_core::Settings {
+        cols: 4_000_000,
+        threshold: 1,
+        scores: true,
+        max_defect_lines_per_row: 16,
+        firmware_version: "0.1.0",
+        reset_cause: cvm_core::protocol::ResetCause::PowerOn,
+        boots: 1,
+    };
+    let h = cvm_core::protocol::HeaderInfo::new(&scorer, &settings);
     cvm_core::protocol::encode_header(&h, &mut sink);
     let t = cvm_core::Totals {
         rows: 4_000_000,
@@ -452,9 +471,12 @@ fn absurd_claimed_size_is_refused() {
 }
 
 /// The example lines of docs/protocol.md are real lines of the current
-/// version: each parses (CRC included) and the header carries `VERSION`.
+/// version: each parses (CRC included), the headers carry `VERSION`, and
+/// the key tables of the `H` and `E` lines list the keys in the encoder's
+/// order (the `E` keys from the one list the encoder and parser share).
 #[test]
 fn protocol_document_examples_parse() {
+    use cvm_core::protocol::{self, Line};
     let doc = std::fs::read_to_string(concat!(
         env!("CARGO_MANIFEST_DIR"),
         "/../../docs/protocol.md"
@@ -462,17 +484,257 @@ fn protocol_document_examples_parse() {
     .unwrap();
     let examples: Vec<&str> = doc
         .lines()
-        .filter(|l| l.contains('*') && (l.starts_with("H,v=") || l.starts_with("E,rows=")))
+        .filter(|l| {
+            l.len() > 7
+                && l.as_bytes()[1] == b','
+                && b"HRDSE".contains(&l.as_bytes()[0])
+                && !l.contains('<')
+                && l.contains('*')
+        })
         .collect();
-    assert_eq!(examples.len(), 2, "{examples:?}");
-    for l in examples {
+    let mut kinds = String::new();
+    for l in &examples {
         let line = format!("{l}\n");
-        match cvm_core::protocol::parse(line.as_bytes()) {
-            Ok(cvm_core::protocol::Line::Header(h)) => {
-                assert_eq!(h.version, cvm_core::protocol::VERSION)
-            }
-            Ok(cvm_core::protocol::Line::End(e)) => assert_eq!(e.totals.frames, 90_000),
-            other => panic!("{l}: {other:?}"),
+        match protocol::parse(line.as_bytes()) {
+            Ok(Line::Header(h)) => assert_eq!(h.version, protocol::VERSION),
+            Ok(Line::End(e)) => assert_eq!(e.totals.frames, 90_000),
+            Ok(_) => {}
+            Err(e) => panic!("{l}: {e}"),
         }
+        kinds.push_str(&l[..1]);
     }
+    assert_eq!(kinds, "HHRDDSE", "{examples:?}");
+    // Key tables: the first column of the rows after `| key | meaning |`.
+    let table_after = |heading: &str| -> Vec<String> {
+        let from = doc.find(heading).unwrap();
+        let rest = &doc[from..];
+        let start = rest.find("| key | meaning |").unwrap();
+        rest[start..]
+            .lines()
+            .skip(2)
+            .take_while(|l| l.starts_with('|'))
+            .flat_map(|l| {
+                let cell = l.split('|').nth(1).unwrap().trim().to_string();
+                cell.split(", ")
+                    .map(|k| k.trim_matches('`').to_string())
+                    .collect::<Vec<_>>()
+            })
+            .collect()
+    };
+    let header_keys: Vec<String> = examples[0]
+        .split('*')
+        .next()
+        .unwrap()
+        .split(',')
+        .skip(1)
+        .map(|f| f.split('=').next().unwrap().to_string())
+        .collect();
+    assert_eq!(table_after("### `H`"), header_keys);
+    let mut end_keys: Vec<String> = protocol::END_FIELDS
+        .iter()
+        .map(|(k, _)| k.to_string())
+        .collect();
+    end_keys.push(protocol::DROPPED.to_string());
+    assert_eq!(table_after("### `E`"), end_keys);
+}
+
+/// Lines out of the documented order are damage: a row going backwards, a
+/// score line of one row after another row's line, defect lines not
+/// strongest first or more than listed, score lines going backwards.
+#[test]
+fn out_of_order_lines_are_reported() {
+    let (_, bytes, _, _) = sample_stream();
+    let ls = lines(&bytes);
+    let idx = |pred: &dyn Fn(&[u8]) -> bool| ls.iter().position(|l| pred(l)).unwrap();
+    let starts = |l: &[u8], p: &str| l.starts_with(p.as_bytes());
+    let feed = |v: &[Vec<u8>]| {
+        let mut d = Decoder::new();
+        for l in v {
+            d.feed(l);
+        }
+        d.finish();
+        d
+    };
+    let clean = feed(&ls);
+    assert!(clean.damage().is_empty(), "{:?}", clean.damage());
+
+    // The R line of row 3 swapped with the first S line of row 2.
+    let mut v = ls.clone();
+    let (a, b) = (idx(&|l| starts(l, "R,3,")), idx(&|l| starts(l, "S,2,0,")));
+    v.swap(a, b);
+    let d = feed(&v);
+    assert!(d.errors.is_empty(), "{:?}", d.errors);
+    let p: Vec<&str> = d.scans[0]
+        .problems
+        .iter()
+        .map(|p| p.what.as_str())
+        .collect();
+    assert!(p.iter().any(|w| w.contains("out of order")), "{p:?}");
+    assert!(!d.damage().is_empty());
+
+    // Rows going backwards: row 5's lines moved before row 4's.
+    let mut v = ls.clone();
+    let (r4, r5, r6) = (
+        idx(&|l| starts(l, "R,4,")),
+        idx(&|l| starts(l, "R,5,")),
+        idx(&|l| starts(l, "R,6,")),
+    );
+    let row5: Vec<Vec<u8>> = v.drain(r5..r6).collect();
+    for (k, l) in row5.into_iter().enumerate() {
+        v.insert(r4 + k, l);
+    }
+    let d = feed(&v);
+    let p: Vec<&str> = d.scans[0]
+        .problems
+        .iter()
+        .map(|p| p.what.as_str())
+        .collect();
+    assert!(
+        p.iter()
+            .any(|w| w.contains("row line of row 4 after row 5")),
+        "{p:?}"
+    );
+
+    // Two D lines of a row swapped (the sample has rows with several).
+    let row_with_two = (0..12)
+        .find(|r| ls.iter().filter(|l| starts(l, &format!("D,{r},"))).count() >= 2)
+        .expect("a row with two defect lines");
+    let first = idx(&|l| starts(l, &format!("D,{row_with_two},")));
+    let mut v = ls.clone();
+    v.swap(first, first + 1);
+    let d = feed(&v);
+    let p: Vec<&str> = d.scans[0]
+        .problems
+        .iter()
+        .map(|p| p.what.as_str())
+        .collect();
+    assert!(p.iter().any(|w| w.contains("not strongest first")), "{p:?}");
+
+    // A D line moved after its row's S lines, and one dropped.
+    let mut v = ls.clone();
+    let dl = v.remove(first);
+    let s_last = idx(&|l| starts(l, &format!("S,{row_with_two},32,")));
+    v.insert(s_last, dl);
+    let d = feed(&v);
+    let p: Vec<&str> = d.scans[0]
+        .problems
+        .iter()
+        .map(|p| p.what.as_str())
+        .collect();
+    assert!(
+        p.iter().any(|w| w.contains("after its score lines")),
+        "{p:?}"
+    );
+    let mut v = ls.clone();
+    v.remove(first);
+    let d = feed(&v);
+    let p: Vec<&str> = d.scans[0]
+        .problems
+        .iter()
+        .map(|p| p.what.as_str())
+        .collect();
+    assert!(
+        p.iter()
+            .any(|w| w.starts_with(&format!("row {row_with_two} lists"))),
+        "{p:?}"
+    );
+
+    // Score lines of a row going backwards.
+    let mut v = ls.clone();
+    let (s0, s1) = (
+        idx(&|l| starts(l, "S,1,0,")),
+        idx(&|l| starts(l, "S,1,32,")),
+    );
+    v.swap(s0, s1);
+    let d = feed(&v);
+    let p: Vec<&str> = d.scans[0]
+        .problems
+        .iter()
+        .map(|p| p.what.as_str())
+        .collect();
+    assert!(
+        p.iter()
+            .any(|w| w.contains("from column 0 after the one from column 32")),
+        "{p:?}"
+    );
+}
+
+/// `dmap stream --full-scale N`: the header declares `fs=N`, the scorer
+/// flags exactly the maps with a sample at or above N, and `dmap listen`
+/// reports the full scale, the cap, the reset cause and the start count.
+#[test]
+fn full_scale_reaches_the_header_and_the_scoring() {
+    let dir = std::env::temp_dir().join(format!("dmap-full-scale-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (rows, cols, j1, j2) = (4, 9, 3, 3);
+    let mut r = ChaCha8Rng::seed_from_u64(12);
+    let data: Vec<u16> = (0..rows * cols * j1 * j2)
+        .map(|_| r.random_range(0..4200))
+        .collect();
+    let saturated = data
+        .chunks(j1 * j2)
+        .filter(|m| m.iter().any(|&v| v >= 4095))
+        .count();
+    assert!(saturated > 0 && saturated < rows * cols);
+    let scan_path = dir.join("scan.npy");
+    dmap::npy::write_scan_u16(
+        &scan_path,
+        rows,
+        cols,
+        cvm_reference::Geometry::new(j1, j2).unwrap(),
+        &data,
+    )
+    .unwrap();
+    let exe = env!("CARGO_BIN_EXE_dmap");
+    let out = std::process::Command::new(exe)
+        .args(["stream", "--full-scale", "4095", "--max-defect-lines", "3"])
+        .arg(&scan_path)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let dec = decode(&out.stdout);
+    assert!(dec.damage().is_empty(), "{:?}", dec.damage());
+    let s = &dec.scans[0];
+    assert_eq!(
+        (s.version, s.full_scale, s.max_defect_lines, s.boots),
+        (3, 4095, 3, 1)
+    );
+    assert_eq!(s.reset_cause, Some(cvm_core::protocol::ResetCause::PowerOn));
+    assert_eq!(s.end.unwrap().totals.saturated as usize, saturated);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.starts_with("H,v=3,"), "{text}");
+    assert!(text.lines().next().unwrap().contains(",fs=4095,"), "{text}");
+    let listen = std::process::Command::new(exe)
+        .args(["listen", "--input", "-"])
+        .stdin(
+            std::fs::File::open({
+                let p = dir.join("lines.txt");
+                std::fs::write(&p, &out.stdout).unwrap();
+                p
+            })
+            .unwrap(),
+        )
+        .output()
+        .unwrap();
+    assert!(listen.status.success());
+    let summary = String::from_utf8_lossy(&listen.stdout);
+    assert!(
+        summary.contains(
+            "protocol v3, full scale 4095, at most 3 defect line(s) per row, reset cause por, start 1 since power-on"
+        ),
+        "{summary}"
+    );
+    for bad in ["0", "65536"] {
+        let out = std::process::Command::new(exe)
+            .args(["stream", "--full-scale", bad])
+            .arg(&scan_path)
+            .output()
+            .unwrap();
+        assert_eq!(out.status.code(), Some(2), "--full-scale {bad}");
+    }
+    std::fs::remove_dir_all(&dir).ok();
 }

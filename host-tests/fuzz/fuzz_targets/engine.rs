@@ -474,6 +474,8 @@ fn run(u: &mut Unstructured) -> Result<()> {
         scores: u.ratio(7, 8)?,
         max_defect_lines_per_row: u.int_in_range(0..=4)?,
         firmware_version: "fuzz",
+        reset_cause: cvm_core::protocol::ResetCause::ALL[u.int_in_range(0..=4)?],
+        boots: u.arbitrary()?,
     };
     let cells = scorer.cells();
     let words = row_words(cols as usize, cells, 1);

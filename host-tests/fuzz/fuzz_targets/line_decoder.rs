@@ -95,6 +95,9 @@ fn round_trip(u: &mut Unstructured) -> Result<()> {
         threshold,
         q: u.arbitrary()?,
         scores: true,
+        max_defect_lines: u.arbitrary()?,
+        reset_cause: *u.choose(&protocol::ResetCause::ALL)?,
+        boots: u.arbitrary()?,
     };
     let mut out = Lines::default();
     protocol::encode_header(&h, &mut out);
@@ -174,13 +177,15 @@ fn round_trip(u: &mut Unstructured) -> Result<()> {
                 listed
             })
         );
-        let defects: Vec<(u32, &PositionScore)> = scores
+        // The strongest defects, strongest first, ties leftmost first.
+        let mut defects: Vec<(u32, &PositionScore)> = scores
             .iter()
             .enumerate()
             .filter(|(_, p)| p.flags & flags::NO_DATA == 0 && p.mag >= threshold)
             .map(|(c, p)| (c as u32, p))
-            .take(listed as usize)
             .collect();
+        defects.sort_by_key(|&(c, p)| (std::cmp::Reverse(p.mag), c));
+        defects.truncate(listed as usize);
         for (col, p) in defects {
             let l = lines.next().expect("defect line");
             assert_eq!(

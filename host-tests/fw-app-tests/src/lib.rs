@@ -83,6 +83,8 @@ impl Scan {
             scores,
             max_defect_lines_per_row: 4,
             firmware_version: "test",
+            reset_cause: cvm_core::protocol::ResetCause::PowerOn,
+            boots: 1,
         }
     }
 
