@@ -2,6 +2,7 @@
 //! a module here so that tests can call it without spawning the binary.
 
 pub mod bench;
+pub mod calibrate;
 pub mod emulate;
 pub mod eval;
 pub mod fixed;

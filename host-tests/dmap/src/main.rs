@@ -27,6 +27,8 @@ enum Command {
     Render(dmap::render::RenderArgs),
     /// SNR, PSNR, CNR and defect sizes of a gradient image against a truth mask
     Eval(dmap::eval::EvalArgs),
+    /// Defect threshold from defect-free reference scans, in the firmware's arithmetic (--calibration of stream, emulate, twin)
+    Calibrate(dmap::calibrate::CalibrateArgs),
     /// Run the firmware's pipeline on the host and print its result lines
     Stream(dmap::stream::StreamArgs),
     /// Decode result lines (file, stdin or serial port) into a score image and a summary
@@ -72,6 +74,7 @@ fn main() {
         Command::Simulate(args) => dmap::simulate::run(&args),
         Command::Render(args) => dmap::render::run(&args),
         Command::Eval(args) => dmap::eval::run(&args),
+        Command::Calibrate(args) => dmap::calibrate::run(&args),
         Command::Stream(args) => dmap::stream::run(&args),
         Command::Listen(args) => dmap::listen::run(&args),
         Command::Emulate(args) => dmap::emulate::run(&args),
