@@ -40,6 +40,10 @@ pub struct OutputArgs {
     /// At most this many defect lines per row, the strongest (the row line has the full count)
     #[arg(long, default_value_t = 16)]
     pub max_defect_lines: u16,
+    /// Threshold from a calibration file (`dmap calibrate`), the same integer as the
+    /// calibration's; refused unless these scoring options are the ones it was made for
+    #[arg(long, value_name = "CAL.json", conflicts_with = "threshold")]
+    pub calibration: Option<PathBuf>,
     /// Full scale of the detector: a sample at or above it flags its map saturated
     /// (header `fs`; 4095 for a 12-bit ADC)
     #[arg(long, value_name = "N", default_value_t = u16::MAX,
@@ -53,6 +57,7 @@ impl Default for OutputArgs {
             threshold: None,
             scores: false,
             max_defect_lines: 16,
+            calibration: None,
             full_scale: u16::MAX,
         }
     }
@@ -64,6 +69,10 @@ impl OutputArgs {
     /// distances scale with the square of the counts), so `--raw` needs
     /// `--threshold`.
     pub fn threshold_units(&self, scoring: &ScoringArgs) -> Result<f64> {
+        // `configure` has checked the calibration against the configuration.
+        if let Some(path) = &self.calibration {
+            return Ok(crate::calibrate::Calibration::load(path)?.threshold);
+        }
         let t = match self.threshold {
             Some(t) => t,
             None if scoring.raw => bail!(
@@ -159,6 +168,10 @@ pub fn configure(
 ) -> Result<(Scorer, Settings, Vec<String>)> {
     let scorer = Scorer::new(&core_config(scoring, output, j1, j2)?)
         .map_err(|e| anyhow::anyhow!("fixed-point scorer refused the configuration: {e}"))?;
+    if let Some(path) = &output.calibration {
+        // Refuses a calibration made for another configuration.
+        crate::calibrate::threshold_units(path, &scoring.core_config(j1, j2)?)?;
+    }
     let units = output.threshold_units(scoring)?;
     let settings = OutputArgs {
         threshold: Some(units),

@@ -77,6 +77,7 @@ fn stream_then_listen_reproduces_cvm_fixed() {
                 threshold: Some(0.05),
                 scores: true,
                 max_defect_lines: 1000,
+                calibration: None,
                 ..OutputArgs::default()
             };
             let bytes =
@@ -120,6 +121,7 @@ fn sample_stream() -> (Scorer, Vec<u8>, usize, usize) {
         threshold: Some(0.05),
         scores: true,
         max_defect_lines: 1000,
+        calibration: None,
         ..OutputArgs::default()
     };
     let bytes = stream_scan(&scorer, out.settings(&scorer, cols).unwrap(), rows, &data).unwrap();
@@ -218,6 +220,7 @@ fn duplicated_and_missing_frames_reach_the_totals() {
         threshold: Some(0.05),
         scores: true,
         max_defect_lines: 100,
+        calibration: None,
         ..OutputArgs::default()
     }
     .settings(&scorer, cols)
@@ -337,6 +340,7 @@ fn bandwidth_figures_of_the_protocol_document() {
         threshold: Some(1e9),
         scores: true,
         max_defect_lines: 16,
+        calibration: None,
         ..OutputArgs::default()
     };
     let bytes = stream_scan(&scorer, out.settings(&scorer, cols).unwrap(), rows, &data).unwrap();
