@@ -22,6 +22,9 @@ pub struct EvalArgs {
     /// Score above which a position counts as defective (default: defect-free mean + K std)
     #[arg(long, allow_hyphen_values = true)]
     pub threshold: Option<f64>,
+    /// Threshold from a calibration file (`dmap calibrate`): its CVM threshold in distance units
+    #[arg(long, value_name = "CAL.json", conflicts_with = "threshold")]
+    pub calibration: Option<PathBuf>,
     /// K of the automatic threshold
     #[arg(long, default_value_t = 5.0)]
     pub k: f64,
@@ -175,15 +178,7 @@ pub fn defect_sizes(
     components(truth, rows, cols)
         .into_iter()
         .map(|comp| {
-            let mut near = vec![false; values.len()];
-            for &(r, c) in &comp {
-                // Saturating: a dilation wider than the image covers it all.
-                for nr in r.saturating_sub(dilate)..=r.saturating_add(dilate).min(rows - 1) {
-                    for nc in c.saturating_sub(dilate)..=c.saturating_add(dilate).min(cols - 1) {
-                        near[nr * cols + nc] = true;
-                    }
-                }
-            }
+            let near = neighbourhood(&comp, rows, cols, dilate);
             let hits: Vec<(usize, usize)> = (0..values.len())
                 .filter(|&i| near[i] && values[i] > threshold)
                 .map(|i| (i / cols, i % cols))
@@ -203,6 +198,51 @@ pub fn defect_sizes(
             }
         })
         .collect()
+}
+
+/// The positions within `dilate` (Chebyshev distance) of any pixel of
+/// `comp`, as a `rows x cols` mask. Per pixel when that is cheap, else by a
+/// summed-area table of the component (linear in the image, whatever
+/// `dilate`); the window is clipped to the image, never wrapped.
+fn neighbourhood(comp: &[(usize, usize)], rows: usize, cols: usize, dilate: usize) -> Vec<bool> {
+    let side = dilate.saturating_mul(2).saturating_add(1);
+    let mut near = vec![false; rows * cols];
+    if comp.len().saturating_mul(side.saturating_mul(side)) <= rows * cols {
+        for &(r, c) in comp {
+            for nr in r.saturating_sub(dilate)..=r.saturating_add(dilate).min(rows - 1) {
+                for nc in c.saturating_sub(dilate)..=c.saturating_add(dilate).min(cols - 1) {
+                    near[nr * cols + nc] = true;
+                }
+            }
+        }
+        return near;
+    }
+    // sat[(r + 1) * (cols + 1) + c + 1]: component pixels in rows 0..=r, cols 0..=c.
+    let w = cols + 1;
+    let mut sat = vec![0u32; (rows + 1) * w];
+    for &(r, c) in comp {
+        sat[(r + 1) * w + c + 1] = 1;
+    }
+    for r in 1..=rows {
+        for c in 1..=cols {
+            sat[r * w + c] += sat[(r - 1) * w + c] + sat[r * w + c - 1] - sat[(r - 1) * w + c - 1];
+        }
+    }
+    for r in 0..rows {
+        let (r0, r1) = (
+            r.saturating_sub(dilate),
+            r.saturating_add(dilate).min(rows - 1) + 1,
+        );
+        for c in 0..cols {
+            let (c0, c1) = (
+                c.saturating_sub(dilate),
+                c.saturating_add(dilate).min(cols - 1) + 1,
+            );
+            let n = sat[r1 * w + c1] + sat[r0 * w + c0] - sat[r0 * w + c1] - sat[r1 * w + c0];
+            near[r * cols + c] = n > 0;
+        }
+    }
+    near
 }
 
 /// Load one channel of a gradient file as (rows, cols, values).
@@ -248,9 +288,14 @@ pub fn run(a: &EvalArgs) -> Result<()> {
     }
     let truth = mask.data;
     let m = metrics(&values, &truth);
-    let (threshold, rule) = match a.threshold {
-        Some(t) => (t, "given".to_string()),
-        None => {
+    let calibrated = match &a.calibration {
+        Some(p) => Some(crate::calibrate::Calibration::load(p)?.threshold),
+        None => None,
+    };
+    let (threshold, rule) = match (a.threshold, calibrated) {
+        (Some(t), _) => (t, "given".to_string()),
+        (None, Some(t)) => (t, "calibrated".to_string()),
+        (None, None) => {
             if m.n_free == 0 {
                 bail!("no defect-free positions with a score: give --threshold");
             }
@@ -262,6 +307,7 @@ pub fn run(a: &EvalArgs) -> Result<()> {
     };
     let sizes = defect_sizes(&values, &truth, rows, cols, threshold, a.dilate);
     let mm = |n: usize| n as f64 * a.pitch_um / 1000.0;
+    let objects = crate::objects::evaluate(&values, &truth, rows, cols, threshold);
     if a.json {
         let defects: Vec<serde_json::Value> = sizes
             .iter()
@@ -278,6 +324,7 @@ pub fn run(a: &EvalArgs) -> Result<()> {
             "cnr": json_num(m.cnr),
             "threshold": json_num(threshold),
             "defects": defects,
+            "objects": crate::objects::to_json(&objects, a.pitch_um / 1000.0),
         });
         return crate::out::stdout(format!("{obj}\n").as_bytes());
     }
@@ -332,6 +379,51 @@ pub fn run(a: &EvalArgs) -> Result<()> {
             fmt((d.peak - m.mean_free) / m.std_free)
         );
     }
+    println!(
+        "objects (8-connected, score >= threshold): {} defects, {} found, {} missed; {} detected objects, {} false",
+        objects.truth.len(),
+        objects.found(),
+        objects.truth.len() - objects.found(),
+        objects.detected,
+        objects.false_objects.len()
+    );
+    println!(
+        "{:<7}{:<24}{:<24}{:<8}{:<24}{:<12}",
+        "defect",
+        "truth rows x cols, area",
+        "found rows x cols, area",
+        "objects",
+        "error rows/cols/area",
+        "peak"
+    );
+    let span = |e: &crate::objects::Extent| {
+        format!(
+            "{}-{} x {}-{}, {}",
+            e.rows.0, e.rows.1, e.cols.0, e.cols.1, e.area
+        )
+    };
+    for (i, t) in objects.truth.iter().enumerate() {
+        println!(
+            "{:<7}{:<24}{:<24}{:<8}{:<24}{:<12}",
+            i + 1,
+            span(&t.truth),
+            t.detected.as_ref().map_or("missed".into(), span),
+            t.objects,
+            t.size_error().map_or("-".into(), |(h, w, ar)| format!(
+                "{:+.0}%/{:+.0}%/{:+.0}%",
+                100.0 * h,
+                100.0 * w,
+                100.0 * ar
+            )),
+            fmt(t.peak)
+        );
+    }
+    for e in objects.false_objects.iter().take(20) {
+        println!("false  {}", span(e));
+    }
+    if objects.false_objects.len() > 20 {
+        println!("false  ... {} more", objects.false_objects.len() - 20);
+    }
     crate::out::stdout(o.as_bytes())
 }
 
@@ -362,6 +454,25 @@ mod tests {
         let m = metrics(&[1.0, 2.0], &[false, false]);
         assert!(m.snr.is_nan() && m.psnr.is_nan() && m.cnr.is_nan());
         assert_eq!(m.std_free, 0.5);
+    }
+
+    #[test]
+    fn both_ways_of_dilating_agree() {
+        // A component of three pixels on a 9x11 image; every dilation from
+        // 0 to beyond the image, per pixel and by the summed-area table.
+        let comp = [(2, 3), (3, 3), (6, 9)];
+        let (rows, cols) = (9, 11);
+        for dilate in [0, 1, 2, 4, 12, usize::MAX] {
+            let got = neighbourhood(&comp, rows, cols, dilate);
+            for r in 0..rows {
+                for c in 0..cols {
+                    let want = comp
+                        .iter()
+                        .any(|&(pr, pc)| r.abs_diff(pr) <= dilate && c.abs_diff(pc) <= dilate);
+                    assert_eq!(got[r * cols + c], want, "dilate {dilate} at ({r}, {c})");
+                }
+            }
+        }
     }
 
     #[test]

@@ -9,6 +9,7 @@ pub mod fixed;
 pub mod font;
 pub mod listen;
 pub mod npy;
+pub mod objects;
 pub mod options;
 pub mod out;
 pub mod render;

@@ -184,7 +184,7 @@ fn eval_json_matches_hand_computed_metrics_and_sizes() {
         serde_json::json!([{"truth_mm": [1.0, 1.0], "estimated_mm": [1.0, 1.0]}])
     );
     let keys: Vec<&String> = v.as_object().unwrap().keys().collect();
-    assert_eq!(keys.len(), 5);
+    assert_eq!(keys.len(), 6);
 }
 
 #[test]
