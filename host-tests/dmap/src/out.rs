@@ -82,8 +82,8 @@ impl Target {
     }
 }
 
-/// An input of a command, for [`refuse_inputs`]: a file, or `-` for standard
-/// input.
+/// Whether `output` is the file `input` (the same device and inode, so
+/// whatever the paths); an `input` of `-` is standard input.
 pub fn input_is_output(input: &Path, output: &Path) -> bool {
     if input.as_os_str() == "-" {
         return match (
