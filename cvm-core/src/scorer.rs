@@ -112,7 +112,7 @@ pub struct Scorer {
 mod embed;
 
 use embed::{Factor, MAX_H, TRI};
-use embed::{RealFactor, precision, quantise, real_factor, saturation_offset};
+use embed::{RealFactor, precision, quantise, real_factor};
 
 /// Finest input format tried for square kernels; `2^(32+f)` must fit the
 /// reciprocal's `u64`.
@@ -383,10 +383,9 @@ impl Scorer {
                 Ok((fl, score))
             }
             Kind::Paper => {
-                let off = saturation_offset(self.config.full_scale);
-                let (sum, sat) = embed::sum_and_saturation(frame, off);
+                let (sum, sat) = embed::sum_and_saturation(frame, self.config.full_scale);
                 let mut fl = 0;
-                if sat & 0x1_0000 != 0 {
+                if sat {
                     fl |= flags::SATURATED;
                 }
                 if sum == 0 {

@@ -172,33 +172,81 @@ const fn pack(r: &Mat, n: usize, p: u32) -> [i32; TRI] {
     out
 }
 
-/// The sum of all samples of a frame and the OR of `a + off` over all
-/// samples (bit 16 set iff a sample reached the full scale, see
-/// [`saturation_offset`]): the only per-map quantities needed before the
-/// row pass. At most `256 * 65535 < 2^24`: the sum cannot overflow.
+/// The sum of all samples of a frame and whether a sample reached
+/// `full_scale` (the saturation flag): the only per-map quantities needed
+/// before the row pass. At most `256 * 65535 < 2^24`: the sum cannot
+/// overflow.
+///
+/// The frame is read as 32-bit words of two samples (sample order does not
+/// matter for either result): per word one `UXTAH` and one `ADD ..., LSR
+/// #16` for the sum, and on the Cortex-M one `UQSUB16` against
+/// `full_scale - 1` in both halves and one `ORR` for the flag (a lane is
+/// non-zero iff its sample is above `full_scale - 1`), so about two
+/// instructions per sample instead of five. The words come in blocks of
+/// four, which the compiler loads with one `LDM`.
 #[inline(never)]
-pub fn sum_and_saturation(frame: &[u16], off: u32) -> (u32, u32) {
-    let mut sum = 0u32;
-    let mut sat = 0u32;
-    let quads = frame.chunks_exact(4);
-    let rest = quads.remainder();
-    for q in quads {
-        if let &[a, b, c, d] = q {
-            let (a, b, c, d) = (a as u32, b as u32, c as u32, d as u32);
-            sum += (a + b) + (c + d);
-            sat |= ((a + off) | (b + off)) | ((c + off) | (d + off));
+pub fn sum_and_saturation(frame: &[u16], full_scale: u16) -> (u32, bool) {
+    if full_scale == 0 {
+        // Every sample reaches a full scale of 0 (a frame is never empty).
+        let mut sum = 0u32;
+        for &a in frame {
+            sum += a as u32;
+        }
+        return (sum, true);
+    }
+    let below = (full_scale - 1) as u32;
+    let below2 = below | (below << 16);
+    // SAFETY: every bit pattern is a valid `u32`; `align_to` only splits
+    // off the unaligned ends.
+    let (head, words, tail) = unsafe { frame.align_to::<u32>() };
+    let (mut lo, mut hi, mut over) = (0u32, 0u32, 0u32);
+    let blocks = words.chunks_exact(4);
+    let rest = blocks.remainder();
+    for b in blocks {
+        if let &[w0, w1, w2, w3] = b {
+            lo += ((w0 & 0xFFFF) + (w1 & 0xFFFF)) + ((w2 & 0xFFFF) + (w3 & 0xFFFF));
+            hi += ((w0 >> 16) + (w1 >> 16)) + ((w2 >> 16) + (w3 >> 16));
+            over |= (above2(w0, below2) | above2(w1, below2))
+                | (above2(w2, below2) | above2(w3, below2));
         }
     }
-    for &a in rest {
-        sum += a as u32;
-        sat |= a as u32 + off;
+    for &w in rest {
+        lo += w & 0xFFFF;
+        hi += w >> 16;
+        over |= above2(w, below2);
     }
-    (sum, sat)
+    for &a in head.iter().chain(tail) {
+        lo += a as u32;
+        over |= (a as u32).saturating_sub(below);
+    }
+    (lo + hi, over != 0)
 }
 
-/// `a + off` has bit 16 set iff `a >= full_scale` (`a <= 65535`).
-pub const fn saturation_offset(full_scale: u16) -> u32 {
-    0x1_0000 - full_scale as u32
+/// Both 16-bit halves of `w` minus those of `below2`, saturating at 0
+/// (`UQSUB16`): non-zero iff a half of `w` exceeds the matching half of
+/// `below2`.
+#[inline(always)]
+fn above2(w: u32, below2: u32) -> u32 {
+    #[cfg(target_arch = "arm")]
+    {
+        let r: u32;
+        // SAFETY: a pure register operation (`UQSUB16` is part of the
+        // Cortex-M4/M7 DSP extension of thumbv7em).
+        unsafe {
+            core::arch::asm!(
+                "uqsub16 {r}, {w}, {b}",
+                r = lateout(reg) r,
+                w = in(reg) w,
+                b = in(reg) below2,
+                options(pure, nomem, nostack, preserves_flags)
+            );
+        }
+        r
+    }
+    #[cfg(not(target_arch = "arm"))]
+    {
+        (w & 0xFFFF).saturating_sub(below2 & 0xFFFF) | (w >> 16).saturating_sub(below2 >> 16)
+    }
 }
 
 /// `round(a * b / 2^32)`: one `SMMULR`.
