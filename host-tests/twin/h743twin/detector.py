@@ -78,6 +78,9 @@ class Detector:
         self.m = machine
         self.scan = scan
         self.period = round(period_us * CLOCK_HZ / 1e6)
+        # Pulses shorter than half the beam period, for very fast DRDY.
+        self.width = max(1, min(DRDY_WIDTH, self.period // 2))
+        self.lead = max(1, min(SYNC_LEAD, self.period // 4))
         self.faults = {}
         for kind, beam, args in faults:
             self.faults.setdefault(beam, []).append((kind, args))
@@ -112,7 +115,7 @@ class Detector:
 
     def start(self):
         for k, t in enumerate(self.times):
-            self.m.bus.at(t - SYNC_LEAD, lambda k=k: self._beam(k), owner="world")
+            self.m.bus.at(t - self.lead, lambda k=k: self._beam(k), owner="world")
 
     def _count(self, kind):
         self.injected[kind] = self.injected.get(kind, 0) + 1
@@ -145,7 +148,7 @@ class Detector:
                 m.wedge()
         if sync:
             m.pin("E", 11, 1)
-        m.bus.at(m.core.cycles + SYNC_LEAD, lambda: self._drdy(k), owner="world")
+        m.bus.at(m.core.cycles + self.lead, lambda: self._drdy(k), owner="world")
 
     def _drdy(self, k):
         self.beam = k
@@ -157,7 +160,7 @@ class Detector:
             self.m.pin("E", 9, 0)
             self.m.pin("E", 11, 0)
 
-        self.m.bus.at(self.m.core.cycles + DRDY_WIDTH, fall, owner="world")
+        self.m.bus.at(self.m.core.cycles + self.width, fall, owner="world")
 
     # --- the SPI slave side
     def chip_select(self, level):
