@@ -60,6 +60,10 @@ pub struct CalibrateArgs {
     /// Margin above the quantile, in robust standard deviations (1.4826 MAD) of the reference magnitudes
     #[arg(long, value_name = "K", default_value_t = 3.0)]
     pub k: f64,
+    /// The references are gradient images (`dmap score` output, any distance), not scans:
+    /// the same rule in f64 on their magnitudes, for `dmap eval --calibration` only
+    #[arg(long)]
+    pub scores: bool,
     /// Output calibration file (JSON; - for standard output)
     #[arg(short, long, value_name = "CAL.json")]
     pub out: PathBuf,
@@ -227,6 +231,11 @@ impl Calibration {
                 v["version"]
             );
         }
+        if v["config"]["scores"] == "precomputed" {
+            bail!(
+                "{p} was calibrated on precomputed scores (dmap calibrate --scores): it has no scoring configuration to check, so only dmap eval takes it"
+            );
+        }
         let ch = &v["channels"]["cvm"];
         let threshold = ch["threshold"]
             .as_f64()
@@ -302,6 +311,98 @@ pub fn threshold_units(path: &Path, config: &Config) -> Result<f64> {
     Calibration::load(path)?.threshold_for(path, config, &scorer)
 }
 
+/// The rule in f64 on magnitudes `m` (not empty): the quantile plus
+/// `k * 1.4826 * MAD`, and at least the next number above the quantile.
+pub fn threshold_f64(m: &[f64], rule: &Rule) -> (f64, f64, f64, f64) {
+    let mut s: Vec<f64> = m.to_vec();
+    s.sort_unstable_by(f64::total_cmp);
+    let median = median_sorted(&s);
+    let mut dev: Vec<f64> = s.iter().map(|x| (x - median).abs()).collect();
+    dev.sort_unstable_by(f64::total_cmp);
+    let mad = median_sorted(&dev);
+    let rank = ((rule.quantile * s.len() as f64).ceil() as usize).clamp(1, s.len());
+    let q = s[rank - 1];
+    let mut t = q + rule.k * MAD_TO_SIGMA * mad;
+    if t <= q {
+        // The next f64 above q (scores are >= 0).
+        t = if q > 0.0 {
+            f64::from_bits(q.to_bits() + 1)
+        } else {
+            f64::from_bits(1)
+        };
+    }
+    (t, s[s.len() - 1], median, mad)
+}
+
+/// `dmap calibrate --scores`: the rule on precomputed gradient images.
+fn run_scores(a: &CalibrateArgs, rule: &Rule) -> Result<()> {
+    let mut all = Vec::new();
+    let mut refs = Vec::new();
+    for path in &a.refs {
+        let img = crate::npy::read_gradient(path)?;
+        let m: Vec<f64> = img
+            .data
+            .chunks_exact(3)
+            .map(|p| p[2])
+            .filter(|v| !v.is_nan())
+            .collect();
+        if m.is_empty() {
+            bail!("{} has no position with a score", path.display());
+        }
+        let (_, max, median, mad) = threshold_f64(&m, rule);
+        refs.push(
+            json!({"file": path.display().to_string(), "max": max, "median": median, "mad": mad}),
+        );
+        all.extend(m);
+    }
+    let (t, max, median, mad) = threshold_f64(&all, rule);
+    let doc = json!({
+        "format": FORMAT,
+        "version": VERSION,
+        "config": {"scores": "precomputed"},
+        "rule": {
+            "text": "threshold = Q_p(m) + k * 1.4826 * MAD(m) over the magnitudes m of all reference positions (f64); defective when magnitude >= threshold",
+            "quantile": rule.quantile,
+            "k": rule.k,
+        },
+        "channels": {"scores": {"threshold": t, "positions": all.len(), "max": max, "median": median, "mad": mad}},
+        "references": refs,
+    });
+    let text = format!(
+        "{}\n",
+        serde_json::to_string_pretty(&doc).context("encoding the calibration")?
+    );
+    crate::out::write_target(&crate::out::Target::new(&a.out), |w| {
+        w.write_all(text.as_bytes()).map_err(|e| anyhow!("{e}"))
+    })?;
+    let _ = writeln!(
+        std::io::stderr(),
+        "dmap calibrate: {} scores of {} reference(s): max {}, median {}, MAD {} -> threshold {}",
+        all.len(),
+        a.refs.len(),
+        fmt_num(max),
+        fmt_num(median),
+        fmt_num(mad),
+        fmt_num(t)
+    );
+    Ok(())
+}
+
+/// The threshold `dmap eval --calibration` applies: the CVM channel of a
+/// calibration made on scans, or that of one made on precomputed scores.
+pub fn eval_threshold(path: &Path) -> Result<f64> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let v: Value = serde_json::from_str(&text)
+        .with_context(|| format!("{}: not a JSON calibration", path.display()))?;
+    if v["format"] == FORMAT && v["config"]["scores"] == "precomputed" {
+        return v["channels"]["scores"]["threshold"]
+            .as_f64()
+            .ok_or_else(|| anyhow!("{}: channels.scores.threshold missing", path.display()));
+    }
+    Ok(Calibration::load(path)?.threshold)
+}
+
 pub fn run(a: &CalibrateArgs) -> Result<()> {
     let rule = Rule {
         quantile: a.quantile,
@@ -311,6 +412,9 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
     if a.out.as_os_str() != "-" {
         let inputs: Vec<&Path> = a.refs.iter().map(PathBuf::as_path).collect();
         crate::out::refuse_inputs(&a.out, &inputs)?;
+    }
+    if a.scores {
+        return run_scores(a, &rule);
     }
     let mut all = Vec::new();
     let mut per_ref = Vec::new();

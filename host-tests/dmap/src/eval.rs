@@ -22,7 +22,7 @@ pub struct EvalArgs {
     /// Score above which a position counts as defective (default: defect-free mean + K std)
     #[arg(long, allow_hyphen_values = true)]
     pub threshold: Option<f64>,
-    /// Threshold from a calibration file (`dmap calibrate`): its CVM threshold in distance units
+    /// Threshold from a calibration file (`dmap calibrate`, with or without --scores), in distance units
     #[arg(long, value_name = "CAL.json", conflicts_with = "threshold")]
     pub calibration: Option<PathBuf>,
     /// K of the automatic threshold
@@ -289,7 +289,7 @@ pub fn run(a: &EvalArgs) -> Result<()> {
     let truth = mask.data;
     let m = metrics(&values, &truth);
     let calibrated = match &a.calibration {
-        Some(p) => Some(crate::calibrate::Calibration::load(p)?.threshold),
+        Some(p) => Some(crate::calibrate::eval_threshold(p)?),
         None => None,
     };
     let (threshold, rule) = match (a.threshold, calibrated) {

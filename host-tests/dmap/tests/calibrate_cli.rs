@@ -318,3 +318,55 @@ fn calibration_reaches_the_emulated_board_and_the_h743_build() {
     let e = dmap::emulate::scan_file_and_warnings(&raw).unwrap_err();
     assert!(format!("{e:#}").contains("normalise"), "{e:#}");
 }
+
+#[test]
+fn calibration_on_precomputed_scores_is_for_eval_only() {
+    // Magnitudes 1..=9 and 100 (a 2x5 image): median 5.5, MAD 2.5, k = 2:
+    // 100 + 2 * 1.4826 * 2.5.
+    let g = tmp("pre-g.npy");
+    let mag = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 100.0];
+    let data: Vec<f64> = mag.iter().flat_map(|&m| [m, m, m]).collect();
+    npy::write_gradient(&g, 2, 5, &data).unwrap();
+    let cal = tmp("pre.json");
+    ok(&dmap(&[
+        "calibrate",
+        "--scores",
+        s(&g),
+        "--k",
+        "2",
+        "-o",
+        s(&cal),
+    ]));
+    let t = json(&cal)["channels"]["scores"]["threshold"]
+        .as_f64()
+        .unwrap();
+    assert!((t - (100.0 + 2.0 * 1.4826 * 2.5)).abs() < 1e-12, "{t}");
+    let (r, m) = (tmp("pre-r.npy"), tmp("pre-m.npy"));
+    reference(&r, 2, 5, 3, 9);
+    one_line_error(
+        &dmap(&["stream", s(&r), "--calibration", s(&cal)]),
+        "precomputed scores",
+    );
+    npy::write_mask(
+        &m,
+        &npy::Mask {
+            rows: 2,
+            cols: 5,
+            data: vec![false; 10],
+        },
+    )
+    .unwrap();
+    let out = dmap(&[
+        "eval",
+        s(&g),
+        "--truth",
+        s(&m),
+        "--calibration",
+        s(&cal),
+        "--json",
+    ]);
+    ok(&out);
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["threshold"].as_f64().unwrap(), t);
+    assert_eq!(v["objects"]["false_objects"], 0);
+}
