@@ -42,10 +42,6 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
         Ok(Pipeline { engine, settings })
     }
 
-    pub fn settings(&self) -> &Settings {
-        &self.settings
-    }
-
     /// Starts a scan: the header line.
     pub fn begin(&mut self, sink: &mut impl LineSink) {
         let h = HeaderInfo::new(self.engine.scorer(), &self.settings);

@@ -38,35 +38,13 @@ pub trait LineSink {
     fn line(&mut self, line: &[u8], priority: Priority);
 }
 
-/// CRC-16/CCITT-FALSE lookup table, built at compile time.
-const CRC_TABLE: [u16; 256] = {
-    let mut t = [0u16; 256];
-    let mut i = 0;
-    while i < 256 {
-        let mut c = (i as u16) << 8;
-        let mut k = 0;
-        while k < 8 {
-            c = if c & 0x8000 != 0 {
-                (c << 1) ^ 0x1021
-            } else {
-                c << 1
-            };
-            k += 1;
-        }
-        t[i] = c;
-        i += 1;
-    }
-    t
-};
+/// CRC-16/CCITT-FALSE, catalogued as CRC-16/IBM-3740; its table is built
+/// at compile time.
+const CRC16: crc::Crc<u16> = crc::Crc::<u16>::new(&crc::CRC_16_IBM_3740);
 
 /// CRC-16/CCITT-FALSE of `data` (check value: `crc16(b"123456789") == 0x29B1`).
 pub fn crc16(data: &[u8]) -> u16 {
-    let mut crc: u16 = 0xFFFF;
-    for &b in data {
-        let idx = ((crc >> 8) as u8 ^ b) as usize;
-        crc = (crc << 8) ^ CRC_TABLE.get(idx).copied().unwrap_or(0);
-    }
-    crc
+    CRC16.checksum(data)
 }
 
 const HEX: &[u8; 16] = b"0123456789ABCDEF";

@@ -248,11 +248,6 @@ impl Scorer {
         self.q
     }
 
-    /// Input format `Q(f)` of the normalised (or raw) map.
-    pub const fn input_frac_bits(&self) -> i32 {
-        self.frac
-    }
-
     /// Real value of an integer score, in the units of the f64 distance.
     pub fn score_to_units(&self, s: u32) -> f64 {
         s as f64 * pow2(-self.q)

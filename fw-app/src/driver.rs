@@ -57,10 +57,6 @@ impl<'a, const MAX_COLS: usize> ScanDriver<'a, MAX_COLS> {
         }
     }
 
-    pub fn pipeline(&self) -> &Pipeline<'a, MAX_COLS> {
-        &self.pipeline
-    }
-
     /// Totals and dropped lines of the last finished scan.
     pub fn last_scan(&self) -> Option<(Totals, u32)> {
         self.last
