@@ -324,7 +324,7 @@ impl Kernels {
         let (mut a, mut b) = (vec![0i32; words], vec![0i32; words]);
         let mut pipeline = Box::new(
             Pipeline::<MAX_COLS>::new(&self.scorer, settings, &mut a, &mut b)
-                .map_err(|e| anyhow::anyhow!("pipeline refused the bench scan: {e:?}"))?,
+                .map_err(|e| anyhow::anyhow!("pipeline refused the bench scan: {e}"))?,
         );
         let mut sink = VecSink::default();
         pipeline.begin(&mut sink);
@@ -350,7 +350,7 @@ impl Kernels {
             Output::Lines(lines) => {
                 let dec = decode(&lines[..], 0)?;
                 if !dec.errors.is_empty() {
-                    bail!("pipeline output does not decode: {:?}", dec.errors[0]);
+                    bail!("pipeline output does not decode: {}", dec.errors[0]);
                 }
                 let [s] = dec.scans.as_slice() else {
                     bail!("pipeline output holds {} scans, not 1", dec.scans.len());

@@ -307,7 +307,7 @@ impl Calibration {
 /// [`Calibration::threshold_for`] does).
 pub fn threshold_units(path: &Path, config: &Config) -> Result<f64> {
     let scorer = Scorer::new(config)
-        .map_err(|e| anyhow!("fixed-point scorer refused the configuration: {e:?}"))?;
+        .map_err(|e| anyhow!("fixed-point scorer refused the configuration: {e}"))?;
     Calibration::load(path)?.threshold_for(path, config, &scorer)
 }
 
@@ -430,7 +430,7 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
                 ..a.scoring.core_config(g.0, g.1)?
             };
             let scorer = Scorer::new(&config)
-                .map_err(|e| anyhow!("fixed-point scorer refused the configuration: {e:?}"))?;
+                .map_err(|e| anyhow!("fixed-point scorer refused the configuration: {e}"))?;
             setup = Some((config, scorer, g));
         }
         let Some((_, scorer, g0)) = &setup else {

@@ -52,6 +52,12 @@ pub struct LineError {
     pub what: String,
 }
 
+impl std::fmt::Display for LineError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "line {}: {}", self.line, self.what)
+    }
+}
+
 /// A defect as the firmware reported it.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Defect {

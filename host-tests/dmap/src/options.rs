@@ -82,7 +82,7 @@ impl ScoringArgs {
     pub fn core_config(&self, j1: usize, j2: usize) -> Result<cvm_core::Config> {
         self.check(j1, j2)?;
         let geometry = cvm_core::Geometry::new(j1 as u8, j2 as u8)
-            .map_err(|e| anyhow::anyhow!("geometry {j1}x{j2}: {e:?}"))?;
+            .map_err(|e| anyhow::anyhow!("geometry {j1}x{j2}: {e}"))?;
         let kernels = match self.kernels {
             KernelArg::Paper => cvm_core::Kernels::Paper {
                 bmax: self.bmax.unwrap_or(0).min(16) as u8,
@@ -109,7 +109,7 @@ impl ScoringArgs {
     pub fn scorer(&self, j1: usize, j2: usize) -> Result<cvm_core::Scorer> {
         let cfg = self.core_config(j1, j2)?;
         cvm_core::Scorer::new(&cfg)
-            .map_err(|e| anyhow::anyhow!("fixed-point scorer refused the configuration: {e:?}"))
+            .map_err(|e| anyhow::anyhow!("fixed-point scorer refused the configuration: {e}"))
     }
 
     /// Warnings for configurations under which part or all of the gradient
