@@ -14,11 +14,10 @@
 //! host's stderr, off the UART stream.
 
 mod cycles;
-mod semihosting;
+mod host;
 mod uart;
 
 use core::cell::RefCell;
-use core::fmt::Write as _;
 
 use cortex_m_rt::entry;
 use cvm_core::pipeline::{Pipeline, Settings};
@@ -41,7 +40,8 @@ use crate::config::{BEAM_LOG, FIRMWARE_VERSION, FRAME_BUFFERS};
 use crate::frames::{Decoder, FrameBuffers};
 use crate::sink::{QueueSink, SharedQueue};
 use cycles::Stopwatch;
-use semihosting::{File, Stderr, exit};
+use host::{eprint, exit};
+use semihosting::io::Read as _;
 
 const ROW_WORDS: usize = row_words(MAX_COLS, MAX_J, MAX_J);
 
@@ -66,7 +66,7 @@ static VERSION: StaticCell<[u8; cvm_core::protocol::MAX_FW]> = StaticCell::new()
 
 /// Fails the run with a one-line message on the host's stderr.
 fn fail(status: u32, what: &str) -> ! {
-    let _ = writeln!(Stderr::new(), "cvm-fw (emulated): error: {what}");
+    eprint(format_args!("cvm-fw (emulated): error: {what}\n"));
     exit(status)
 }
 
@@ -114,36 +114,14 @@ async fn drain() {
     }
 }
 
-/// The scan file named by the last word of the semihosting command line.
-fn open_scan() -> File {
-    let mut cmd = [0u8; 512];
-    let Some(len) = semihosting::command_line(&mut cmd) else {
-        fail(
-            EXIT_INPUT,
-            "no semihosting command line (run with -semihosting-config ...,arg=SCAN)",
-        )
-    };
-    let text = &cmd[..len];
-    let text = text.split(|&b| b == 0).next().unwrap_or(&[]);
-    let Some(path) = text.split(|&b| b == b' ').rfind(|w| !w.is_empty()) else {
-        fail(EXIT_INPUT, "no scan file on the command line")
-    };
-    let mut name = [0u8; 512];
-    if path.len() >= name.len() {
-        fail(EXIT_INPUT, "scan file path too long");
-    }
-    name[..path.len()].copy_from_slice(path);
-    match File::open_read(&name[..=path.len()]) {
-        Some(f) => f,
-        None => fail(EXIT_INPUT, "cannot open the scan file"),
-    }
-}
-
 #[embassy_executor::task]
 async fn scan_task(syst: cortex_m::peripheral::SYST) {
-    let file = open_scan();
+    let mut file = match host::open_scan() {
+        Ok(f) => f,
+        Err(what) => fail(EXIT_INPUT, what),
+    };
     let mut head = [0u8; HEADER_LEN];
-    if file.read(&mut head) != Some(HEADER_LEN) {
+    if file.read_exact(&mut head).is_err() {
         fail(EXIT_INPUT, "scan file shorter than its header");
     }
     let header = match ScanHeader::parse(&head) {
@@ -198,7 +176,7 @@ async fn scan_task(syst: cortex_m::peripheral::SYST) {
     let mut beam: u64 = 0;
     let mut sink = QueueSink(&QUEUE);
 
-    let Some(file_len) = file.len() else {
+    let Ok(file_len) = file.metadata().map(|m| m.len() as usize) else {
         fail(EXIT_INPUT, "cannot size the scan file")
     };
     let data = file_len.saturating_sub(HEADER_LEN);
@@ -218,7 +196,7 @@ async fn scan_task(syst: cortex_m::peripheral::SYST) {
         };
         // SAFETY: `buf` is Filling: the acquisition side owns it.
         let bytes = unsafe { FRAMES.buffer(buf) };
-        if file.read(&mut bytes[..n]) != Some(n) {
+        if file.read_exact(&mut bytes[..n]).is_err() {
             fail(EXIT_INPUT, "reading the scan file failed");
         }
         acq.read_done(buf, true);
@@ -266,11 +244,9 @@ async fn scan_task(syst: cortex_m::peripheral::SYST) {
     let q = QUEUE.lock(|q| *q.borrow().counts());
     let instr = stopwatch.instructions();
     let per_beam = instr.checked_div(beam).unwrap_or(0);
-    let mut err = Stderr::new();
-    let _ = writeln!(
-        err,
+    eprint(format_args!(
         "cvm-fw (emulated): beams={beam} scans={} placed={} lost={} extra={} sync_missing={} sync_extra={} \
-         short_rows={} misplaced={} lines={} dropped={} scoring_instructions={instr} instructions_per_beam={per_beam}",
+         short_rows={} misplaced={} lines={} dropped={} scoring_instructions={instr} instructions_per_beam={per_beam}\n",
         seq.scans_finished,
         seq.placed,
         seq.lost,
@@ -281,13 +257,13 @@ async fn scan_task(syst: cortex_m::peripheral::SYST) {
         seq.misplaced,
         q.accepted,
         q.dropped_scores + q.dropped_keep,
-    );
+    ));
     let ok = q.dropped_keep == 0 && q.dropped_scores == 0 && acq.counts().spi_errors == 0;
     exit(if ok { EXIT_OK } else { EXIT_INTERNAL })
 }
 
 #[panic_handler]
 fn panic(info: &core::panic::PanicInfo) -> ! {
-    let _ = writeln!(Stderr::new(), "cvm-fw (emulated): panic: {info}");
+    eprint(format_args!("cvm-fw (emulated): panic: {info}\n"));
     exit(101)
 }
