@@ -107,11 +107,13 @@ pub struct Scorer {
     scale_num: f32,
     /// Score format `Q(q)`.
     q: i32,
+    /// The unrolled passes of this geometry (paper kernels).
+    passes: Passes,
 }
 
 mod embed;
 
-use embed::{Factor, MAX_H, TRI};
+use embed::{Factor, MAX_H, Passes, TRI};
 use embed::{RealFactor, precision, quantise, real_factor};
 
 /// Finest input format tried for square kernels; `2^(32+f)` must fit the
@@ -138,6 +140,9 @@ impl Scorer {
         }
         let (j1, j2) = (g.j1 as usize, g.j2 as usize);
         let n = (j1 * j2) as f64;
+        let Some(passes) = Passes::new(j1, j2) else {
+            return Err(ConfigError::Geometry);
+        };
 
         let (kind, bmax) = match cfg.kernels {
             Kernels::Paper { bmax } => (Kind::Paper, bmax as usize),
@@ -227,6 +232,7 @@ impl Scorer {
             e_frac,
             scale_num: pow2(32 + f) as f32,
             q,
+            passes,
         })
     }
 
@@ -387,8 +393,16 @@ impl Scorer {
                     fl |= flags::DARK;
                 }
                 let conv = self.scale(sum);
-                let acc =
-                    embed::embed(&self.f1, &self.f2, frame, conv, &mut scratch.t, state, diff);
+                let acc = embed::embed(
+                    &self.passes,
+                    &self.f1,
+                    &self.f2,
+                    frame,
+                    conv,
+                    &mut scratch.t,
+                    state,
+                    diff,
+                );
                 Ok((fl, if diff { self.to_score(acc) } else { 0 }))
             }
         }

@@ -267,7 +267,7 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
                     s.g1 = g1;
                 }
             }
-            self.emit_prev(p, out);
+            self.emit_prev(p, &mut *out);
         }
         let totals = self.totals;
         self.reset();
@@ -465,7 +465,7 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
         let b = (r % 2) as usize;
         self.horizontal(b, self.cols - 1, None);
         if let Some(p) = self.pending {
-            self.emit_prev(p, out);
+            self.emit_prev(p, &mut *out);
         }
         self.cur ^= 1;
         self.pending = Some(r);
@@ -474,7 +474,11 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
     }
 
     /// Finalises magnitudes and decisions of the previous row and emits it.
-    fn emit_prev(&mut self, row: u32, out: &mut impl FnMut(&RowView)) {
+    /// Out of line and through `dyn`: one copy for every caller, and the
+    /// line encoder behind `out` is not inlined into each of them (about
+    /// 15 KB of flash per copy).
+    #[inline(never)]
+    fn emit_prev(&mut self, row: u32, out: &mut dyn FnMut(&RowView)) {
         let mut sum = RowSummary {
             row,
             ..RowSummary::default()

@@ -70,6 +70,14 @@ impl<const CAP: usize> LineQueue<CAP> {
         }
     }
 
+    /// Sets `reserve` (clamped to `CAP`). A `static` queue built with
+    /// `new(0)` is all zero bytes and goes to `.bss`; with a non-zero
+    /// reserve its whole buffer would be an initial value in flash
+    /// (`.data`), so the firmware sets the reserve at start-up instead.
+    pub fn set_reserve(&mut self, reserve: usize) {
+        self.reserve = if reserve < CAP { reserve } else { CAP };
+    }
+
     pub fn counts(&self) -> &QueueCounts {
         &self.counts
     }

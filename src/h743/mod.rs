@@ -109,7 +109,9 @@ type Queue = LineQueue<QUEUE_BYTES>;
 static ACQ: Mutex<CriticalSectionRawMutex, RefCell<Acq>> = Mutex::new(RefCell::new(Acq::new()));
 #[unsafe(link_section = ".dma_buffers")]
 static FRAMES: SampleBuffers<FRAME_BUFFERS> = SampleBuffers::new();
-static QUEUE: SharedQueue<QUEUE_BYTES> = Mutex::new(RefCell::new(Queue::new(KEEP_RESERVE)));
+/// Zero-initialised (`.bss`, not 48 KB of `.data` in flash); `main` sets
+/// its reserve before any task runs.
+static QUEUE: SharedQueue<QUEUE_BYTES> = Mutex::new(RefCell::new(Queue::new(0)));
 /// The DMA source of the line being sent (AXI SRAM, not the DTCM stack).
 struct TxLine(core::cell::UnsafeCell<[u8; MAX_LINE]>);
 // SAFETY: only the UART task touches it.
@@ -192,6 +194,7 @@ fn main() -> ! {
     let mut wdg = IndependentWatchdog::new(pins.iwdg, WATCHDOG_US);
     wdg.unleash();
 
+    QUEUE.lock(|q| q.borrow_mut().set_reserve(KEEP_RESERVE));
     // SAFETY: the row buffers are handed out here, once, before any task runs.
     let (row_a, row_b) = unsafe { (&mut *ROW_A.0.get(), &mut *ROW_B.0.get()) };
     // SRAM1..3 is NOLOAD: start from a known state.

@@ -374,12 +374,90 @@ fn cols<const H: usize, const G: usize, const DIFF: bool>(
     acc
 }
 
+/// A row pass (see [`rows`]).
+type RowsFn = fn(&Factor, &[u16], usize, (u32, i32), &mut [[i32; MAX_J]; MAX_J]);
+/// A column pass (see [`cols`]).
+type ColsFn = fn(&Factor, &[[i32; MAX_J]], &mut [i32]) -> u64;
+
+/// The unrolled passes of one geometry, chosen when the tables are built.
+/// A firmware whose `Scorer` is a compile-time constant references only
+/// its own geometry's three passes, so the linker drops the other 45
+/// (about 26 KB of flash); a dispatch at run time would keep them all.
+#[derive(Clone, Copy)]
+pub struct Passes {
+    rows: RowsFn,
+    cols: ColsFn,
+    cols_diff: ColsFn,
+}
+
+impl Passes {
+    /// The passes of a `j1 x j2` map (`None` outside `1..=16`).
+    pub const fn new(j1: usize, j2: usize) -> Option<Passes> {
+        let rows: RowsFn = match j2 {
+            1 => rows::<1, 0>,
+            2 => rows::<1, 1>,
+            3 => rows::<2, 1>,
+            4 => rows::<2, 2>,
+            5 => rows::<3, 2>,
+            6 => rows::<3, 3>,
+            7 => rows::<4, 3>,
+            8 => rows::<4, 4>,
+            9 => rows::<5, 4>,
+            10 => rows::<5, 5>,
+            11 => rows::<6, 5>,
+            12 => rows::<6, 6>,
+            13 => rows::<7, 6>,
+            14 => rows::<7, 7>,
+            15 => rows::<8, 7>,
+            16 => rows::<8, 8>,
+            _ => return None,
+        };
+        macro_rules! cols_of {
+            ($($j:literal => ($h:literal, $g:literal)),*) => {
+                match j1 {
+                    $($j => (cols::<$h, $g, false> as ColsFn, cols::<$h, $g, true> as ColsFn),)*
+                    _ => return None,
+                }
+            };
+        }
+        let (cols, cols_diff) = cols_of!(
+            1 => (1, 0), 2 => (1, 1), 3 => (2, 1), 4 => (2, 2), 5 => (3, 2), 6 => (3, 3),
+            7 => (4, 3), 8 => (4, 4), 9 => (5, 4), 10 => (5, 5), 11 => (6, 5), 12 => (6, 6),
+            13 => (7, 6), 14 => (7, 7), 15 => (8, 7), 16 => (8, 8)
+        );
+        Some(Passes {
+            rows,
+            cols,
+            cols_diff,
+        })
+    }
+}
+
+/// Equal when built for the same geometry (the `Scorer`'s configuration
+/// is compared as well).
+impl PartialEq for Passes {
+    fn eq(&self, other: &Self) -> bool {
+        core::ptr::fn_addr_eq(self.rows, other.rows)
+            && core::ptr::fn_addr_eq(self.cols, other.cols)
+            && core::ptr::fn_addr_eq(self.cols_diff, other.cols_diff)
+    }
+}
+
+impl core::fmt::Debug for Passes {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str("Passes")
+    }
+}
+
 /// `E = R1' y R2'ᵀ` of a row-major frame (converted by `conv`), folded
 /// along axis 2 in the row pass and along axis 1 in the column pass, stored
 /// folded-column-major in `e` (`j1 * j2` words): `e[k * j1 + i]`, the even
 /// columns of axis 2 first. With `diff`, returns the squared distance
-/// between the map `e` held before and the new one (else 0).
+/// between the map `e` held before and the new one (else 0). `passes` are
+/// those of `f1`'s and `f2`'s geometry.
+#[allow(clippy::too_many_arguments)]
 pub fn embed(
+    passes: &Passes,
     f1: &Factor,
     f2: &Factor,
     frame: &[u16],
@@ -389,25 +467,7 @@ pub fn embed(
     diff: bool,
 ) -> u64 {
     let j1 = f1.h + f1.g;
-    match f2.h + f2.g {
-        1 => rows::<1, 0>(f2, frame, j1, conv, t),
-        2 => rows::<1, 1>(f2, frame, j1, conv, t),
-        3 => rows::<2, 1>(f2, frame, j1, conv, t),
-        4 => rows::<2, 2>(f2, frame, j1, conv, t),
-        5 => rows::<3, 2>(f2, frame, j1, conv, t),
-        6 => rows::<3, 3>(f2, frame, j1, conv, t),
-        7 => rows::<4, 3>(f2, frame, j1, conv, t),
-        8 => rows::<4, 4>(f2, frame, j1, conv, t),
-        9 => rows::<5, 4>(f2, frame, j1, conv, t),
-        10 => rows::<5, 5>(f2, frame, j1, conv, t),
-        11 => rows::<6, 5>(f2, frame, j1, conv, t),
-        12 => rows::<6, 6>(f2, frame, j1, conv, t),
-        13 => rows::<7, 6>(f2, frame, j1, conv, t),
-        14 => rows::<7, 7>(f2, frame, j1, conv, t),
-        15 => rows::<8, 7>(f2, frame, j1, conv, t),
-        16 => rows::<8, 8>(f2, frame, j1, conv, t),
-        _ => return 0,
-    }
+    (passes.rows)(f2, frame, j1, conv, t);
     let (te, to) = t.split_at(MAX_H);
     let (Some(te), Some(to)) = (te.get(..f2.h), to.get(..f2.g)) else {
         return 0;
@@ -418,34 +478,11 @@ pub fn embed(
     let Some((ee, eo)) = e.split_at_mut_checked(j1 * f2.h) else {
         return 0;
     };
-    macro_rules! both {
-        ($h:literal, $g:literal) => {
-            if diff {
-                cols::<$h, $g, true>(f1, te, ee).wrapping_add(cols::<$h, $g, true>(f1, to, eo))
-            } else {
-                cols::<$h, $g, false>(f1, te, ee);
-                cols::<$h, $g, false>(f1, to, eo);
-                0
-            }
-        };
-    }
-    match j1 {
-        1 => both!(1, 0),
-        2 => both!(1, 1),
-        3 => both!(2, 1),
-        4 => both!(2, 2),
-        5 => both!(3, 2),
-        6 => both!(3, 3),
-        7 => both!(4, 3),
-        8 => both!(4, 4),
-        9 => both!(5, 4),
-        10 => both!(5, 5),
-        11 => both!(6, 5),
-        12 => both!(6, 6),
-        13 => both!(7, 6),
-        14 => both!(7, 7),
-        15 => both!(8, 7),
-        16 => both!(8, 8),
-        _ => 0,
+    if diff {
+        (passes.cols_diff)(f1, te, ee).wrapping_add((passes.cols_diff)(f1, to, eo))
+    } else {
+        (passes.cols)(f1, te, ee);
+        (passes.cols)(f1, to, eo);
+        0
     }
 }
