@@ -388,12 +388,12 @@ pub fn run(a: &EvalArgs) -> Result<()> {
         objects.false_objects.len()
     );
     println!(
-        "{:<7}{:<24}{:<24}{:<8}{:<24}{:<12}",
+        "{:<7}{:<24}{:<24}{:<8}{:<36}{:<12}",
         "defect",
         "truth rows x cols, area",
         "found rows x cols, area",
         "objects",
-        "error rows/cols/area",
+        "error rows/cols/area (corrected rows/cols)",
         "peak"
     );
     let span = |e: &crate::objects::Extent| {
@@ -404,17 +404,22 @@ pub fn run(a: &EvalArgs) -> Result<()> {
     };
     for (i, t) in objects.truth.iter().enumerate() {
         println!(
-            "{:<7}{:<24}{:<24}{:<8}{:<24}{:<12}",
+            "{:<7}{:<24}{:<24}{:<8}{:<36}{:<12}",
             i + 1,
             span(&t.truth),
             t.detected.as_ref().map_or("missed".into(), span),
             t.objects,
-            t.size_error().map_or("-".into(), |(h, w, ar)| format!(
-                "{:+.0}%/{:+.0}%/{:+.0}%",
-                100.0 * h,
-                100.0 * w,
-                100.0 * ar
-            )),
+            match (t.size_error(), t.corrected_error()) {
+                (Some((h, w, ar)), Some((ch, cw))) => format!(
+                    "{:+.0}%/{:+.0}%/{:+.0}% ({:+.0}%/{:+.0}%)",
+                    100.0 * h,
+                    100.0 * w,
+                    100.0 * ar,
+                    100.0 * ch,
+                    100.0 * cw
+                ),
+                _ => "-".into(),
+            },
             fmt(t.peak)
         );
     }

@@ -47,6 +47,28 @@ impl Extent {
     pub fn width(&self) -> usize {
         self.cols.1 - self.cols.0 + 1
     }
+
+    /// The extent of the defect behind a detected object: one position less
+    /// on each side (at least one position). The gradient (Eq. 1) compares
+    /// the two neighbours of a position, so the positions just outside a
+    /// defect, one of whose neighbours lies in it, score as high as its
+    /// edge: a detected object is one position wider on each side than
+    /// the defect. The area is not corrected.
+    pub fn stencil_corrected(&self) -> Extent {
+        let shrink = |(a, b): (usize, usize)| {
+            if b >= a + 2 {
+                (a + 1, b - 1)
+            } else {
+                let m = (a + b) / 2;
+                (m, m)
+            }
+        };
+        Extent {
+            rows: shrink(self.rows),
+            cols: shrink(self.cols),
+            area: self.area,
+        }
+    }
 }
 
 /// One truth component and what detection made of it.
@@ -69,7 +91,17 @@ impl TruthObject {
     /// Relative errors of the detected height, width and area against the
     /// truth's ((detected - truth) / truth), `None` if missed.
     pub fn size_error(&self) -> Option<(f64, f64, f64)> {
-        let d = self.detected?;
+        self.error_of(self.detected?)
+    }
+
+    /// Relative errors of the stencil-corrected extent's height and width
+    /// ([`Extent::stencil_corrected`]), `None` if missed.
+    pub fn corrected_error(&self) -> Option<(f64, f64)> {
+        let (h, w, _) = self.error_of(self.detected?.stencil_corrected())?;
+        Some((h, w))
+    }
+
+    fn error_of(&self, d: Extent) -> Option<(f64, f64, f64)> {
         let rel = |a: usize, b: usize| (a as f64 - b as f64) / b as f64;
         Some((
             rel(d.height(), self.truth.height()),
@@ -185,6 +217,11 @@ pub fn to_json(r: &ObjectReport, pitch_mm: f64) -> serde_json::Value {
                 "detected": t.detected.as_ref().map(ext),
                 "peak": num(t.peak),
                 "size_error": err.map(|(h, w, a)| json!({"rows": num(h), "cols": num(w), "area": num(a)})),
+                "corrected": t.detected.map(|d| {
+                    let c = d.stencil_corrected();
+                    json!({"rows": [c.rows.0, c.rows.1], "cols": [c.cols.0, c.cols.1]})
+                }),
+                "corrected_error": t.corrected_error().map(|(h, w)| json!({"rows": num(h), "cols": num(w)})),
             })
         })
         .collect();
@@ -218,6 +255,15 @@ mod tests {
         assert_eq!((e.rows, e.cols, e.area), ((2, 4), (1, 3), 3));
         assert_eq!((e.height(), e.width()), (3, 3));
         assert!(Extent::of(&[]).is_none());
+        let c = e.stencil_corrected();
+        assert_eq!((c.rows, c.cols, c.area), ((3, 3), (2, 2), 3));
+        let thin = Extent {
+            rows: (4, 5),
+            cols: (7, 7),
+            area: 2,
+        }
+        .stencil_corrected();
+        assert_eq!((thin.rows, thin.cols), ((4, 4), (7, 7)));
     }
 
     #[test]
@@ -261,6 +307,8 @@ mod tests {
             })
         );
         assert_eq!(a.size_error(), Some((0.5, 0.25, -0.375)));
+        // One position less on each side: rows 2-2 (height 1), cols 2-4 (width 3).
+        assert_eq!(a.corrected_error(), Some((-0.5, -0.25)));
         assert_eq!(a.peak, 9.0);
         let b = &rep.truth[1];
         assert!(!b.found() && b.detected.is_none() && b.size_error().is_none());
