@@ -399,7 +399,6 @@ impl Scorer {
                     &self.f2,
                     frame,
                     conv,
-                    &mut scratch.t,
                     state,
                     diff,
                 );
@@ -652,19 +651,18 @@ fn squared_difference(a: &[i32], b: &[i32]) -> u64 {
     acc as u64
 }
 
-/// Scratch space of the embedding (the folded map and the row pass), in a
-/// fixed `MAX_J` stride so that the inner loops need no index arithmetic.
+/// Scratch space of the square kernels (the new map while the old one is
+/// still needed), in a fixed `MAX_J` stride. (The paper kernels' row pass
+/// keeps its output on the stack: see `embed::embed`.)
 #[derive(Clone)]
 pub struct Scratch {
     v: [[i32; MAX_J]; MAX_J],
-    t: [[i32; MAX_J]; MAX_J],
 }
 
 impl Scratch {
     pub const fn new() -> Self {
         Scratch {
             v: [[0; MAX_J]; MAX_J],
-            t: [[0; MAX_J]; MAX_J],
         }
     }
 }

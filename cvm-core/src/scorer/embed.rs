@@ -11,6 +11,8 @@
 //! blocks needs half the multiply-adds of `R1 x R2ᵀ`, and every block is at
 //! most 8 x 8, so each block size gets its own fully unrolled code.
 
+use core::mem::MaybeUninit;
+
 use crate::config::MAX_J;
 use crate::tables::{Mat, abs, cholesky_psd, pivot_tolerance, pow2, round};
 
@@ -18,6 +20,10 @@ use crate::tables::{Mat, abs, cholesky_psd, pivot_tolerance, pow2, round};
 pub const MAX_H: usize = MAX_J.div_ceil(2);
 /// Words of a packed upper-triangular `MAX_H x MAX_H` block.
 pub const TRI: usize = MAX_H * (MAX_H + 1) / 2;
+
+/// The row pass's output `T`, transposed (`t[k][i]`), in a fixed `MAX_J`
+/// stride; only the words the row pass writes are read.
+type Rows = [[MaybeUninit<i32>; MAX_J]; MAX_J];
 
 /// The quantised factor of one folded axis: the even block (`h` cells, the
 /// middle one included) and the odd block (`g` cells), each upper
@@ -279,21 +285,22 @@ fn tri<const N: usize>(r: &[i32; TRI], u: &[i32; N]) -> [i32; N] {
 /// exact), converts the folded counts to `Q(f)`
 /// (`round((v << k) * m / 2^32)`), applies the even and the odd block and
 /// stores the results transposed, `t[k][i]` (even) and `t[MAX_H + k][i]`
-/// (odd).
+/// (odd): every `t[k][i]` with `k < H` or `MAX_H <= k < MAX_H + G` and
+/// `i < n_rows` is written.
 #[inline(never)]
 fn rows<const H: usize, const G: usize>(
     f2: &Factor,
     frame: &[u16],
     n_rows: usize,
     conv: (u32, i32),
-    t: &mut [[i32; MAX_J]; MAX_J],
+    t: &mut Rows,
 ) {
     let j2 = H + G;
     let (sh, m) = (conv.0 & 31, conv.1);
     let (te, to) = t.split_at_mut(MAX_H);
     let (Some(Ok(te)), Some(Ok(to))) = (
-        te.get_mut(..H).map(<&mut [[i32; MAX_J]; H]>::try_from),
-        to.get_mut(..G).map(<&mut [[i32; MAX_J]; G]>::try_from),
+        te.get_mut(..H).map(<&mut [[MaybeUninit<i32>; MAX_J]; H]>::try_from),
+        to.get_mut(..G).map(<&mut [[MaybeUninit<i32>; MAX_J]; G]>::try_from),
     ) else {
         return;
     };
@@ -310,13 +317,13 @@ fn rows<const H: usize, const G: usize>(
         });
         let oe = tri::<H>(&f2.even, &ue);
         for (tk, &v) in te.iter_mut().zip(oe.iter()) {
-            tk[i & (MAX_J - 1)] = v;
+            tk[i & (MAX_J - 1)].write(v);
         }
         let uo: [i32; G] =
             core::array::from_fn(|l| mul_hi_round((at(l) - at(j2 - 1 - l)) << sh, m));
         let oo = tri::<G>(&f2.odd, &uo);
         for (tk, &v) in to.iter_mut().zip(oo.iter()) {
-            tk[i & (MAX_J - 1)] = v;
+            tk[i & (MAX_J - 1)].write(v);
         }
     }
 }
@@ -333,7 +340,7 @@ fn rows<const H: usize, const G: usize>(
 #[inline(never)]
 fn cols<const H: usize, const G: usize, const DIFF: bool>(
     f1: &Factor,
-    t: &[[i32; MAX_J]],
+    t: &[[MaybeUninit<i32>; MAX_J]],
     e: &mut [i32],
 ) -> u64 {
     let j1 = H + G;
@@ -347,15 +354,18 @@ fn cols<const H: usize, const G: usize, const DIFF: bool>(
             return acc;
         };
         // Constant indices below MAX_J once unrolled: no bounds checks.
+        // SAFETY: `l < j1`, and the row pass wrote the first `j1` words of
+        // every row of `t` that `embed` hands to this pass.
+        let tr = |l: usize| unsafe { tr[l & (MAX_J - 1)].assume_init() };
         let ue: [i32; H] = core::array::from_fn(|l| {
             if l < G {
-                tr[l].wrapping_add(tr[(j1 - 1 - l) & (MAX_J - 1)])
+                tr(l).wrapping_add(tr(j1 - 1 - l))
             } else {
-                tr[l]
+                tr(l)
             }
         });
         let uo: [i32; G] =
-            core::array::from_fn(|l| tr[l].wrapping_sub(tr[(j1 - 1 - l) & (MAX_J - 1)]));
+            core::array::from_fn(|l| tr(l).wrapping_sub(tr(j1 - 1 - l)));
         let (ne, no) = (tri::<H>(&f1.even, &ue), tri::<G>(&f1.odd, &uo));
         if DIFF {
             // Two fixed-length loops: fully unrolled, one SMLAL per word.
@@ -375,9 +385,9 @@ fn cols<const H: usize, const G: usize, const DIFF: bool>(
 }
 
 /// A row pass (see [`rows`]).
-type RowsFn = fn(&Factor, &[u16], usize, (u32, i32), &mut [[i32; MAX_J]; MAX_J]);
+type RowsFn = fn(&Factor, &[u16], usize, (u32, i32), &mut Rows);
 /// A column pass (see [`cols`]).
-type ColsFn = fn(&Factor, &[[i32; MAX_J]], &mut [i32]) -> u64;
+type ColsFn = fn(&Factor, &[[MaybeUninit<i32>; MAX_J]], &mut [i32]) -> u64;
 
 /// The unrolled passes of one geometry, chosen when the tables are built.
 /// A firmware whose `Scorer` is a compile-time constant references only
@@ -455,18 +465,25 @@ impl core::fmt::Debug for Passes {
 /// columns of axis 2 first. With `diff`, returns the squared distance
 /// between the map `e` held before and the new one (else 0). `passes` are
 /// those of `f1`'s and `f2`'s geometry.
-#[allow(clippy::too_many_arguments)]
 pub fn embed(
     passes: &Passes,
     f1: &Factor,
     f2: &Factor,
     frame: &[u16],
     conv: (u32, i32),
-    t: &mut [[i32; MAX_J]; MAX_J],
     e: &mut [i32],
     diff: bool,
 ) -> u64 {
     let j1 = f1.h + f1.g;
+    if frame.len() != j1 * (f2.h + f2.g) {
+        return 0;
+    }
+    // The row pass's output, on the stack: in DTCM on the H743, where the
+    // engine's own state is in AXI SRAM (one wait-stated store and load
+    // per word of it otherwise). Not cleared: the row pass writes every
+    // word the column pass reads.
+    let mut t: Rows = [[MaybeUninit::uninit(); MAX_J]; MAX_J];
+    let t = &mut t;
     (passes.rows)(f2, frame, j1, conv, t);
     let (te, to) = t.split_at(MAX_H);
     let (Some(te), Some(to)) = (te.get(..f2.h), to.get(..f2.g)) else {
