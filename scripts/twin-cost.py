@@ -1,0 +1,185 @@
+#!/usr/bin/env python3
+"""Bus cost model of the H743's per-beam scoring path, on the chip model:
+`python3 scripts/twin-cost.py ELF J1 J2` (run from the repository root;
+scripts/twin-cost.sh builds the ELFs and runs it for 9x9 and 15x15).
+
+The chip model counts instructions (one cycle each, no wait states). This
+script also counts every data load and store the scoring path makes (the
+functions of h743twin.profile's scoring stages), by the memory and the
+static it falls in, and adds a stall per access from the table below: the
+estimated cycles per beam of the firmware as linked, and of the same
+firmware with chosen statics moved to DTCM (`--dtcm NAME,...`: the same
+accesses at DTCM cost). Instruction fetches cost no stall: from flash
+they are taken to hit the M7's 16 KiB I-cache (enabled at start-up),
+which holds the hot path; misses are not modelled.
+
+Stall cycles per access at a 400 MHz core, D-cache off (the AXI bus
+matrix and AHB run at 200 MHz; flash has 2 wait states at that clock; the
+M7's write buffer absorbs most of a store's latency): these are the
+model's assumptions, not measurements, and can be changed with
+`--cost REGION=READ/WRITE`. Accesses are attributed to the scoring path
+by the function of the block that makes them."""
+
+import argparse
+import bisect
+import os
+import random
+import sys
+
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "host-tests", "twin"))
+
+from elftools.elf.elffile import ELFFile  # noqa: E402
+from unicorn import UC_HOOK_MEM_READ, UC_HOOK_MEM_WRITE, UC_MEM_WRITE  # noqa: E402
+
+from h743twin.detector import Detector, Scan  # noqa: E402
+from h743twin.machine import Machine, cycles_of_ms, symbolizer  # noqa: E402
+from h743twin.profile import SCORING, stage_of  # noqa: E402
+
+REGIONS = (  # name, start, end
+    ("ITCM", 0x0000_0000, 0x0001_0000),
+    ("flash", 0x0800_0000, 0x0820_0000),
+    ("DTCM", 0x2000_0000, 0x2002_0000),
+    ("AXI SRAM", 0x2400_0000, 0x2408_0000),
+    ("SRAM1-3", 0x3000_0000, 0x3004_8000),
+    ("SRAM4", 0x3800_0000, 0x3801_0000),
+    ("peripherals", 0x4000_0000, 0x6000_0000),
+)
+# Extra cycles per (read, write), beyond the instruction's own cycle.
+COST = {
+    "ITCM": (0, 0),
+    "DTCM": (0, 0),
+    "AXI SRAM": (6, 1),
+    "SRAM1-3": (10, 2),
+    "SRAM4": (10, 2),
+    "flash": (10, 10),
+    "peripherals": (12, 4),
+}
+
+
+def region_of(addr):
+    for name, lo, hi in REGIONS:
+        if lo <= addr < hi:
+            return name
+    return "other"
+
+
+def short(name):
+    """`_ZN6cvm_fw4h7435ROW_A17h...E` -> `h743::ROW_A` (the last two path
+    components of a mangled Rust name, without the hash)."""
+    if not name.startswith("_ZN"):
+        return name
+    parts, i = [], 3
+    while i < len(name) and name[i].isdigit():
+        j = i
+        while name[j].isdigit():
+            j += 1
+        n = int(name[i:j])
+        parts.append(name[j:j + n])
+        i = j + n
+    parts = [p for p in parts if not (p.startswith("h") and len(p) == 17)]
+    return "::".join(parts[-2:])
+
+
+def objects_of(path):
+    with open(path, "rb") as f:
+        elf = ELFFile(f)
+        objs = sorted((s["st_value"], s["st_size"], s.name)
+                      for s in elf.get_section_by_name(".symtab").iter_symbols()
+                      if s["st_info"]["type"] == "STT_OBJECT" and s["st_size"])
+    starts = [a for a, _, _ in objs]
+
+    def name_of(addr):
+        i = bisect.bisect_right(starts, addr) - 1
+        if i >= 0 and addr < objs[i][0] + objs[i][1]:
+            return short(objs[i][2])
+        return None
+
+    return name_of
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(prog="twin-cost")
+    ap.add_argument("elf")
+    ap.add_argument("j1", type=int)
+    ap.add_argument("j2", type=int)
+    ap.add_argument("--rows", type=int, default=6)
+    ap.add_argument("--cols", type=int, default=12)
+    ap.add_argument("--beam-us", type=float, default=400.0)
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--dtcm", default="", help="statics (substrings) to cost as if in DTCM")
+    ap.add_argument("--cost", action="append", default=[], help="REGION=READ/WRITE stall cycles")
+    args = ap.parse_args(argv)
+    for c in args.cost:
+        k, v = c.split("=")
+        r, w = v.split("/")
+        COST[k] = (int(r), int(w))
+    moved = [s for s in args.dtcm.split(",") if s]
+
+    rng = random.Random(args.seed)
+    n = args.rows * args.cols * args.j1 * args.j2
+    scan = Scan(args.rows, args.cols, args.j1, args.j2, [rng.randint(100, 4000) for _ in range(n)])
+    m = Machine(args.elf)
+    det = Detector(m, scan, args.beam_us, 20.0, [])
+    m.attach(det)
+    m.run(det.times[0] - 1000)
+    m.start_profile()
+    func_of = m.core.symbolize
+    obj_of = objects_of(args.elf)
+    scoring_block = {}
+    counts = {}  # (region, object, is_write) -> accesses
+
+    def in_scoring(addr):
+        hit = scoring_block.get(addr)
+        if hit is None:
+            hit = stage_of(func_of(addr)) in SCORING
+            scoring_block[addr] = hit
+        return hit
+
+    def on_mem(uc, access, addr, size, value, data):
+        if not in_scoring(m.core.last_block[0]):
+            return
+        reg = region_of(addr)
+        obj = obj_of(addr) or ("stack" if reg == "DTCM" else reg)
+        key = (reg, obj, access == UC_MEM_WRITE)
+        counts[key] = counts.get(key, 0) + 1
+
+    for _, lo, hi in REGIONS[:-1]:
+        m.core.uc.hook_add(UC_HOOK_MEM_READ | UC_HOOK_MEM_WRITE, on_mem, begin=lo, end=hi - 1)
+    m.run(det.done_at + cycles_of_ms(5))
+    beams = det.sent
+    instr = sum(v for k, v in m.core.profile.items() if stage_of(k) in SCORING)
+
+    by_obj = {}
+    for (reg, obj, w), c in counts.items():
+        e = by_obj.setdefault((reg, obj), [0, 0])
+        e[1 if w else 0] += c
+
+    def num(x):
+        return f"{x:,.0f}".replace(",", " ")
+
+    print(f"Scoring path, {args.j1}x{args.j2}, {beams} beams: {num(instr / beams)} instructions per beam")
+    print()
+    print("| memory | static | reads per beam | writes per beam | stall cycles per beam |")
+    print("|---|---|---:|---:|---:|")
+    stall = 0.0
+    stall_moved = 0.0
+    for (reg, obj), (r, w) in sorted(by_obj.items(), key=lambda kv: -(kv[1][0] + kv[1][1])):
+        cr, cw = COST.get(reg, (0, 0))
+        s = (r * cr + w * cw) / beams
+        stall += s
+        if not any(x in obj for x in moved):
+            stall_moved += s
+        if (r + w) / beams >= 1:
+            print(f"| {reg} | {obj} | {num(r / beams)} | {num(w / beams)} | {num(s)} |")
+    ipb = instr / beams
+    print()
+    print("| placement | instructions per beam | estimated cycles per beam |")
+    print("|---|---:|---:|")
+    print(f"| as linked | {num(ipb)} | {num(ipb + stall)} |")
+    if moved:
+        print(f"| with {', '.join(moved)} in DTCM | {num(ipb)} | {num(ipb + stall_moved)} |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,16 @@
+#!/usr/bin/env bash
+# Estimated cycles per beam of the H743 release firmware's scoring path on
+# the chip model: instructions plus the bus cost model of
+# scripts/twin-cost.py (accesses by memory and static, stall cycles per
+# access), for 9x9 and 15x15 maps with paper kernels. Extra arguments go to
+# twin-cost.py (e.g. `--dtcm ROW_A` to cost a static as if in DTCM).
+# Builds the ELF for each geometry into target/twin like twin-profile.sh.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bash scripts/setup.sh
+for j in 9 15; do
+    CVM_H743_SCAN="j1=$j j2=$j cols=12 rows=6 scores=true" \
+        cargo build --release --target-dir target/twin >&2
+    python3 scripts/twin-cost.py target/twin/thumbv7em-none-eabihf/release/cvm-fw "$j" "$j" "$@"
+    echo
+done
