@@ -88,11 +88,22 @@ pub struct Pins {
 const CELLS: usize = CORE.geometry.cells();
 const ROW_WORDS: usize = row_words(MAX_COLS, J1 as usize, J2 as usize);
 
-/// Scoring tables, built by the compiler.
-static SCORER: Scorer = match Scorer::new(&CORE) {
+/// Scoring tables, built by the compiler (in flash).
+const TABLES: Scorer = match Scorer::new(&CORE) {
     Ok(s) => s,
     Err(_) => panic!("cvm-core refuses the configuration in config.rs"),
 };
+
+/// The tables the scorer reads, in DTCM: every map loads its factor
+/// coefficients, which cost no wait state there and about 10 cycles each
+/// from flash with the D-cache off (scripts/twin-cost.sh,
+/// docs/performance.md). `.dtcm` is not loaded: `main` copies the tables
+/// in before anything reads them.
+struct DtcmScorer(core::cell::UnsafeCell<core::mem::MaybeUninit<Scorer>>);
+// SAFETY: written once by `main` before any task runs, only read after.
+unsafe impl Sync for DtcmScorer {}
+#[unsafe(link_section = ".dtcm")]
+static SCORER: DtcmScorer = DtcmScorer(core::cell::UnsafeCell::new(core::mem::MaybeUninit::uninit()));
 
 /// Row buffer A in AXI SRAM (.bss), row buffer B in SRAM1..3: at 300
 /// columns of 15x15 maps each is 270 KB, too much for one bank together.
@@ -195,20 +206,22 @@ fn main() -> ! {
     wdg.unleash();
 
     QUEUE.lock(|q| q.borrow_mut().set_reserve(KEEP_RESERVE));
+    // SAFETY: written here, once, before any task runs; read-only after.
+    let scorer: &'static Scorer = unsafe { (*SCORER.0.get()).write(TABLES) };
     // SAFETY: the row buffers are handed out here, once, before any task runs.
     let (row_a, row_b) = unsafe { (&mut *ROW_A.0.get(), &mut *ROW_B.0.get()) };
     // SRAM1..3 is NOLOAD: start from a known state.
     row_b.fill(0);
     let settings = Settings {
         cols: COLS as u32,
-        threshold: SCORER.threshold_from_units(THRESHOLD_UNITS),
+        threshold: scorer.threshold_from_units(THRESHOLD_UNITS),
         scores: SCORES,
         max_defect_lines_per_row: MAX_DEFECT_LINES_PER_ROW,
         firmware_version: FIRMWARE_VERSION,
         reset_cause: cause,
         boots,
     };
-    let pipeline = match Pipeline::<MAX_COLS>::new(&SCORER, settings, row_a, row_b) {
+    let pipeline = match Pipeline::<MAX_COLS>::new(scorer, settings, row_a, row_b) {
         Ok(p) => p,
         Err(e) => defmt::panic!("pipeline refused its buffers: {}", e),
     };
