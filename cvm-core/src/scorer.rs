@@ -643,12 +643,58 @@ fn fill(x: &mut [i32], frame: &[u16], f: impl Fn(u16) -> i32) {
 /// with the square-kernel path.
 #[inline(never)]
 fn squared_difference(a: &[i32], b: &[i32]) -> u64 {
-    let mut acc: i64 = 0;
-    for (&x, &y) in a.iter().zip(b) {
+    let (mut acc, done) = squared_difference_blocks(a, b);
+    for (&x, &y) in a.iter().zip(b).skip(done) {
         let d = x.wrapping_sub(y) as i64;
-        acc += d * d;
+        acc = acc.wrapping_add(d * d);
     }
     acc as u64
+}
+
+/// The sum of [`squared_difference`] over the first `3 * (n / 3)` words
+/// (`n` the shorter length) and that number of words. On the Cortex-M:
+/// three words of each map per `LDM`, 10 instructions per three words
+/// instead of about 14.
+#[cfg(target_arch = "arm")]
+#[inline(always)]
+fn squared_difference_blocks(a: &[i32], b: &[i32]) -> (i64, usize) {
+    let blocks = a.len().min(b.len()) / 3;
+    if blocks == 0 {
+        return (0, 0);
+    }
+    let (mut lo, mut hi) = (0u32, 0u32);
+    // SAFETY: `a` and `b` hold at least `3 * blocks` words; the loop reads
+    // exactly those and writes registers only.
+    unsafe {
+        core::arch::asm!(
+            "2:",
+            "ldm {pa}!, {{r0, r1, r2}}",
+            "ldm {pb}!, {{r3, r4, r5}}",
+            "sub r0, r0, r3",
+            "smlal {lo}, {hi}, r0, r0",
+            "sub r1, r1, r4",
+            "smlal {lo}, {hi}, r1, r1",
+            "sub r2, r2, r5",
+            "smlal {lo}, {hi}, r2, r2",
+            "subs {k}, {k}, #1",
+            "bne 2b",
+            pa = inout(reg) a.as_ptr() => _,
+            pb = inout(reg) b.as_ptr() => _,
+            k = inout(reg) blocks => _,
+            lo = inout(reg) lo,
+            hi = inout(reg) hi,
+            out("r0") _, out("r1") _, out("r2") _,
+            out("r3") _, out("r4") _, out("r5") _,
+            options(readonly, nostack)
+        );
+    }
+    ((((hi as u64) << 32) | lo as u64) as i64, 3 * blocks)
+}
+
+#[cfg(not(target_arch = "arm"))]
+#[inline(always)]
+fn squared_difference_blocks(_a: &[i32], _b: &[i32]) -> (i64, usize) {
+    (0, 0)
 }
 
 /// Scratch space of the square kernels (the new map while the old one is
