@@ -3,8 +3,8 @@
 //! and the f64 reference.
 
 use dmap::options::{KernelArg, ScoringArgs, WeightArg};
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
+use rand::rngs::ChaCha8Rng;
+use rand::{Rng, RngExt, SeedableRng};
 
 pub fn rng(seed: u64) -> ChaCha8Rng {
     ChaCha8Rng::seed_from_u64(seed)

@@ -25,7 +25,7 @@
 
 use cvm_core::{Config, Geometry, Kernels, Scorer, Weights};
 use cvm_core_tests::{random_map, rng};
-use rand::Rng;
+use rand::RngExt;
 
 type M = Vec<Vec<f64>>;
 

@@ -10,7 +10,7 @@
 use cvm_core::{Config, Geometry, Kernels, Position, RowSummary, Scorer, Weights};
 use cvm_core::{flags, tables::box_range};
 use cvm_core_tests::{frame_flags, random_map, rng, row_summary_of, run_engine};
-use rand::Rng;
+use rand::RngExt;
 
 const GEOMETRIES: &[(u8, u8)] = &[(1, 1), (1, 5), (2, 2), (3, 3), (4, 6), (9, 9), (16, 16)];
 const FULL_SCALES: &[u16] = &[u16::MAX, 60000, 1000, 1, 0];

@@ -5,8 +5,8 @@
 
 use cvm_reference::{BruteCvm, Geometry, gradient_image};
 use dmap::options::{KernelArg, ScoringArgs, WeightArg};
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
+use rand::rngs::ChaCha8Rng;
+use rand::{Rng, RngExt, SeedableRng};
 use std::process::Command;
 
 fn scan(r: &mut impl Rng, rows: usize, cols: usize, n: usize) -> Vec<u16> {

@@ -6,8 +6,8 @@ use dmap::fixed::{score_scan, to_image};
 use dmap::listen::Decoder;
 use dmap::options::{KernelArg, ScoringArgs, WeightArg};
 use dmap::stream::{OutputArgs, stream_scan};
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
+use rand::rngs::ChaCha8Rng;
+use rand::{Rng, RngExt, SeedableRng};
 
 fn scan(r: &mut impl Rng, rows: usize, cols: usize, n: usize) -> Vec<u16> {
     let mut prev: Vec<u16> = (0..n).map(|_| r.random_range(0..5000)).collect();
