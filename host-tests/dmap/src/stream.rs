@@ -223,7 +223,7 @@ pub fn stream_scan(
     let (mut a, mut b) = (vec![0i32; words], vec![0i32; words]);
     let mut pipeline = Box::new(
         Pipeline::<MAX_COLS>::new(scorer, settings, &mut a, &mut b)
-            .map_err(|e| anyhow::anyhow!("pipeline refused the scan: {e:?}"))?,
+            .map_err(|e| anyhow::anyhow!("pipeline refused the scan: {e}"))?,
     );
     let mut sink = VecSink::default();
     pipeline.begin(&mut sink);
@@ -262,7 +262,7 @@ pub fn stream_mapped(
     let (mut a, mut b) = (vec![0i32; words], vec![0i32; words]);
     let mut pipeline = Box::new(
         Pipeline::<MAX_COLS>::new(scorer, settings, &mut a, &mut b)
-            .map_err(|e| anyhow::anyhow!("pipeline refused the scan: {e:?}"))?,
+            .map_err(|e| anyhow::anyhow!("pipeline refused the scan: {e}"))?,
     );
     let mut sink = VecSink::default();
     pipeline.begin(&mut sink);
