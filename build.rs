@@ -54,6 +54,9 @@ fn main() {
 /// `src/config.rs`). `CVM_H743_SCAN` overrides the defaults with
 /// space-separated `key=value` pairs; `dmap twin` sets it to the
 /// configuration of the scan it runs. See docs/firmware.md.
+/// Keys: j1, j2, cols, rows, kernels (paper|square), b, weights
+/// (uniform|unit), normalise, threshold, scores, max_defect_lines, fs (full
+/// scale), fw (the version in the header).
 fn h743_scan(spec: &str) -> Result<String, String> {
     let mut j1 = 15u8;
     let mut j2 = 15u8;
@@ -66,6 +69,8 @@ fn h743_scan(spec: &str) -> Result<String, String> {
     let mut threshold = 0.5f64;
     let mut scores = true;
     let mut max_defect_lines = 16u16;
+    let mut full_scale = u16::MAX;
+    let mut fw = None::<String>;
     fn num<T: std::str::FromStr>(k: &str, v: &str) -> Result<T, String> {
         v.parse()
             .map_err(|_| format!("{k}={v}: not a valid number"))
@@ -93,6 +98,16 @@ fn h743_scan(spec: &str) -> Result<String, String> {
             "threshold" => threshold = num(k, v)?,
             "scores" => scores = flag(k, v)?,
             "max_defect_lines" => max_defect_lines = num(k, v)?,
+            "fs" => full_scale = num(k, v)?,
+            // The version the header announces (`dmap twin` passes the
+            // host's, so that its output compares byte for byte).
+            "fw" if !v.is_empty()
+                && v.len() <= 32
+                && v.bytes()
+                    .all(|b| b.is_ascii_graphic() && b != b',' && b != b'*') =>
+            {
+                fw = Some(v.into())
+            }
             _ => return Err(format!("unknown key or value in {pair:?}")),
         }
     }
@@ -126,6 +141,11 @@ fn h743_scan(spec: &str) -> Result<String, String> {
     let _ = writeln!(
         s,
         "pub const MAX_DEFECT_LINES_PER_ROW: u16 = {max_defect_lines};"
+    );
+    let _ = writeln!(s, "pub const FULL_SCALE: u16 = {full_scale};");
+    let _ = writeln!(
+        s,
+        "pub const FIRMWARE_VERSION_OVERRIDE: Option<&str> = {fw:?};"
     );
     Ok(s)
 }

@@ -64,7 +64,8 @@ pub mod h743 {
     // gradient magnitude, in `dmap` units), SCORES (emit per-position score
     // lines, dropped first when the UART lags), MAX_DEFECT_LINES_PER_ROW.
     // Defaults: 15x15 maps, 300 x 200 beams, paper kernels, uniform weights,
-    // normalised, threshold 0.5, scores on, 16 defect lines per row; build.rs
+    // normalised, threshold 0.5, scores on, 16 defect lines per row, full
+    // scale 65535, the package's version in the header; build.rs
     // writes them, or the `CVM_H743_SCAN` override (docs/firmware.md).
     include!(concat!(env!("OUT_DIR"), "/h743_scan.rs"));
     const _: () = assert!(
@@ -91,7 +92,13 @@ pub mod h743 {
         kernels: KERNELS,
         weights: WEIGHTS,
         normalise: NORMALISE,
-        full_scale: u16::MAX,
+        full_scale: FULL_SCALE,
+    };
+
+    /// The version the header announces.
+    pub const FIRMWARE_VERSION: &str = match FIRMWARE_VERSION_OVERRIDE {
+        Some(v) => v,
+        None => super::FIRMWARE_VERSION,
     };
 
     /// Core clock (PLL1 P) and the SPI kernel clock (PLL1 Q).

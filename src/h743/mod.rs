@@ -57,11 +57,12 @@ use frame_reader::FrameReader;
 use static_cell::StaticCell;
 use tasks::{acquire_task, score_task, uart_task};
 
+use crate::config::h743::FIRMWARE_VERSION;
 use crate::config::h743::{
     BAUD, COLS, CORE, J1, J2, KEEP_RESERVE, MAX_COLS, MAX_DEFECT_LINES_PER_ROW, QUEUE_BYTES, ROWS,
     SCORES, SPI_DIV, SPI_HZ, SYSCLK_HZ, THRESHOLD_UNITS, WATCHDOG_US,
 };
-use crate::config::{BEAM_LOG, FIRMWARE_VERSION, FRAME_BUFFERS};
+use crate::config::{BEAM_LOG, FRAME_BUFFERS};
 use crate::frames::SampleBuffers;
 use crate::sink::SharedQueue;
 
@@ -103,7 +104,8 @@ struct DtcmScorer(core::cell::UnsafeCell<core::mem::MaybeUninit<Scorer>>);
 // SAFETY: written once by `main` before any task runs, only read after.
 unsafe impl Sync for DtcmScorer {}
 #[unsafe(link_section = ".dtcm")]
-static SCORER: DtcmScorer = DtcmScorer(core::cell::UnsafeCell::new(core::mem::MaybeUninit::uninit()));
+static SCORER: DtcmScorer =
+    DtcmScorer(core::cell::UnsafeCell::new(core::mem::MaybeUninit::uninit()));
 
 /// Row buffer A in AXI SRAM (.bss), row buffer B in SRAM1..3: at 300
 /// columns of 15x15 maps each is 270 KB, too much for one bank together.

@@ -111,14 +111,20 @@ pub fn h743_config(h: &ScanHeader) -> Result<String> {
         Weights::Unit => "unit",
         Weights::Separable { .. } => bail!("the H743 build has no separable weights"),
     };
-    if h.config.full_scale != u16::MAX {
-        bail!(
-            "the H743 build has a full scale of 65535, not {}",
-            h.config.full_scale
-        );
-    }
+    let fw = h
+        .version
+        .get(..usize::from(h.version_len))
+        .and_then(|v| std::str::from_utf8(v).ok())
+        .filter(|v| {
+            !v.is_empty()
+                && v.bytes()
+                    .all(|b| b.is_ascii_graphic() && b != b',' && b != b'*')
+        })
+        .context("the firmware version of the scan header is not a plain ASCII word")?;
+    // The version the host announces, so that the header compares byte for
+    // byte with `dmap stream`'s.
     Ok(format!(
-        "j1={} j2={} cols={} rows={} kernels={kernels} b={b} weights={weights} normalise={} threshold={:?} scores={} max_defect_lines={}",
+        "j1={} j2={} cols={} rows={} kernels={kernels} b={b} weights={weights} normalise={} threshold={:?} scores={} max_defect_lines={} fs={} fw={fw}",
         g.j1,
         g.j2,
         h.cols,
@@ -127,6 +133,7 @@ pub fn h743_config(h: &ScanHeader) -> Result<String> {
         h.threshold_units,
         h.scores,
         h.max_defect_lines_per_row,
+        h.config.full_scale,
     ))
 }
 
