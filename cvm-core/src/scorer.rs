@@ -393,15 +393,7 @@ impl Scorer {
                     fl |= flags::DARK;
                 }
                 let conv = self.scale(sum);
-                let acc = embed::embed(
-                    &self.passes,
-                    &self.f1,
-                    &self.f2,
-                    frame,
-                    conv,
-                    state,
-                    diff,
-                );
+                let acc = embed::embed(&self.passes, &self.f1, &self.f2, frame, conv, state, diff);
                 Ok((fl, if diff { self.to_score(acc) } else { 0 }))
             }
         }

@@ -284,9 +284,8 @@ fn tri<const N: usize>(r: &[i32; TRI], u: &[i32; N]) -> [i32; N] {
 /// a row-major frame: folds each row along axis 2 (`a[l] ± a[H+G-1-l]`,
 /// exact), converts the folded counts to `Q(f)`
 /// (`round((v << k) * m / 2^32)`), applies the even and the odd block and
-/// stores the results transposed, `t[k][i]` (even) and `t[MAX_H + k][i]`
-/// (odd): every `t[k][i]` with `k < H` or `MAX_H <= k < MAX_H + G` and
-/// `i < n_rows` is written.
+/// stores the results transposed, `t[k][i]` (even) and `t[H + k][i]`
+/// (odd): every `t[k][i]` with `k < H + G` and `i < n_rows` is written.
 #[inline(never)]
 fn rows<const H: usize, const G: usize>(
     f2: &Factor,
@@ -297,10 +296,12 @@ fn rows<const H: usize, const G: usize>(
 ) {
     let j2 = H + G;
     let (sh, m) = (conv.0 & 31, conv.1);
-    let (te, to) = t.split_at_mut(MAX_H);
+    let (te, to) = t.split_at_mut(H);
     let (Some(Ok(te)), Some(Ok(to))) = (
-        te.get_mut(..H).map(<&mut [[MaybeUninit<i32>; MAX_J]; H]>::try_from),
-        to.get_mut(..G).map(<&mut [[MaybeUninit<i32>; MAX_J]; G]>::try_from),
+        te.get_mut(..H)
+            .map(<&mut [[MaybeUninit<i32>; MAX_J]; H]>::try_from),
+        to.get_mut(..G)
+            .map(<&mut [[MaybeUninit<i32>; MAX_J]; G]>::try_from),
     ) else {
         return;
     };
@@ -364,8 +365,7 @@ fn cols<const H: usize, const G: usize, const DIFF: bool>(
                 tr(l)
             }
         });
-        let uo: [i32; G] =
-            core::array::from_fn(|l| tr(l).wrapping_sub(tr(j1 - 1 - l)));
+        let uo: [i32; G] = core::array::from_fn(|l| tr(l).wrapping_sub(tr(j1 - 1 - l)));
         let (ne, no) = (tri::<H>(&f1.even, &ue), tri::<G>(&f1.odd, &uo));
         if DIFF {
             // Two fixed-length loops: fully unrolled, one SMLAL per word.
@@ -485,21 +485,15 @@ pub fn embed(
     let mut t: Rows = [[MaybeUninit::uninit(); MAX_J]; MAX_J];
     let t = &mut t;
     (passes.rows)(f2, frame, j1, conv, t);
-    let (te, to) = t.split_at(MAX_H);
-    let (Some(te), Some(to)) = (te.get(..f2.h), to.get(..f2.g)) else {
-        return 0;
-    };
-    let Some(e) = e.get_mut(..j1 * (f2.h + f2.g)) else {
-        return 0;
-    };
-    let Some((ee, eo)) = e.split_at_mut_checked(j1 * f2.h) else {
+    // Even and odd rows of `t` are consecutive, like their chunks of `e`:
+    // one call of the column pass (its coefficients are set up once).
+    let (Some(t), Some(e)) = (t.get(..f2.h + f2.g), e.get_mut(..j1 * (f2.h + f2.g))) else {
         return 0;
     };
     if diff {
-        (passes.cols_diff)(f1, te, ee).wrapping_add((passes.cols_diff)(f1, to, eo))
+        (passes.cols_diff)(f1, t, e)
     } else {
-        (passes.cols)(f1, te, ee);
-        (passes.cols)(f1, to, eo);
+        (passes.cols)(f1, t, e);
         0
     }
 }
