@@ -170,7 +170,7 @@ pub fn configure(
         .map_err(|e| anyhow::anyhow!("fixed-point scorer refused the configuration: {e}"))?;
     if let Some(path) = &output.calibration {
         // Refuses a calibration made for another configuration.
-        crate::calibrate::threshold_units(path, &scoring.core_config(j1, j2)?)?;
+        crate::calibrate::threshold_units(path, &core_config(scoring, output, j1, j2)?)?;
     }
     let units = output.threshold_units(scoring)?;
     let settings = OutputArgs {

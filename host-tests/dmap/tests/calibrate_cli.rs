@@ -204,6 +204,10 @@ fn calibration_refuses_other_configurations_and_bad_input() {
         (vec!["--kernels", "square"], "kernels"),
         (vec!["--bmax", "2"], "b: calibrated 0, this run 2"),
         (vec!["--weights", "unit"], "weights"),
+        (
+            vec!["--full-scale", "4095"],
+            "full_scale: calibrated 65535, this run 4095",
+        ),
     ] {
         let mut a = vec!["stream", s(&r), "--calibration", s(&cal)];
         a.extend(&extra);
