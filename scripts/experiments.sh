@@ -11,7 +11,7 @@
 # REUSE=1 keeps simulated scans and EMD scores already in OUT_DIR (same seeds,
 # same commands) instead of recomputing them; everything else is recomputed.
 # Writes .npy/.json files and the numbers to OUT_DIR and the PNGs to docs/img/.
-# About 25 minutes from scratch on the shared 2-core machine (nice 10).
+# About 45 minutes from scratch on the shared, loaded 2-core machine (nice 10).
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 out=${1:-$root/host-tests/target/experiments}
