@@ -23,7 +23,6 @@ by the function of the block that makes them."""
 import argparse
 import bisect
 import os
-import random
 import sys
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "host-tests", "twin"))
@@ -31,9 +30,8 @@ sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "host-tests", "
 from elftools.elf.elffile import ELFFile  # noqa: E402
 from unicorn import UC_HOOK_MEM_READ, UC_HOOK_MEM_WRITE, UC_MEM_WRITE  # noqa: E402
 
-from h743twin.detector import Detector, Scan  # noqa: E402
-from h743twin.machine import Machine, cycles_of_ms, symbolizer  # noqa: E402
-from h743twin.profile import SCORING, stage_of  # noqa: E402
+from h743twin.machine import cycles_of_ms  # noqa: E402
+from h743twin.profile import SCORING, add_scan_args, boot_for_scan, stage_of  # noqa: E402
 
 REGIONS = (  # name, start, end
     ("ITCM", 0x0000_0000, 0x0001_0000),
@@ -99,13 +97,7 @@ def objects_of(path):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="twin-cost")
-    ap.add_argument("elf")
-    ap.add_argument("j1", type=int)
-    ap.add_argument("j2", type=int)
-    ap.add_argument("--rows", type=int, default=6)
-    ap.add_argument("--cols", type=int, default=12)
-    ap.add_argument("--beam-us", type=float, default=400.0)
-    ap.add_argument("--seed", type=int, default=1)
+    add_scan_args(ap)
     ap.add_argument("--dtcm", default="", help="statics (substrings) to cost as if in DTCM")
     ap.add_argument("--cost", action="append", default=[], help="REGION=READ/WRITE stall cycles")
     args = ap.parse_args(argv)
@@ -115,14 +107,7 @@ def main(argv=None):
         COST[k] = (int(r), int(w))
     moved = [s for s in args.dtcm.split(",") if s]
 
-    rng = random.Random(args.seed)
-    n = args.rows * args.cols * args.j1 * args.j2
-    scan = Scan(args.rows, args.cols, args.j1, args.j2, [rng.randint(100, 4000) for _ in range(n)])
-    m = Machine(args.elf)
-    det = Detector(m, scan, args.beam_us, 20.0, [])
-    m.attach(det)
-    m.run(det.times[0] - 1000)
-    m.start_profile()
+    m, det = boot_for_scan(args)
     func_of = m.core.symbolize
     obj_of = objects_of(args.elf)
     scoring_block = {}

@@ -7,7 +7,7 @@ import argparse
 import json
 import sys
 
-from .core import CLOCK_HZ, Stop
+from .core import Stop
 from .detector import Detector, Scan, parse_fault
 from .machine import Machine, cycles_of_ms
 

@@ -46,8 +46,8 @@ def stage_of(name):
     return "other"
 
 
-def main(argv=None):
-    ap = argparse.ArgumentParser(prog="h743twin.profile")
+def add_scan_args(ap):
+    """The ELF, its geometry, and the random scan to run."""
     ap.add_argument("elf")
     ap.add_argument("j1", type=int)
     ap.add_argument("j2", type=int)
@@ -55,17 +55,29 @@ def main(argv=None):
     ap.add_argument("--cols", type=int, default=12)
     ap.add_argument("--beam-us", type=float, default=400.0)
     ap.add_argument("--seed", type=int, default=1)
-    ap.add_argument("--top", type=int, default=0, help="also list the N costliest functions")
-    args = ap.parse_args(argv)
+
+
+def boot_for_scan(args):
+    """A machine with the ELF booted up to just before the first beam of a
+    random scan (`add_scan_args`), counting instructions per function."""
     rng = random.Random(args.seed)
     n = args.rows * args.cols * args.j1 * args.j2
     scan = Scan(args.rows, args.cols, args.j1, args.j2, [rng.randint(100, 4000) for _ in range(n)])
     m = Machine(args.elf)
     det = Detector(m, scan, args.beam_us, 20.0, [])
     m.attach(det)
+    m.run(det.times[0] - 1000)
+    m.start_profile()
+    return m, det
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(prog="h743twin.profile")
+    add_scan_args(ap)
+    ap.add_argument("--top", type=int, default=0, help="also list the N costliest functions")
+    args = ap.parse_args(argv)
     try:
-        m.run(det.times[0] - 1000)
-        m.start_profile()
+        m, det = boot_for_scan(args)
         # Up to the last beam plus the time to score and send it.
         m.run(det.done_at + cycles_of_ms(5))
     except Stop as e:
