@@ -1,33 +1,14 @@
 //! `dmap eval`'s object metrics on hand-made masks, through the real binary.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::path::PathBuf;
 
 use dmap::npy;
 
-fn dmap(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_dmap"))
-        .args(args)
-        .output()
-        .expect("run dmap")
-}
+mod common;
+use common::{dmap, ok, s};
 
 fn tmp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("dmap-obj-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
-
-fn ok(out: &Output) {
-    assert!(
-        out.status.success(),
-        "stderr: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    common::tmp_in("obj", name)
 }
 
 #[test]

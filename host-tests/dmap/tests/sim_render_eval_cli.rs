@@ -2,25 +2,15 @@
 //! the real binary, one-line errors on bad input.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 
 use dmap::npy;
 
-fn dmap(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_dmap"))
-        .args(args)
-        .output()
-        .expect("run dmap")
-}
+mod common;
+use common::{dmap, ok, s};
 
 fn tmp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("dmap-sre-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
+    common::tmp_in("sre", name)
 }
 
 /// The command failed with exactly one line on stderr, naming the problem.
@@ -32,14 +22,6 @@ fn assert_one_line_error(out: &Output, needle: &str) {
     assert!(err.starts_with("dmap: error:"), "{err}");
     assert!(err.contains(needle), "{err:?} lacks {needle:?}");
     assert!(!err.contains("panicked"));
-}
-
-fn ok(out: &Output) {
-    assert!(
-        out.status.success(),
-        "stderr: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
 }
 
 #[test]
