@@ -55,8 +55,9 @@ fn main() {
 /// space-separated `key=value` pairs; `dmap twin` sets it to the
 /// configuration of the scan it runs. See docs/firmware.md.
 /// Keys: j1, j2, cols, rows, kernels (paper|square), b, weights
-/// (uniform|unit), normalise, threshold, scores, max_defect_lines, fs (full
-/// scale), fw (the version in the header).
+/// (uniform|unit), normalise, threshold, pthr (the power channel's
+/// threshold, a contrast; `inf` turns it off), scores, max_defect_lines,
+/// fs (full scale), fw (the version in the header).
 fn h743_scan(spec: &str) -> Result<String, String> {
     let mut j1 = 15u8;
     let mut j2 = 15u8;
@@ -67,8 +68,9 @@ fn h743_scan(spec: &str) -> Result<String, String> {
     let mut weights = "uniform".to_string();
     let mut normalise = true;
     let mut threshold = 0.5f64;
+    let mut pthr = 0.1f64;
     let mut scores = true;
-    let mut max_defect_lines = 16u16;
+    let mut max_defect_lines = 0u16;
     let mut full_scale = u16::MAX;
     let mut fw = None::<String>;
     fn num<T: std::str::FromStr>(k: &str, v: &str) -> Result<T, String> {
@@ -96,6 +98,7 @@ fn h743_scan(spec: &str) -> Result<String, String> {
             "weights" if v == "uniform" || v == "unit" => weights = v.into(),
             "normalise" => normalise = flag(k, v)?,
             "threshold" => threshold = num(k, v)?,
+            "pthr" => pthr = num(k, v)?,
             "scores" => scores = flag(k, v)?,
             "max_defect_lines" => max_defect_lines = num(k, v)?,
             "fs" => full_scale = num(k, v)?,
@@ -120,6 +123,9 @@ fn h743_scan(spec: &str) -> Result<String, String> {
     if !threshold.is_finite() || threshold < 0.0 {
         return Err(format!("threshold={threshold}: must be finite and >= 0"));
     }
+    if pthr.is_nan() || pthr < 0.0 {
+        return Err(format!("pthr={pthr}: must be >= 0 (inf: off)"));
+    }
     let kernels = match (kernels.as_str(), b) {
         ("paper", b) => format!("Kernels::Paper {{ bmax: {} }}", b.unwrap_or(0)),
         (_, Some(k)) => format!("Kernels::Square {{ kmax: {k} }}"),
@@ -137,6 +143,12 @@ fn h743_scan(spec: &str) -> Result<String, String> {
     let _ = writeln!(s, "pub const WEIGHTS: Weights = Weights::{weights};");
     let _ = writeln!(s, "pub const NORMALISE: bool = {normalise};");
     let _ = writeln!(s, "pub const THRESHOLD_UNITS: f64 = {threshold:?};");
+    let pthr = if pthr.is_infinite() {
+        "f64::INFINITY".to_string()
+    } else {
+        format!("{pthr:?}")
+    };
+    let _ = writeln!(s, "pub const POWER_THRESHOLD_UNITS: f64 = {pthr};");
     let _ = writeln!(s, "pub const SCORES: bool = {scores};");
     let _ = writeln!(
         s,

@@ -30,11 +30,14 @@ pub const BEAM_LOG: usize = 64;
 /// rows, their score lines promoted to keep lines, and the end line), the
 /// next scan's header, and two more rows (a held beam placed with its
 /// successor); a row is one `R` line and at most
-/// [`MAX_DEFECT_LINES_PER_ROW`] `D` lines.
+/// [`MAX_DEFECT_LINES_PER_ROW`] `D` lines, and every open object can close
+/// in that burst (one `O` line each).
 pub const fn keep_reserve(max_cols: usize) -> usize {
     let row = 1 + MAX_DEFECT_LINES_PER_ROW as usize;
     let score_lines = max_cols.div_ceil(SCORES_PER_LINE);
-    (4 * row + 2 * score_lines + 2) * LineQueue::<1>::cost(MAX_LINE)
+    // Each object closes once: at most every open one in such a burst.
+    let objects = cvm_core::objects::MAX_OBJECTS;
+    (4 * row + 2 * score_lines + 2 + objects) * LineQueue::<1>::cost(MAX_LINE)
 }
 
 /// A queue must leave room for score lines besides the keep reserve.
@@ -76,8 +79,8 @@ pub mod h743 {
     /// The columns the row buffers are sized for.
     pub const MAX_COLS: usize = COLS;
 
-    /// Bytes of the output queue (about half a second of lines at 921600 baud).
-    pub const QUEUE_BYTES: usize = 48 * 1024;
+    /// Bytes of the output queue (about 1 s of lines at 921600 baud).
+    pub const QUEUE_BYTES: usize = 96 * 1024;
     pub const KEEP_RESERVE: usize = super::keep_reserve(MAX_COLS);
     const _: () = assert!(super::queue_fits(QUEUE_BYTES, MAX_COLS));
 

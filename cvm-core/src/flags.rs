@@ -10,3 +10,9 @@ pub const SATURATED: u8 = 1 << 2;
 /// A score hit the top of its integer range (cannot happen for the bounds
 /// the scorer proves; reported rather than hidden if it ever does).
 pub const CLIPPED: u8 = 1 << 3;
+/// The position is a defect by its distance gradient: `mag >= thr`.
+pub const CVM_DEFECT: u8 = 1 << 4;
+/// The position is a defect by its power gradient: `pmag >= pthr`.
+pub const POWER_DEFECT: u8 = 1 << 5;
+/// Either channel: the position is a defect.
+pub const DEFECT: u8 = CVM_DEFECT | POWER_DEFECT;

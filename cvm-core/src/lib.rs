@@ -6,13 +6,16 @@ pub const VERSION: &str = env!("CARGO_PKG_VERSION");
 
 pub mod config;
 pub mod flags;
+pub mod objects;
 pub mod pipeline;
+pub mod power;
 pub mod protocol;
 pub mod scorer;
 pub mod stream;
 pub mod tables;
 
 pub use config::{Config, ConfigError, Geometry, Kernels, MAX_CELLS, MAX_J, Weights};
+pub use objects::{Object, Objects};
 pub use pipeline::{Pipeline, Settings};
 pub use scorer::{FrameError, Scorer, magnitude};
 pub use stream::{Engine, Position, PositionScore, RowSummary, RowView, Totals};

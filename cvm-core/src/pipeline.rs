@@ -1,10 +1,14 @@
-//! Engine plus line encoder: frames in, protocol lines out. The host's
+//! Engine, object labeller and line encoder: frames in, protocol lines
+//! out. The host's
 //! `dmap stream` and both firmware boards drive exactly this type, which is
 //! what makes their output byte-identical.
 
-use crate::protocol::{HeaderInfo, LineSink, ResetCause, encode_end, encode_header, encode_row};
+use crate::objects::Objects;
+use crate::protocol::{
+    HeaderInfo, LineSink, ResetCause, encode_end, encode_header, encode_object, encode_row,
+};
 use crate::scorer::Scorer;
-use crate::stream::{Engine, EngineError, Position, PushOutcome, Totals};
+use crate::stream::{Engine, EngineError, Position, PushOutcome, RowView, Totals};
 
 /// What the pipeline reports besides the scores.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -13,11 +17,15 @@ pub struct Settings {
     pub cols: u32,
     /// Integer magnitude at or above which a position is a defect.
     pub threshold: u32,
+    /// Power magnitude (`Q15`) at or above which a position is a defect
+    /// ([`crate::power::POWER_OFF`]: never).
+    pub power_threshold: u32,
     /// Emit per-position score (`S`) lines.
     pub scores: bool,
     /// At most this many defect (`D`) lines per row, the strongest; the row
     /// line carries the full count, so a truncated list is visible, and the
-    /// header the cap (`dcap`).
+    /// header the cap (`dcap`). 0 (no per-position lines; the objects
+    /// describe the defects) is the boards' default.
     pub max_defect_lines_per_row: u16,
     pub firmware_version: &'static str,
     /// Why the board last started (`rst`; [`ResetCause::PowerOn`] on the host).
@@ -28,6 +36,7 @@ pub struct Settings {
 
 pub struct Pipeline<'a, const MAX_COLS: usize> {
     engine: Engine<'a, MAX_COLS>,
+    objects: Objects,
     settings: Settings,
 }
 
@@ -38,8 +47,13 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
         row_a: &'a mut [i32],
         row_b: &'a mut [i32],
     ) -> Result<Self, EngineError> {
-        let engine = Engine::new(scorer, settings.cols, settings.threshold, row_a, row_b)?;
-        Ok(Pipeline { engine, settings })
+        let mut engine = Engine::new(scorer, settings.cols, settings.threshold, row_a, row_b)?;
+        engine.set_power_threshold(settings.power_threshold);
+        Ok(Pipeline {
+            engine,
+            objects: Objects::new(),
+            settings,
+        })
     }
 
     /// Starts a scan: the header line.
@@ -49,16 +63,22 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
     }
 
     pub fn push(&mut self, pos: Position, frame: &[u16], sink: &mut impl LineSink) -> PushOutcome {
-        let (md, sc) = (self.settings.max_defect_lines_per_row, self.settings.scores);
-        self.engine
-            .push(pos, frame, &mut |row| encode_row(row, md, sc, sink))
+        let Pipeline {
+            engine,
+            objects,
+            settings,
+        } = self;
+        engine.push(pos, frame, &mut |row| emit(row, settings, objects, sink))
     }
 
     /// Records that `pos` receives no frame (detector overrun, SPI error).
     pub fn mark_missing(&mut self, pos: Position, sink: &mut impl LineSink) -> PushOutcome {
-        let (md, sc) = (self.settings.max_defect_lines_per_row, self.settings.scores);
-        self.engine
-            .mark_missing(pos, &mut |row| encode_row(row, md, sc, sink))
+        let Pipeline {
+            engine,
+            objects,
+            settings,
+        } = self;
+        engine.mark_missing(pos, &mut |row| emit(row, settings, objects, sink))
     }
 
     /// See [`Engine::count_misplaced`].
@@ -66,11 +86,17 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
         self.engine.count_misplaced(n);
     }
 
-    /// Ends the scan: remaining rows, then the end line with `lines_dropped`
-    /// (score lines the output could not carry). Returns the scan's totals.
+    /// Ends the scan: remaining rows, the objects still open, then the end
+    /// line with `lines_dropped` (score lines the output could not carry).
+    /// Returns the scan's totals.
     pub fn finish(&mut self, lines_dropped: u32, sink: &mut impl LineSink) -> Totals {
-        let (md, sc) = (self.settings.max_defect_lines_per_row, self.settings.scores);
-        let totals = self.engine.finish(&mut |row| encode_row(row, md, sc, sink));
+        let Pipeline {
+            engine,
+            objects,
+            settings,
+        } = self;
+        let mut totals = engine.finish(&mut |row| emit(row, settings, objects, sink));
+        objects.finish_with(&mut |o| encode_object(o, sink), &mut totals);
         encode_end(&totals, lines_dropped, sink);
         totals
     }
@@ -78,4 +104,15 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
     pub fn totals(&self) -> &Totals {
         self.engine.totals()
     }
+}
+
+/// A finished row's lines, then the lines of the objects it closes.
+fn emit(row: &RowView, settings: &Settings, objects: &mut Objects, sink: &mut impl LineSink) {
+    encode_row(
+        row,
+        settings.max_defect_lines_per_row,
+        settings.scores,
+        sink,
+    );
+    objects.push_row(row, &mut |o| encode_object(o, &mut *sink));
 }

@@ -7,18 +7,21 @@
 //! from the line it is given, so both run on the target and on the host.
 
 use crate::config::{Config, Kernels, Weights};
+use crate::objects::Object;
 use crate::pipeline::Settings;
 use crate::scorer::Scorer;
 use crate::stream::{PositionScore, RowSummary, RowView, Totals};
 
 /// Protocol version written in the header.
-pub const VERSION: u32 = 3;
+pub const VERSION: u32 = 4;
 /// Upper bound on the length of any line, newline included.
 pub const MAX_LINE: usize = 256;
 /// Positions per score (`S`) line.
-pub const SCORES_PER_LINE: usize = 32;
+pub const SCORES_PER_LINE: usize = 24;
 /// Characters of one position in a score line.
-pub const SCORE_CHARS: usize = 6;
+pub const SCORE_CHARS: usize = 9;
+/// Flag bits a score line carries.
+const SCORE_FLAGS: u64 = 0x3F;
 /// Longest firmware version string carried in the header.
 pub const MAX_FW: usize = 24;
 
@@ -146,10 +149,11 @@ impl LineBuf {
     }
 }
 
-/// One position in a score line: 36 bits as 6 base64 digits, most
-/// significant first; bits 0-31 the magnitude, bits 32-35 the flags.
+/// One position in a score line: 54 bits as 9 base64 digits, most
+/// significant first; bits 0-31 the magnitude, bits 32-47 the power
+/// magnitude, bits 48-53 the flags.
 pub fn encode_score(s: &PositionScore) -> [u8; SCORE_CHARS] {
-    let v = ((s.flags as u64 & 0xF) << 32) | s.mag as u64;
+    let v = ((s.flags as u64 & SCORE_FLAGS) << 48) | ((s.pmag as u64) << 32) | s.mag as u64;
     let mut out = [b'A'; SCORE_CHARS];
     for (i, o) in out.iter_mut().enumerate() {
         let shift = 6 * (SCORE_CHARS - 1 - i);
@@ -158,8 +162,17 @@ pub fn encode_score(s: &PositionScore) -> [u8; SCORE_CHARS] {
     out
 }
 
-/// Inverse of [`encode_score`]: `(magnitude, flags)`.
-pub fn decode_score(chars: &[u8]) -> Option<(u32, u8)> {
+/// One position of a score line, decoded.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ScoreValue {
+    pub mag: u32,
+    pub pmag: u16,
+    pub flags: u8,
+}
+
+/// Inverse of [`encode_score`]; `None` for a character outside the
+/// alphabet or flag bits beyond bit 5.
+pub fn decode_score(chars: &[u8]) -> Option<ScoreValue> {
     if chars.len() != SCORE_CHARS {
         return None;
     }
@@ -175,7 +188,14 @@ pub fn decode_score(chars: &[u8]) -> Option<(u32, u8)> {
         };
         v = (v << 6) | d as u64;
     }
-    Some((v as u32, (v >> 32) as u8))
+    if v >> 48 > SCORE_FLAGS {
+        return None;
+    }
+    Some(ScoreValue {
+        mag: v as u32,
+        pmag: (v >> 32) as u16,
+        flags: (v >> 48) as u8,
+    })
 }
 
 /// Why the board last started, as the header's `rst` carries it.
@@ -239,6 +259,8 @@ pub struct HeaderInfo<'s> {
     pub normalise: bool,
     pub full_scale: u16,
     pub threshold: u32,
+    /// Power channel threshold, `Q15` (`pthr`; [`crate::power::POWER_OFF`]: off).
+    pub power_threshold: u32,
     /// Score format: a score `s` is `s / 2^q` distance units.
     pub q: i32,
     pub scores: bool,
@@ -275,6 +297,7 @@ impl HeaderInfo<'static> {
             normalise: cfg.normalise,
             full_scale: cfg.full_scale,
             threshold: settings.threshold,
+            power_threshold: settings.power_threshold,
             q: scorer.score_frac_bits(),
             scores: settings.scores,
             max_defect_lines: settings.max_defect_lines_per_row,
@@ -284,7 +307,7 @@ impl HeaderInfo<'static> {
     }
 }
 
-/// `H,v=3,fw=..,j=15x15,cols=300,k=P,b=0,w=uniform,norm=1,fs=65535,thr=..,q=23,scores=0,dcap=16,rst=por,boots=1`
+/// `H,v=4,fw=..,j=15x15,cols=300,k=P,b=0,w=uniform,norm=1,fs=65535,thr=..,pthr=..,q=23,scores=0,dcap=0,rst=por,boots=1`
 pub fn encode_header(h: &HeaderInfo, sink: &mut impl LineSink) {
     let mut l = LineBuf::new(b'H');
     l.kv_u64(b"v", h.version as u64);
@@ -311,6 +334,7 @@ pub fn encode_header(h: &HeaderInfo, sink: &mut impl LineSink) {
     l.kv_u64(b"norm", h.normalise as u64);
     l.kv_u64(b"fs", h.full_scale as u64);
     l.kv_u64(b"thr", h.threshold as u64);
+    l.kv_u64(b"pthr", h.power_threshold as u64);
     l.field(b"q=");
     l.i64(h.q as i64);
     l.kv_u64(b"scores", h.scores as u64);
@@ -322,7 +346,7 @@ pub fn encode_header(h: &HeaderInfo, sink: &mut impl LineSink) {
 }
 
 /// Encodes a finished row: the `R` summary, up to `max_defect_lines` `D`
-/// lines (the strongest defects, strongest first; equal magnitudes by
+/// lines (the strongest defects, strongest first; equal strengths by
 /// column, leftmost first), and with `scores` its `S` lines.
 pub fn encode_row(view: &RowView, max_defect_lines: u16, scores: bool, sink: &mut impl LineSink) {
     let s = &view.summary;
@@ -334,6 +358,13 @@ pub fn encode_row(view: &RowView, max_defect_lines: u16, scores: bool, sink: &mu
     l.u64(s.max as u64);
     l.byte(b',');
     match s.argmax {
+        Some(c) => l.u64(c as u64),
+        None => l.byte(b'-'),
+    }
+    l.byte(b',');
+    l.u64(s.pmax as u64);
+    l.byte(b',');
+    match s.pargmax {
         Some(c) => l.u64(c as u64),
         None => l.byte(b'-'),
     }
@@ -349,12 +380,19 @@ pub fn encode_row(view: &RowView, max_defect_lines: u16, scores: bool, sink: &mu
             break;
         };
         let mut l = LineBuf::new(b'D');
-        for v in [s.row, c as u32, p.mag, p.flags as u32] {
+        for v in [
+            s.row,
+            c as u32,
+            p.mag,
+            p.pmag as u32,
+            p.strength,
+            p.flags as u32,
+        ] {
             l.byte(b',');
             l.u64(v as u64);
         }
         sink.line(l.finish(), Priority::Keep);
-        last = Some((p.mag, c));
+        last = Some((p.strength, c));
     }
 
     if scores {
@@ -373,23 +411,49 @@ pub fn encode_row(view: &RowView, max_defect_lines: u16, scores: bool, sink: &mu
     }
 }
 
-/// The defect listed after `last` (magnitude, column): the strongest one
-/// below it in the order of `D` lines (magnitude down, then column up).
+/// The defect listed after `last` (strength, column): the strongest one
+/// below it in the order of `D` lines (strength down, then column up).
 /// One pass over the row per line: no buffer, and at most the cap passes.
 fn next_defect(view: &RowView, last: Option<(u32, usize)>) -> Option<(usize, PositionScore)> {
     let mut best: Option<(usize, PositionScore)> = None;
     for (c, p) in view.scores.iter().enumerate() {
-        let defect = p.flags & crate::flags::NO_DATA == 0 && p.mag >= view.threshold;
+        let defect = p.flags & crate::flags::NO_DATA == 0 && p.is_defect();
         let after = match last {
             None => true,
-            Some((m, lc)) => p.mag < m || (p.mag == m && c > lc),
+            Some((m, lc)) => p.strength < m || (p.strength == m && c > lc),
         };
         // Columns ascend: a tie keeps the leftmost.
-        if defect && after && best.is_none_or(|(_, b)| p.mag > b.mag) {
+        if defect && after && best.is_none_or(|(_, b)| p.strength > b.strength) {
             best = Some((c, *p));
         }
     }
     best
+}
+
+/// `O,id,row0,row1,col0,col1,area,peak,peak_row,peak_col,peak_mag,peak_power,centroid_row,centroid_col,channels`:
+/// one defect object, when it closes.
+pub fn encode_object(o: &Object, sink: &mut impl LineSink) {
+    let mut l = LineBuf::new(b'O');
+    for v in [
+        o.id as u64,
+        o.row0 as u64,
+        o.row1 as u64,
+        o.col0 as u64,
+        o.col1 as u64,
+        o.area as u64,
+        o.peak as u64,
+        o.peak_row as u64,
+        o.peak_col as u64,
+        o.peak_mag as u64,
+        o.peak_power as u64,
+        o.centroid_row_q8,
+        o.centroid_col_q8,
+        o.channels as u64,
+    ] {
+        l.byte(b',');
+        l.u64(v);
+    }
+    sink.line(l.finish(), Priority::Keep);
 }
 
 /// `E,rows=..,frames=..,missing=..,dark=..,sat=..,defects=..,rejected=..,extra=..,bad=..,clipped=..,misplaced=..,dropped=..`
@@ -406,13 +470,15 @@ pub fn encode_end(t: &Totals, dropped: u32, sink: &mut impl LineSink) {
 /// The end line's keys and the [`Totals`] field each one carries, in the
 /// order of the line; [`DROPPED`] follows them. The encoder, the parser and
 /// `dmap listen` read this one list.
-pub const END_FIELDS: [(&str, TotalsField); 11] = [
+pub const END_FIELDS: [(&str, TotalsField); 13] = [
     ("rows", |t| &mut t.rows),
     ("frames", |t| &mut t.frames),
     ("missing", |t| &mut t.missing),
     ("dark", |t| &mut t.dark),
     ("sat", |t| &mut t.saturated),
     ("defects", |t| &mut t.defects),
+    ("obj", |t| &mut t.objects),
+    ("unobj", |t| &mut t.unobjected),
     ("rejected", |t| &mut t.rejected),
     ("extra", |t| &mut t.extra),
     ("bad", |t| &mut t.bad),
@@ -445,9 +511,12 @@ pub enum Line<'s> {
         row: u32,
         col: u32,
         mag: u32,
+        pmag: u16,
+        strength: u32,
         flags: u8,
     },
-    /// Scores of `col0..col0 + chars.len() / 6`; decode with [`decode_score`].
+    Object(Object),
+    /// Scores of `col0..col0 + chars.len() / 9`; decode with [`decode_score`].
     Scores {
         row: u32,
         col0: u32,
@@ -588,6 +657,7 @@ pub fn parse(line: &[u8]) -> Result<Line<'_>, ParseError> {
         b"H" => Line::Header(parse_header(&mut f)?),
         b"R" => parse_row(&mut f)?,
         b"D" => parse_defect(&mut f)?,
+        b"O" => Line::Object(parse_object(&mut f)?),
         b"S" => parse_scores(&mut f)?,
         b"E" => Line::End(parse_end(&mut f)?),
         _ => return Err(ParseError::Type),
@@ -620,6 +690,7 @@ fn parse_header<'s>(
     let normalise = f.key_u32("norm")? != 0;
     let full_scale = u16::try_from(f.key_u32("fs")?).map_err(|_| e)?;
     let threshold = f.key_u32("thr")?;
+    let power_threshold = f.key_u32("pthr")?;
     let q = parse_i32(f.key("q")?).ok_or(e)?;
     let scores = f.key_u32("scores")? != 0;
     let max_defect_lines = u16::try_from(f.key_u32("dcap")?).map_err(|_| e)?;
@@ -637,6 +708,7 @@ fn parse_header<'s>(
         normalise,
         full_scale,
         threshold,
+        power_threshold,
         q,
         scores,
         max_defect_lines,
@@ -654,6 +726,11 @@ fn parse_row<'s>(
         b"-" => None,
         v => Some(parse_u32(v).ok_or(ParseError::Format)?),
     };
+    let pmax = f.u32()?;
+    let pargmax = match f.next()? {
+        b"-" => None,
+        v => Some(parse_u32(v).ok_or(ParseError::Format)?),
+    };
     let [defects, listed, no_data, dark, saturated] =
         [f.u32()?, f.u32()?, f.u32()?, f.u32()?, f.u32()?];
     Ok(Line::Row {
@@ -661,6 +738,8 @@ fn parse_row<'s>(
             row,
             max,
             argmax,
+            pmax,
+            pargmax,
             defects,
             no_data,
             dark,
@@ -674,12 +753,68 @@ fn parse_defect<'s>(
     f: &mut Fields<'s, impl Iterator<Item = &'s [u8]>>,
 ) -> Result<Line<'s>, ParseError> {
     let [row, col, mag] = [f.u32()?, f.u32()?, f.u32()?];
+    let pmag = u16::try_from(f.u32()?).map_err(|_| ParseError::Format)?;
+    let strength = f.u32()?;
     let flags = u8::try_from(f.u32()?).map_err(|_| ParseError::Format)?;
     Ok(Line::Defect {
         row,
         col,
         mag,
+        pmag,
+        strength,
         flags,
+    })
+}
+
+fn parse_object<'s>(
+    f: &mut Fields<'s, impl Iterator<Item = &'s [u8]>>,
+) -> Result<Object, ParseError> {
+    let e = ParseError::Format;
+    let [
+        id,
+        row0,
+        row1,
+        col0,
+        col1,
+        area,
+        peak,
+        peak_row,
+        peak_col,
+        peak_mag,
+    ] = [
+        f.u32()?,
+        f.u32()?,
+        f.u32()?,
+        f.u32()?,
+        f.u32()?,
+        f.u32()?,
+        f.u32()?,
+        f.u32()?,
+        f.u32()?,
+        f.u32()?,
+    ];
+    let peak_power = u16::try_from(f.u32()?).map_err(|_| e)?;
+    let centroid_row_q8 = parse_u64(f.next()?).ok_or(e)?;
+    let centroid_col_q8 = parse_u64(f.next()?).ok_or(e)?;
+    let channels = u8::try_from(f.u32()?).map_err(|_| e)?;
+    if row0 > row1 || col0 > col1 || channels & !crate::flags::DEFECT != 0 {
+        return Err(e);
+    }
+    Ok(Object {
+        id,
+        row0,
+        row1,
+        col0,
+        col1,
+        area,
+        peak,
+        peak_row,
+        peak_col,
+        peak_mag,
+        peak_power,
+        channels,
+        centroid_row_q8,
+        centroid_col_q8,
     })
 }
 

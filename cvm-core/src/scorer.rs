@@ -91,6 +91,18 @@ enum Kind {
     Square { kmax: u8 },
 }
 
+/// What [`Scorer::prepare_map`] learnt about one map.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Prepared {
+    /// [`flags::DARK`], [`flags::SATURATED`].
+    pub flags: u8,
+    /// The map's power: the sum of its samples, below `256 * 65535 < 2^24`.
+    pub power: u32,
+    /// With `replacing`: the score of the distance between the map the
+    /// state held and the new one; 0 otherwise.
+    pub score: u32,
+}
+
 /// Tables and fixed-point formats for one configuration.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Scorer {
@@ -278,6 +290,11 @@ impl Scorer {
     /// Normalises `frame` (Eq. 5) into `x` (`J1 * J2` values, row-major) in
     /// `Q(f)` and returns its flags ([`flags::DARK`], [`flags::SATURATED`]).
     pub fn normalise(&self, frame: &[u16], x: &mut [i32]) -> Result<u8, FrameError> {
+        self.normalise_power(frame, x).map(|(fl, _)| fl)
+    }
+
+    /// [`Scorer::normalise`], also returning the map's sample sum.
+    fn normalise_power(&self, frame: &[u16], x: &mut [i32]) -> Result<(u8, u32), FrameError> {
         let n = self.cells();
         let (Some(frame), Some(x)) = (frame.get(..n), x.get_mut(..n)) else {
             return Err(FrameError::Length);
@@ -285,18 +302,18 @@ impl Scorer {
         if frame.len() != n {
             return Err(FrameError::Length);
         }
-        let (fl, conv) = self.converter(frame);
+        let (fl, sum, conv) = self.converter(frame);
         match conv {
             Conv::Zero => x.fill(0),
             Conv::Recip(r) => fill(x, frame, |a| recip_sample(a, r)),
             Conv::Shl(s) => fill(x, frame, |a| (a as i32) << s),
             Conv::Shr(s) => fill(x, frame, |a| shr_sample(a, s)),
         }
-        Ok(fl)
+        Ok((fl, sum))
     }
 
-    /// Flags of a frame and how its samples become `Q(f)` values.
-    fn converter(&self, frame: &[u16]) -> (u8, Conv) {
+    /// Flags and sample sum of a frame, and how its samples become `Q(f)` values.
+    fn converter(&self, frame: &[u16]) -> (u8, u32, Conv) {
         let mut fl = 0;
         let mut sum: u32 = 0;
         let mut peak: u16 = 0;
@@ -323,7 +340,7 @@ impl Scorer {
         } else {
             Conv::Shr((-self.frac) as u32)
         };
-        (fl, conv)
+        (fl, sum, conv)
     }
 
     /// Normalises and embeds one raw frame into `state` (`J1 * J2` words):
@@ -340,8 +357,8 @@ impl Scorer {
         state: &mut [i32],
         scratch: &mut Scratch,
     ) -> Result<u8, FrameError> {
-        self.prepare_into(frame, state, scratch, false)
-            .map(|(fl, _)| fl)
+        self.prepare_map(frame, state, scratch, false)
+            .map(|p| p.flags)
     }
 
     /// [`Scorer::prepare_with`] into a `state` that holds a prepared map:
@@ -355,16 +372,20 @@ impl Scorer {
         state: &mut [i32],
         scratch: &mut Scratch,
     ) -> Result<(u8, u32), FrameError> {
-        self.prepare_into(frame, state, scratch, true)
+        self.prepare_map(frame, state, scratch, true)
+            .map(|p| (p.flags, p.score))
     }
 
-    fn prepare_into(
+    /// The per-map work of the streaming engine: [`Scorer::prepare_with`]
+    /// (`replacing` false) or [`Scorer::prepare_replacing`] (true), with the
+    /// map's power (sample sum) that the normalisation computes anyway.
+    pub fn prepare_map(
         &self,
         frame: &[u16],
         state: &mut [i32],
         scratch: &mut Scratch,
         diff: bool,
-    ) -> Result<(u8, u32), FrameError> {
+    ) -> Result<Prepared, FrameError> {
         let n = self.cells();
         if frame.len() != n {
             return Err(FrameError::Length);
@@ -375,13 +396,22 @@ impl Scorer {
         match self.kind {
             Kind::Square { kmax } => {
                 if !diff {
-                    return self.normalise(frame, state).map(|fl| (fl, 0));
+                    let (flags, power) = self.normalise_power(frame, state)?;
+                    return Ok(Prepared {
+                        flags,
+                        power,
+                        score: 0,
+                    });
                 }
                 let new = scratch.v.as_flattened_mut().get_mut(..n).unwrap_or(&mut []);
-                let fl = self.normalise(frame, new)?;
+                let (flags, power) = self.normalise_power(frame, new)?;
                 let score = self.to_score(self.square_distance(state, new, kmax as usize));
                 state.copy_from_slice(new);
-                Ok((fl, score))
+                Ok(Prepared {
+                    flags,
+                    power,
+                    score,
+                })
             }
             Kind::Paper => {
                 let (sum, sat) = embed::sum_and_saturation(frame, self.config.full_scale);
@@ -394,7 +424,11 @@ impl Scorer {
                 }
                 let conv = self.scale(sum);
                 let acc = embed::embed(&self.passes, &self.f1, &self.f2, frame, conv, state, diff);
-                Ok((fl, if diff { self.to_score(acc) } else { 0 }))
+                Ok(Prepared {
+                    flags: fl,
+                    power: sum,
+                    score: if diff { self.to_score(acc) } else { 0 },
+                })
             }
         }
     }

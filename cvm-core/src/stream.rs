@@ -25,7 +25,8 @@
 //! extra; neither shifts any later position.
 
 use crate::flags;
-use crate::scorer::{FrameError, Scorer, Scratch, magnitude};
+use crate::power::{self, POWER_OFF, contrast};
+use crate::scorer::{FrameError, Prepared, Scorer, Scratch, magnitude};
 
 /// Scan position of a beam: `row = m2 - 1`, `col = m1 - 1`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -44,8 +45,33 @@ pub struct PositionScore {
     pub g1: u32,
     /// `floor(sqrt(g0² + g1²))`.
     pub mag: u32,
-    /// [`flags`] bits.
+    /// How far the position's strongest channel reaches past its
+    /// threshold: `floor(2^16 score / threshold)` of each channel that
+    /// fired (threshold 0 taken as 1), the larger one, saturating; at least
+    /// `2^16` for a defect, 0 for any other position.
+    pub strength: u32,
+    /// Horizontal power contrast of the neighbours, `Q15` ([`crate::power`]).
+    pub p0: u16,
+    /// Vertical power contrast, `Q15`.
+    pub p1: u16,
+    /// `floor(sqrt(p0² + p1²))`, `Q15`.
+    pub pmag: u16,
+    /// [`flags`] bits, the decisions ([`flags::CVM_DEFECT`],
+    /// [`flags::POWER_DEFECT`]) included.
     pub flags: u8,
+}
+
+impl PositionScore {
+    /// Whether any channel reached its threshold.
+    pub const fn is_defect(&self) -> bool {
+        self.flags & flags::DEFECT != 0
+    }
+}
+
+/// `floor(2^16 s / thr)` (thr 0 taken as 1), saturating.
+pub fn strength(s: u32, thr: u32) -> u32 {
+    let v = ((s as u64) << 16) / thr.max(1) as u64;
+    v.min(u32::MAX as u64) as u32
 }
 
 /// Decisions for one finished row.
@@ -56,7 +82,11 @@ pub struct RowSummary {
     pub max: u32,
     /// Column of the first position reaching `max` (None if no data).
     pub argmax: Option<u32>,
-    /// Positions whose magnitude reaches the threshold.
+    /// Largest power magnitude among positions with data (0 if none).
+    pub pmax: u32,
+    /// Column of the first position reaching `pmax` (None if no data).
+    pub pargmax: Option<u32>,
+    /// Positions where a channel reaches its threshold.
     pub defects: u32,
     pub no_data: u32,
     pub dark: u32,
@@ -68,6 +98,7 @@ pub struct RowView<'s> {
     pub summary: RowSummary,
     pub scores: &'s [PositionScore],
     pub threshold: u32,
+    pub power_threshold: u32,
 }
 
 /// Counters of one scan, reported in the end-of-scan line.
@@ -82,7 +113,13 @@ pub struct Totals {
     pub missing: u32,
     pub dark: u32,
     pub saturated: u32,
+    /// Positions where a channel reaches its threshold.
     pub defects: u32,
+    /// Defect objects reported (see [`crate::objects`]).
+    pub objects: u32,
+    /// Defective positions left out of every object because the object
+    /// table or a row's run table was full.
+    pub unobjected: u32,
     /// Frames for a position already passed (repeat, out of order) or too
     /// far ahead to be plausible.
     pub rejected: u32,
@@ -140,9 +177,9 @@ pub const fn row_words(cols: usize, j1: usize, j2: usize) -> usize {
 }
 
 /// Bytes of engine state for `cols` columns: the two row buffers plus the
-/// per-column flags and two rows of results.
+/// per-column flags and powers and two rows of results.
 pub const fn window_bytes(cols: usize, j1: usize, j2: usize) -> usize {
-    2 * row_words(cols, j1, j2) * 4 + cols * (2 + 2 * core::mem::size_of::<PositionScore>())
+    2 * row_words(cols, j1, j2) * 4 + cols * (2 + 8 + 2 * core::mem::size_of::<PositionScore>())
 }
 
 /// The streaming engine, for at most `MAX_COLS` columns.
@@ -151,9 +188,12 @@ pub struct Engine<'a, const MAX_COLS: usize> {
     cells: usize,
     cols: usize,
     threshold: u32,
+    power_threshold: u32,
     bufs: [&'a mut [i32]; 2],
     /// Flags of each slot of each buffer; `NO_DATA` where no state is held.
     meta: [[u8; MAX_COLS]; 2],
+    /// Power (sample sum) of the map in each slot of each buffer.
+    powers: [[u32; MAX_COLS]; 2],
     /// Results of two rows: `results[cur]` is the row being received (`g0`
     /// filled as beams arrive), the other one the previous row (`g0` final,
     /// `g1` filled as the current row arrives). A finished row changes
@@ -190,8 +230,10 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
             cells,
             cols,
             threshold,
+            power_threshold: POWER_OFF,
             bufs: [row_a, row_b],
             meta: [[flags::NO_DATA; MAX_COLS]; 2],
+            powers: [[0; MAX_COLS]; 2],
             results: [[PositionScore::default(); MAX_COLS]; 2],
             cur: 0,
             current: None,
@@ -208,6 +250,16 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
 
     pub fn threshold(&self) -> u32 {
         self.threshold
+    }
+
+    /// Sets the power channel's threshold (`Q15`; [`POWER_OFF`], the
+    /// default, never fires).
+    pub fn set_power_threshold(&mut self, t: u32) {
+        self.power_threshold = t;
+    }
+
+    pub fn power_threshold(&self) -> u32 {
+        self.power_threshold
     }
 
     pub fn scorer(&self) -> &Scorer {
@@ -257,14 +309,18 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
                 if own & flags::NO_DATA != 0 {
                     continue;
                 }
-                let g1 = if above & flags::NO_DATA == 0 {
+                let (g1, p1) = if above & flags::NO_DATA == 0 {
                     let (a, b) = (self.slot(1 - pb, c), self.slot(pb, c));
-                    self.scorer.distance(a, b)
+                    (
+                        self.scorer.distance(a, b),
+                        self.power_contrast(1 - pb, pb, c),
+                    )
                 } else {
-                    0
+                    (0, 0)
                 };
                 if let Some(s) = self.prev_row().get_mut(c) {
                     s.g1 = g1;
+                    s.p1 = p1;
                 }
             }
             self.emit_prev(p, &mut *out);
@@ -367,19 +423,17 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
         // neighbours of (r-1, c) have data, their distance comes out of the
         // embedding as it overwrites (r-2, c).
         let start = c * self.cells;
+        let fuse = mid_ok && up_ok;
         let prepared = match (frame, self.bufs[b].get_mut(start..start + self.cells)) {
-            (Some(f), Some(slot)) if mid_ok && up_ok => self
-                .scorer
-                .prepare_replacing(f, slot, &mut self.scratch)
-                .map(|(fl, g1)| (fl, Some(g1))),
-            (Some(f), Some(slot)) => self
-                .scorer
-                .prepare_with(f, slot, &mut self.scratch)
-                .map(|fl| (fl, None)),
+            (Some(f), Some(slot)) => self.scorer.prepare_map(f, slot, &mut self.scratch, fuse),
             _ => Err(FrameError::Length),
         };
-        let (own, fused) = match prepared {
-            Ok((fl, g1)) => {
+        let (own, fused, pw) = match prepared {
+            Ok(Prepared {
+                flags: fl,
+                power,
+                score,
+            }) => {
                 self.totals.frames += 1;
                 if fl & flags::DARK != 0 {
                     self.totals.dark += 1;
@@ -387,11 +441,11 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
                 if fl & flags::SATURATED != 0 {
                     self.totals.saturated += 1;
                 }
-                (fl, g1)
+                (fl, score, power)
             }
             Err(_) => {
                 self.totals.missing += 1;
-                (flags::NO_DATA, None)
+                (flags::NO_DATA, 0, 0)
             }
         };
 
@@ -399,19 +453,37 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
         // by (r-1, c) itself. Without a new map slot c still holds (r-2, c).
         if mid_ok {
             let down_ok = own & flags::NO_DATA == 0;
-            let g1 = match (up_ok, down_ok) {
-                (true, true) => fused.unwrap_or(0),
-                (true, false) => self.scorer.distance(self.slot(b, c), self.slot(1 - b, c)),
-                (false, true) => self.scorer.distance(self.slot(1 - b, c), self.slot(b, c)),
-                (false, false) => 0,
+            let pget = |buf: usize| {
+                self.powers
+                    .get(buf)
+                    .and_then(|p| p.get(c))
+                    .copied()
+                    .unwrap_or(0)
+            };
+            let (up_p, mid_p) = (pget(b), pget(1 - b));
+            let (g1, p1) = match (up_ok, down_ok) {
+                (true, true) => (fused, contrast(up_p, pw)),
+                (true, false) => (
+                    self.scorer.distance(self.slot(b, c), self.slot(1 - b, c)),
+                    contrast(up_p, mid_p),
+                ),
+                (false, true) => (
+                    self.scorer.distance(self.slot(1 - b, c), self.slot(b, c)),
+                    contrast(mid_p, pw),
+                ),
+                (false, false) => (0, 0),
             };
             if let Some(s) = self.results[(self.cur ^ 1) & 1].get_mut(c) {
                 s.g1 = g1;
+                s.p1 = p1;
             }
         }
 
         if let Some(m) = self.meta[b].get_mut(c) {
             *m = own;
+        }
+        if let Some(p) = self.powers[b].get_mut(c) {
+            *p = pw;
         }
         if let Some(s) = self.cur_row().get_mut(c) {
             *s = PositionScore {
@@ -443,15 +515,43 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
             Some(rc) if ok(&self.meta[b], rc) => rc,
             _ => c,
         };
-        let g0 = if left == right {
-            0
+        let (g0, p0) = if left == right {
+            (0, 0)
         } else {
-            self.scorer
-                .distance(self.slot(b, left), self.slot(b, right))
+            (
+                self.scorer
+                    .distance(self.slot(b, left), self.slot(b, right)),
+                self.power_contrast_cols(b, left, right),
+            )
         };
         if let Some(s) = self.cur_row().get_mut(c) {
             s.g0 = g0;
+            s.p0 = p0;
         }
+    }
+
+    /// Power contrast of slot `c` of buffers `a` and `b`.
+    fn power_contrast(&self, a: usize, b: usize, c: usize) -> u16 {
+        let get = |buf: usize| {
+            self.powers
+                .get(buf)
+                .and_then(|p| p.get(c))
+                .copied()
+                .unwrap_or(0)
+        };
+        contrast(get(a), get(b))
+    }
+
+    /// Power contrast of slots `l` and `r` of buffer `b`.
+    fn power_contrast_cols(&self, b: usize, l: usize, r: usize) -> u16 {
+        let get = |c: usize| {
+            self.powers
+                .get(b)
+                .and_then(|p| p.get(c))
+                .copied()
+                .unwrap_or(0)
+        };
+        contrast(get(l), get(r))
     }
 
     /// The current row ends: remaining positions have no data, the last
@@ -497,6 +597,9 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
                 continue;
             }
             s.mag = magnitude(s.g0, s.g1);
+            s.pmag = power::magnitude(s.p0, s.p1);
+            s.flags &= !flags::DEFECT;
+            s.strength = 0;
             if s.g0 == u32::MAX || s.g1 == u32::MAX || s.mag == u32::MAX {
                 s.flags |= flags::CLIPPED;
                 self.totals.clipped += 1;
@@ -508,11 +611,25 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
                 sum.saturated += 1;
             }
             if s.mag >= self.threshold {
+                s.flags |= flags::CVM_DEFECT;
+                s.strength = strength(s.mag, self.threshold);
+            }
+            if s.pmag as u32 >= self.power_threshold {
+                s.flags |= flags::POWER_DEFECT;
+                s.strength = s
+                    .strength
+                    .max(strength(s.pmag as u32, self.power_threshold));
+            }
+            if s.is_defect() {
                 sum.defects += 1;
             }
             if sum.argmax.is_none() || s.mag > sum.max {
                 sum.max = s.mag;
                 sum.argmax = Some(c as u32);
+            }
+            if sum.pargmax.is_none() || s.pmag as u32 > sum.pmax {
+                sum.pmax = s.pmag as u32;
+                sum.pargmax = Some(c as u32);
             }
         }
         self.totals.defects += sum.defects;
@@ -523,6 +640,7 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
                 .get(..self.cols)
                 .unwrap_or(&[]),
             threshold: self.threshold,
+            power_threshold: self.power_threshold,
         };
         out(&view);
     }

@@ -17,7 +17,8 @@
 //! | 38 | 1+1 | firmware version length (0 = the firmware's own), reserved 0 |
 //! | 40 | 24 | firmware version text, zero padded |
 //! | 64 | 128+128 | separable weights `w1[16]`, `w2[16]` (f64; zero otherwise) |
-//! | 320 | | frames: `J1*J2` samples each, big-endian (bus order), raster order, until end of file |
+//! | 320 | 8 | power threshold, a contrast (f64; infinite = the channel off) |
+//! | 328 | | frames: `J1*J2` samples each, big-endian (bus order), raster order, until end of file |
 //!
 //! The board synthesises LINE_SYNC on every `cols`-th beam, as a scanner
 //! would drive it.
@@ -25,8 +26,8 @@
 use cvm_core::config::{Config, Geometry, Kernels, MAX_J, Weights};
 use cvm_core::protocol::MAX_FW;
 
-pub const MAGIC: [u8; 8] = *b"CVMSCAN1";
-pub const HEADER_LEN: usize = 320;
+pub const MAGIC: [u8; 8] = *b"CVMSCAN2";
+pub const HEADER_LEN: usize = 328;
 
 /// Everything the header says.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -35,6 +36,8 @@ pub struct ScanHeader {
     pub cols: u32,
     pub rows: u32,
     pub threshold_units: f64,
+    /// Power channel threshold, a contrast (`cvm_core::power`).
+    pub power_threshold_units: f64,
     pub scores: bool,
     pub max_defect_lines_per_row: u16,
     pub version_len: u8,
@@ -168,6 +171,7 @@ impl ScanHeader {
             cols,
             rows,
             threshold_units: f64_at(b, 28),
+            power_threshold_units: f64_at(b, 320),
             scores,
             max_defect_lines_per_row: u16_at(b, 36),
             version_len,
@@ -209,6 +213,7 @@ impl ScanHeader {
         b[24..28].copy_from_slice(&self.rows.to_le_bytes());
         b[28..36].copy_from_slice(&self.threshold_units.to_le_bytes());
         b[36..38].copy_from_slice(&self.max_defect_lines_per_row.to_le_bytes());
+        b[320..328].copy_from_slice(&self.power_threshold_units.to_le_bytes());
         b[38] = self.version_len;
         b[40..40 + MAX_FW].copy_from_slice(&self.version);
         b

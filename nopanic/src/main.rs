@@ -110,6 +110,7 @@ pub extern "C" fn _start() -> ! {
     let settings = Settings {
         cols: black_box(300),
         threshold: black_box(1 << 20),
+        power_threshold: black_box(3277),
         scores: black_box(true),
         max_defect_lines_per_row: black_box(8),
         firmware_version: "nopanic",

@@ -149,6 +149,7 @@ async fn scan_task(syst: cortex_m::peripheral::SYST) {
     let settings = Settings {
         cols: header.cols,
         threshold: scorer.threshold_from_units(header.threshold_units),
+        power_threshold: cvm_core::power::threshold_from_units(header.power_threshold_units),
         scores: header.scores,
         max_defect_lines_per_row: header.max_defect_lines_per_row,
         firmware_version,

@@ -59,8 +59,9 @@ use tasks::{acquire_task, score_task, uart_task};
 
 use crate::config::h743::FIRMWARE_VERSION;
 use crate::config::h743::{
-    BAUD, COLS, CORE, J1, J2, KEEP_RESERVE, MAX_COLS, MAX_DEFECT_LINES_PER_ROW, QUEUE_BYTES, ROWS,
-    SCORES, SPI_DIV, SPI_HZ, SYSCLK_HZ, THRESHOLD_UNITS, WATCHDOG_US,
+    BAUD, COLS, CORE, J1, J2, KEEP_RESERVE, MAX_COLS, MAX_DEFECT_LINES_PER_ROW,
+    POWER_THRESHOLD_UNITS, QUEUE_BYTES, ROWS, SCORES, SPI_DIV, SPI_HZ, SYSCLK_HZ, THRESHOLD_UNITS,
+    WATCHDOG_US,
 };
 use crate::config::{BEAM_LOG, FRAME_BUFFERS};
 use crate::frames::SampleBuffers;
@@ -217,6 +218,7 @@ fn main() -> ! {
     let settings = Settings {
         cols: COLS as u32,
         threshold: scorer.threshold_from_units(THRESHOLD_UNITS),
+        power_threshold: cvm_core::power::threshold_from_units(POWER_THRESHOLD_UNITS),
         scores: SCORES,
         max_defect_lines_per_row: MAX_DEFECT_LINES_PER_ROW,
         firmware_version: FIRMWARE_VERSION,

@@ -121,10 +121,22 @@ pub fn run_engine(
     threshold: u32,
     frames: &[(cvm_core::Position, Option<Vec<u16>>)],
 ) -> (Vec<(RowSummary, Vec<PositionScore>)>, Totals) {
+    run_engine_with(scorer, cols, threshold, cvm_core::power::POWER_OFF, frames)
+}
+
+/// [`run_engine`] with the power channel's threshold.
+pub fn run_engine_with(
+    scorer: &Scorer,
+    cols: usize,
+    threshold: u32,
+    power_threshold: u32,
+    frames: &[(cvm_core::Position, Option<Vec<u16>>)],
+) -> (Vec<(RowSummary, Vec<PositionScore>)>, Totals) {
     let words = cvm_core::stream::row_words(cols, scorer.cells(), 1);
     let (mut a, mut b) = (vec![0i32; words], vec![0i32; words]);
     let mut engine =
         Box::new(Engine::<256>::new(scorer, cols as u32, threshold, &mut a, &mut b).unwrap());
+    engine.set_power_threshold(power_threshold);
     let mut rows = Vec::new();
     let mut out = |v: &cvm_core::RowView| rows.push((v.summary, v.scores.to_vec()));
     for (pos, f) in frames {
@@ -135,6 +147,58 @@ pub fn run_engine(
     }
     let totals = engine.finish(&mut out);
     (rows, totals)
+}
+
+/// The decisions of docs/method.md §6 applied to scores that have none:
+/// a channel fires when its magnitude reaches its threshold; the strength
+/// is the larger `floor(65536 score / threshold)` of the channels that
+/// fired (a zero threshold counts as 1), saturated to `u32`.
+pub fn decide(scores: &mut [PositionScore], threshold: u32, power_threshold: u32) {
+    use cvm_core::flags;
+    let ratio = |s: u32, t: u32| -> u32 {
+        let v = (s as u128 * 65536) / (t.max(1) as u128);
+        u32::try_from(v).unwrap_or(u32::MAX)
+    };
+    for s in scores.iter_mut() {
+        s.flags &= !flags::DEFECT;
+        s.strength = 0;
+        if s.flags & flags::NO_DATA != 0 {
+            continue;
+        }
+        let mut st = Vec::new();
+        if s.mag >= threshold {
+            s.flags |= flags::CVM_DEFECT;
+            st.push(ratio(s.mag, threshold));
+        }
+        if u32::from(s.pmag) >= power_threshold {
+            s.flags |= flags::POWER_DEFECT;
+            st.push(ratio(u32::from(s.pmag), power_threshold));
+        }
+        s.strength = st.into_iter().max().unwrap_or(0);
+    }
+}
+
+/// Power contrast of two map sums in `Q15`, from its definition in f64:
+/// `floor(2^15 |a - b| / (a + b))` (exact: both below `2^25`, see the test
+/// of `cvm_core::power::contrast`).
+pub fn contrast_f64(a: u64, b: u64) -> u16 {
+    if a + b == 0 {
+        return 0;
+    }
+    ((a.abs_diff(b) as f64 * 32768.0) / (a + b) as f64).floor() as u16
+}
+
+/// `floor(sqrt(c0² + c1²))` by exhaustive search from the f64 root.
+pub fn power_magnitude_ref(c0: u16, c1: u16) -> u16 {
+    let s = u64::from(c0).pow(2) + u64::from(c1).pow(2);
+    let mut m = (s as f64).sqrt() as u64;
+    while m * m > s {
+        m -= 1;
+    }
+    while (m + 1) * (m + 1) <= s {
+        m += 1;
+    }
+    m as u16
 }
 
 /// A random scan: rows x cols maps of `j1 x j2`, neighbours similar, with
@@ -179,6 +243,17 @@ pub fn frame_flags(frame: &[u16], full_scale: u16) -> u8 {
 /// reaching it, the positions at or above `threshold`, and the counts of
 /// positions without data, dark and saturated.
 pub fn row_summary_of(row: u32, scores: &[PositionScore], threshold: u32) -> RowSummary {
+    row_summary_with(row, scores, threshold, cvm_core::power::POWER_OFF)
+}
+
+/// [`row_summary_of`] with the power channel's threshold: a defect is a
+/// position where either magnitude reaches its threshold.
+pub fn row_summary_with(
+    row: u32,
+    scores: &[PositionScore],
+    threshold: u32,
+    power_threshold: u32,
+) -> RowSummary {
     use cvm_core::flags;
     let data: Vec<(usize, &PositionScore)> = scores
         .iter()
@@ -186,6 +261,11 @@ pub fn row_summary_of(row: u32, scores: &[PositionScore], threshold: u32) -> Row
         .filter(|(_, s)| s.flags & flags::NO_DATA == 0)
         .collect();
     let max = data.iter().map(|(_, s)| s.mag).max().unwrap_or(0);
+    let pmax = data
+        .iter()
+        .map(|(_, s)| u32::from(s.pmag))
+        .max()
+        .unwrap_or(0);
     let count = |bit: u8| data.iter().filter(|(_, s)| s.flags & bit != 0).count() as u32;
     RowSummary {
         row,
@@ -194,7 +274,15 @@ pub fn row_summary_of(row: u32, scores: &[PositionScore], threshold: u32) -> Row
             .iter()
             .find(|(_, s)| s.mag == max)
             .map(|(c, _)| *c as u32),
-        defects: data.iter().filter(|(_, s)| s.mag >= threshold).count() as u32,
+        pmax,
+        pargmax: data
+            .iter()
+            .find(|(_, s)| u32::from(s.pmag) == pmax)
+            .map(|(c, _)| *c as u32),
+        defects: data
+            .iter()
+            .filter(|(_, s)| s.mag >= threshold || u32::from(s.pmag) >= power_threshold)
+            .count() as u32,
         no_data: (scores.len() - data.len()) as u32,
         dark: count(flags::DARK),
         saturated: count(flags::SATURATED),

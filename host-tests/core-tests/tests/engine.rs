@@ -2,7 +2,10 @@
 //! (`dmap score --distance cvm-fixed`), and its handling of damaged input.
 
 use cvm_core::{Position, PositionScore, Scorer, flags};
-use cvm_core_tests::{frame_flags, random_scan, rng, row_summary_of, run_engine, variants};
+use cvm_core_tests::{
+    contrast_f64, decide, frame_flags, power_magnitude_ref, random_scan, rng, row_summary_with,
+    run_engine, run_engine_with, variants,
+};
 use dmap::fixed::score_scan;
 use proptest::prelude::*;
 
@@ -45,6 +48,12 @@ fn batch_with_gaps(
             .unwrap();
     }
     let s = |i: usize| &st[i * n..(i + 1) * n];
+    let pw = |i: usize| {
+        data[i * n..(i + 1) * n]
+            .iter()
+            .map(|&a| u64::from(a))
+            .sum::<u64>()
+    };
     let at = |r: isize, c: isize| -> Option<usize> {
         if r < 0 || c < 0 || r >= rows as isize || c >= cols as isize {
             return None;
@@ -75,11 +84,25 @@ fn batch_with_gaps(
             } else {
                 scorer.distance(s(u), s(d))
             };
+            let p0 = if l == rr {
+                0
+            } else {
+                contrast_f64(pw(l), pw(rr))
+            };
+            let p1 = if u == d {
+                0
+            } else {
+                contrast_f64(pw(u), pw(d))
+            };
             PositionScore {
                 g0,
                 g1,
                 mag: cvm_core::magnitude(g0, g1),
+                p0,
+                p1,
+                pmag: power_magnitude_ref(p0, p1),
                 flags: fl[i],
+                ..Default::default()
             }
         })
         .collect()
@@ -98,9 +121,13 @@ proptest! {
         let data = random_scan(&mut r, rows, cols, j1, j2);
         for args in variants(j1, j2) {
             let scorer = args.scorer(j1, j2).unwrap();
-            let batch = score_scan(&scorer, rows, cols, &data);
+            let mut batch = score_scan(&scorer, rows, cols, &data);
             let thr = batch.iter().map(|s| s.mag).max().unwrap_or(0) / 2 + 1;
-            let (out, totals) = run_engine(&scorer, cols, thr, &clean_frames(rows, cols, n, &data));
+            // A power threshold that splits the positions too.
+            let pthr = u32::from(batch.iter().map(|s| s.pmag).max().unwrap_or(0)) * 2 / 3 + 1;
+            decide(&mut batch, thr, pthr);
+            let (out, totals) =
+                run_engine_with(&scorer, cols, thr, pthr, &clean_frames(rows, cols, n, &data));
             prop_assert_eq!(out.len(), rows);
             for (k, (sum, _)) in out.iter().enumerate() {
                 prop_assert_eq!(sum.row as usize, k);
@@ -112,12 +139,15 @@ proptest! {
                 prop_assert_eq!(s.flags & (flags::DARK | flags::SATURATED), want);
             }
             for (k, (sum, _)) in out.iter().enumerate() {
-                let want = row_summary_of(k as u32, &batch[k * cols..(k + 1) * cols], thr);
+                let want = row_summary_with(k as u32, &batch[k * cols..(k + 1) * cols], thr, pthr);
                 prop_assert_eq!(*sum, want);
             }
             prop_assert_eq!(totals.frames as usize, rows * cols);
             prop_assert_eq!(totals.missing, 0);
-            let defects = batch.iter().filter(|s| s.mag >= thr).count();
+            let defects = batch
+                .iter()
+                .filter(|s| s.mag >= thr || u32::from(s.pmag) >= pthr)
+                .count();
             prop_assert_eq!(totals.defects as usize, defects);
             let dark = batch.iter().filter(|s| s.flags & flags::DARK != 0).count();
             prop_assert_eq!(totals.dark as usize, dark);
@@ -149,15 +179,18 @@ proptest! {
                 frames.push((f.0, None));
             }
         }
-        let (out, totals) = run_engine(&scorer, cols, 1, &frames);
-        let want = batch_with_gaps(&scorer, rows, cols, &data, &present);
+        // Power threshold 0.05: random maps give contrasts on both sides of it.
+        let pthr = cvm_core::power::threshold_from_units(0.05);
+        let (out, totals) = run_engine_with(&scorer, cols, 1, pthr, &frames);
+        let mut want = batch_with_gaps(&scorer, rows, cols, &data, &present);
+        decide(&mut want, 1, pthr);
         // Trailing missing rows are never seen by the engine: it cannot
         // know the scan had them.
         let last_row = (0..rows * cols).rev().find(|&i| present[i] || i.is_multiple_of(3)).map_or(0, |i| i / cols + 1);
         prop_assert_eq!(out.len(), last_row);
         prop_assert_eq!(&flatten(&out)[..], &want[..last_row * cols]);
         for (k, (sum, _)) in out.iter().enumerate() {
-            prop_assert_eq!(*sum, row_summary_of(k as u32, &want[k * cols..(k + 1) * cols], 1));
+            prop_assert_eq!(*sum, row_summary_with(k as u32, &want[k * cols..(k + 1) * cols], 1, pthr));
         }
         let missing = want[..last_row * cols].iter().filter(|s| s.flags & flags::NO_DATA != 0).count();
         prop_assert_eq!(totals.missing as usize, missing);
@@ -269,19 +302,22 @@ fn consecutive_scans_are_independent() {
             engine.push(pos, &f.unwrap(), &mut out);
         }
         let t = engine.finish(&mut out);
-        assert_eq!(flatten(&rows_out), score_scan(&scorer, rows, cols, data));
+        let mut want = score_scan(&scorer, rows, cols, data);
+        decide(&mut want, 1, cvm_core::power::POWER_OFF);
+        assert_eq!(flatten(&rows_out), want);
         assert_eq!(t.frames as usize, rows * cols);
     }
 }
 
 #[test]
 fn window_size_table() {
-    // Two rows of J1*J2 i32 words per column plus per-column bookkeeping.
+    // Two rows of J1*J2 i32 words per column plus per-column bookkeeping:
+    // two flag bytes, two u32 powers, two positions' results.
     assert_eq!(cvm_core::stream::row_words(300, 15, 15), 300 * 225);
     let w = cvm_core::stream::window_bytes(300, 15, 15);
     assert_eq!(
         w,
-        2 * 300 * 225 * 4 + 300 * (2 + 2 * std::mem::size_of::<PositionScore>())
+        2 * 300 * 225 * 4 + 300 * (2 + 2 * 4 + 2 * std::mem::size_of::<PositionScore>())
     );
 }
 

@@ -36,6 +36,7 @@ fn header(fw: &'static str, q: i32) -> HeaderInfo<'static> {
         normalise: true,
         full_scale: 65535,
         threshold: 12345,
+        power_threshold: 3277,
         q,
         scores: true,
         max_defect_lines: 16,
@@ -61,23 +62,40 @@ fn header_round_trip() {
 }
 
 fn arb_score() -> impl Strategy<Value = PositionScore> {
-    (any::<u32>(), any::<u32>(), any::<u32>(), 0u8..16)
-        .prop_map(|(g0, g1, mag, flags)| PositionScore { g0, g1, mag, flags })
+    (
+        any::<u32>(),
+        any::<u32>(),
+        any::<u32>(),
+        any::<u32>(),
+        any::<u16>(),
+        0u8..64,
+    )
+        .prop_map(|(g0, g1, mag, strength, pmag, flags)| PositionScore {
+            g0,
+            g1,
+            mag,
+            strength,
+            pmag,
+            flags,
+            ..Default::default()
+        })
 }
 
 proptest! {
     #[test]
     fn score_encoding_round_trips(s in arb_score()) {
-        prop_assert_eq!(decode_score(&encode_score(&s)), Some((s.mag, s.flags)));
+        let want = protocol::ScoreValue { mag: s.mag, pmag: s.pmag, flags: s.flags };
+        prop_assert_eq!(decode_score(&encode_score(&s)), Some(want));
     }
 
     /// Row, defect and score lines decode to what was encoded, and only
     /// score lines are droppable.
     #[test]
     fn row_lines_round_trip(row in any::<u32>(), scores in prop::collection::vec(arb_score(), 1..100), thr in any::<u32>(), max_def in 0u16..5) {
-        let mut defects: Vec<usize> = (0..scores.len()).filter(|&c| scores[c].flags & 1 == 0 && scores[c].mag >= thr).collect();
-        let summary = RowSummary { row, max: 77, argmax: Some(3), defects: defects.len() as u32, no_data: 1, dark: 2, saturated: 3 };
-        let view = RowView { summary, scores: &scores, threshold: thr };
+        // A defect: data, and a channel's decision bit (bits 4 and 5).
+        let mut defects: Vec<usize> = (0..scores.len()).filter(|&c| scores[c].flags & 1 == 0 && scores[c].flags & 0x30 != 0).collect();
+        let summary = RowSummary { row, max: 77, argmax: Some(3), pmax: 4000, pargmax: Some(1), defects: defects.len() as u32, no_data: 1, dark: 2, saturated: 3 };
+        let view = RowView { summary, scores: &scores, threshold: thr, power_threshold: 3000 };
         let mut s = Lines::default();
         encode_row(&view, max_def, true, &mut s);
         let mut got_scores = vec![None; scores.len()];
@@ -90,16 +108,18 @@ proptest! {
                     prop_assert_eq!(listed as usize, defects.len().min(max_def as usize));
                     prop_assert_eq!(*p, Priority::Keep);
                 }
-                Line::Defect { row: r, col, mag, flags } => {
+                Line::Defect { row: r, col, mag, pmag, strength, flags } => {
                     prop_assert_eq!(r, row);
                     prop_assert_eq!(mag, scores[col as usize].mag);
+                    prop_assert_eq!(pmag, scores[col as usize].pmag);
+                    prop_assert_eq!(strength, scores[col as usize].strength);
                     prop_assert_eq!(flags, scores[col as usize].flags);
                     got_defects.push(col as usize);
                     prop_assert_eq!(*p, Priority::Keep);
                 }
                 Line::Scores { row: r, col0, chars } => {
                     prop_assert_eq!(r, row);
-                    for (k, c) in chars.chunks(6).enumerate() {
+                    for (k, c) in chars.chunks(9).enumerate() {
                         got_scores[col0 as usize + k] = decode_score(c);
                     }
                     prop_assert_eq!(*p, Priority::Droppable);
@@ -107,16 +127,16 @@ proptest! {
                 other => prop_assert!(false, "unexpected line {:?}", other),
             }
         }
-        // The strongest defects, strongest first, equal magnitudes leftmost first.
-        defects.sort_by_key(|&c| (std::cmp::Reverse(scores[c].mag), c));
+        // The strongest defects, strongest first, equal strengths leftmost first.
+        defects.sort_by_key(|&c| (std::cmp::Reverse(scores[c].strength), c));
         prop_assert_eq!(&got_defects[..], &defects[..defects.len().min(max_def as usize)]);
-        let want: Vec<_> = scores.iter().map(|s| Some((s.mag, s.flags))).collect();
+        let want: Vec<_> = scores.iter().map(|s| Some(protocol::ScoreValue { mag: s.mag, pmag: s.pmag, flags: s.flags })).collect();
         prop_assert_eq!(got_scores, want);
     }
 
     #[test]
-    fn end_line_round_trips(v in prop::collection::vec(any::<u32>(), 12)) {
-        let t = Totals { rows: v[0], frames: v[1], missing: v[2], dark: v[3], saturated: v[4], defects: v[5], rejected: v[6], extra: v[7], bad: v[8], clipped: v[9], misplaced: v[10] };
+    fn end_line_round_trips(v in prop::collection::vec(any::<u32>(), 14)) {
+        let t = Totals { rows: v[0], frames: v[1], missing: v[2], dark: v[3], saturated: v[4], defects: v[5], objects: v[12], unobjected: v[13], rejected: v[6], extra: v[7], bad: v[8], clipped: v[9], misplaced: v[10] };
         let mut s = Lines::default();
         encode_end(&t, v[11], &mut s);
         prop_assert!(s.0[0].0.len() <= MAX_LINE);
@@ -128,8 +148,8 @@ proptest! {
     /// of up to 16 bits, and a damaged trailer fails its own syntax.
     #[test]
     fn any_single_byte_change_is_detected(row in any::<u32>(), scores in prop::collection::vec(arb_score(), 1..40), pos in any::<prop::sample::Index>(), byte in any::<u8>()) {
-        let summary = RowSummary { row, max: 1, argmax: None, defects: 0, no_data: 0, dark: 0, saturated: 0 };
-        let view = RowView { summary, scores: &scores, threshold: u32::MAX };
+        let summary = RowSummary { row, max: 1, argmax: None, pmax: 7, pargmax: None, defects: 0, no_data: 0, dark: 0, saturated: 0 };
+        let view = RowView { summary, scores: &scores, threshold: u32::MAX, power_threshold: u32::MAX };
         let mut s = Lines::default();
         encode_row(&view, 0, true, &mut s);
         for (line, _) in &s.0 {
@@ -144,8 +164,8 @@ proptest! {
     /// Truncated lines never parse.
     #[test]
     fn truncation_is_detected(scores in prop::collection::vec(arb_score(), 1..40), cut in any::<prop::sample::Index>()) {
-        let summary = RowSummary { row: 3, max: 1, argmax: Some(0), defects: 0, no_data: 0, dark: 0, saturated: 0 };
-        let view = RowView { summary, scores: &scores, threshold: u32::MAX };
+        let summary = RowSummary { row: 3, max: 1, argmax: Some(0), pmax: 1, pargmax: Some(0), defects: 0, no_data: 0, dark: 0, saturated: 0 };
+        let view = RowView { summary, scores: &scores, threshold: u32::MAX, power_threshold: u32::MAX };
         let mut s = Lines::default();
         encode_row(&view, 0, true, &mut s);
         for (line, _) in &s.0 {
@@ -163,6 +183,7 @@ fn worst_case_lines_fit() {
     let mut h = header("a-very-long-firmware-version-string-that-gets-cut", -120);
     h.cols = u32::MAX;
     h.threshold = u32::MAX;
+    h.power_threshold = u32::MAX;
     h.weights = "separable";
     h.max_defect_lines = u16::MAX;
     h.reset_cause = ResetCause::Other;
@@ -173,7 +194,11 @@ fn worst_case_lines_fit() {
             g0: u32::MAX,
             g1: u32::MAX,
             mag: u32::MAX,
-            flags: 15
+            strength: u32::MAX,
+            p0: u16::MAX,
+            p1: u16::MAX,
+            pmag: u16::MAX,
+            flags: 63
         };
         64
     ];
@@ -181,6 +206,8 @@ fn worst_case_lines_fit() {
         row: u32::MAX,
         max: u32::MAX,
         argmax: Some(u32::MAX),
+        pmax: u32::MAX,
+        pargmax: Some(u32::MAX),
         defects: u32::MAX,
         no_data: u32::MAX,
         dark: u32::MAX,
@@ -191,6 +218,7 @@ fn worst_case_lines_fit() {
             summary,
             scores: &scores,
             threshold: 0,
+            power_threshold: 0,
         },
         u16::MAX,
         true,
@@ -203,6 +231,8 @@ fn worst_case_lines_fit() {
         dark: u32::MAX,
         saturated: u32::MAX,
         defects: u32::MAX,
+        objects: u32::MAX,
+        unobjected: u32::MAX,
         rejected: u32::MAX,
         extra: u32::MAX,
         bad: u32::MAX,
@@ -210,6 +240,24 @@ fn worst_case_lines_fit() {
         misplaced: u32::MAX,
     };
     encode_end(&t, u32::MAX, &mut s);
+    let o = cvm_core::Object {
+        id: u32::MAX,
+        row0: u32::MAX,
+        row1: u32::MAX,
+        col0: u32::MAX,
+        col1: u32::MAX,
+        area: u32::MAX,
+        peak: u32::MAX,
+        peak_row: u32::MAX,
+        peak_col: u32::MAX,
+        peak_mag: u32::MAX,
+        peak_power: u16::MAX,
+        channels: 0x30,
+        centroid_row_q8: u64::from(u32::MAX) << 8,
+        centroid_col_q8: u64::from(u32::MAX) << 8,
+    };
+    protocol::encode_object(&o, &mut s);
+    assert_eq!(protocol::parse(&s.0.last().unwrap().0), Ok(Line::Object(o)));
     for (line, _) in &s.0 {
         assert!(line.len() <= MAX_LINE, "{} bytes", line.len());
         assert!(
@@ -233,18 +281,27 @@ fn garbage_is_rejected_with_a_reason() {
 }
 
 /// At the cap, the strongest defects are listed, strongest first; equal
-/// magnitudes by column, leftmost first; positions without data never.
+/// strengths by column, leftmost first; positions without data, and
+/// positions no channel fired at, never.
 #[test]
 fn cap_lists_the_strongest_defects_with_ties_by_column() {
-    let mags = [5u32, 9, 7, 9, 3, 9, 8, 100, 1];
-    let mut scores: Vec<PositionScore> = mags
+    let strengths = [5u32, 9, 7, 9, 3, 9, 8, 100, 1];
+    let mut scores: Vec<PositionScore> = strengths
         .iter()
-        .map(|&mag| PositionScore {
-            mag,
+        .enumerate()
+        .map(|(c, &strength)| PositionScore {
+            strength,
+            // Alternate channels: the order does not depend on which fired.
+            flags: if c % 2 == 0 {
+                cvm_core::flags::CVM_DEFECT
+            } else {
+                cvm_core::flags::POWER_DEFECT
+            },
             ..PositionScore::default()
         })
         .collect();
-    scores[7].flags = cvm_core::flags::NO_DATA;
+    scores[7].flags = cvm_core::flags::NO_DATA | cvm_core::flags::CVM_DEFECT;
+    scores[8].flags = 0;
     let summary = RowSummary {
         row: 4,
         defects: 7,
@@ -254,6 +311,7 @@ fn cap_lists_the_strongest_defects_with_ties_by_column() {
         summary,
         scores: &scores,
         threshold: 3,
+        power_threshold: 3,
     };
     for (cap, want) in [
         (0u16, vec![]),

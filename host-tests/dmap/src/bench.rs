@@ -13,7 +13,7 @@
 
 use crate::listen::decode;
 use crate::options::ScoringArgs;
-use crate::stream::{DEFAULT_THRESHOLD, VecSink};
+use crate::stream::{DEFAULT_POWER_THRESHOLD, DEFAULT_THRESHOLD, VecSink};
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use cvm_core::{Pipeline, Position, PositionScore, Scorer, Settings};
@@ -313,6 +313,7 @@ impl Kernels {
         let settings = Settings {
             cols: scan.cols as u32,
             threshold: self.scorer.threshold_from_units(DEFAULT_THRESHOLD),
+            power_threshold: cvm_core::power::threshold_from_units(DEFAULT_POWER_THRESHOLD),
             scores,
             max_defect_lines_per_row: 16,
             firmware_version: cvm_core::VERSION,

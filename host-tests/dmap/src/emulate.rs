@@ -109,6 +109,7 @@ pub fn scan_file_and_warnings(args: &EmulateArgs) -> Result<(Vec<u8>, Vec<String
         cols: settings.cols,
         rows: scan.rows as u32,
         threshold_units: args.output.threshold_units(&args.scoring)?,
+        power_threshold_units: args.output.power_threshold_units()?,
         scores: settings.scores,
         max_defect_lines_per_row: settings.max_defect_lines_per_row,
         version_len: version.len() as u8,

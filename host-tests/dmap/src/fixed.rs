@@ -3,10 +3,12 @@
 //! engine, applied to a scan held in memory (`dmap score --distance
 //! cvm-fixed`). The streaming engine must reproduce it bit for bit.
 
-use cvm_core::{PositionScore, Scorer, flags, magnitude};
+use cvm_core::{PositionScore, Scorer, flags, magnitude, power};
 
 /// Scores every position of a `rows x cols` scan of `u16` maps (raster
 /// order, `cells` samples per map), with the border rule of docs/method.md §3.
+/// Both channels' values are filled in; the decisions (defect flags and
+/// strength) are left to the caller, which knows the thresholds.
 ///
 /// # Panics
 /// If `data` does not hold `rows * cols` maps: callers pass a scan that
@@ -30,6 +32,11 @@ pub fn score_scan(scorer: &Scorer, rows: usize, cols: usize, data: &[u16]) -> Ve
             .expect("frame length checked above");
     }
     let state = |r: usize, c: usize| &states[(r * cols + c) * n..(r * cols + c + 1) * n];
+    let powers: Vec<u32> = data
+        .chunks_exact(n)
+        .map(|f| f.iter().map(|&a| u32::from(a)).sum())
+        .collect();
+    let pw = |r: usize, c: usize| powers[r * cols + c];
     let mut out = Vec::with_capacity(rows * cols);
     for r in 0..rows {
         for c in 0..cols {
@@ -51,10 +58,16 @@ pub fn score_scan(scorer: &Scorer, rows: usize, cols: usize, data: &[u16]) -> Ve
             if g0 == u32::MAX || g1 == u32::MAX || mag == u32::MAX {
                 f |= flags::CLIPPED;
             }
+            let p0 = power::contrast(pw(r, l), pw(r, rr));
+            let p1 = power::contrast(pw(u, c), pw(d, c));
             out.push(PositionScore {
                 g0,
                 g1,
                 mag,
+                strength: 0,
+                p0,
+                p1,
+                pmag: power::magnitude(p0, p1),
                 flags: f,
             });
         }

@@ -375,6 +375,8 @@ impl Decoder {
             }
         };
         match line {
+            // Objects are read by the object report (not yet in this decoder).
+            Line::Object(_) => {}
             Line::Header(h) => {
                 self.skipping = false;
                 if let Some(prev) = self.current.take() {
@@ -454,6 +456,7 @@ impl Decoder {
                 col,
                 mag,
                 flags,
+                ..
             } => {
                 let Some(s) = self.current.as_mut() else {
                     return self.error("defect line outside a scan (header lost?)");
@@ -538,7 +541,7 @@ impl Decoder {
                 for (k, c) in chars.chunks(protocol::SCORE_CHARS).enumerate() {
                     // In range: `col0 + n <= cols` was checked above.
                     if let Some(v) = protocol::decode_score(c) {
-                        let again = line.insert(col0 + k as u32, v).is_some();
+                        let again = line.insert(col0 + k as u32, (v.mag, v.flags)).is_some();
                         dup |= again;
                         added += usize::from(!again);
                     }

@@ -16,6 +16,9 @@ pub const MAX_COLS: usize = 4096;
 
 /// Default defect threshold, in distance units.
 pub const DEFAULT_THRESHOLD: f64 = 0.5;
+/// Default threshold of the power channel: a contrast of 0.1 between the
+/// two neighbours' powers (one has 22 % more light than the other).
+pub const DEFAULT_POWER_THRESHOLD: f64 = 0.1;
 
 #[derive(Args, Clone, Debug)]
 pub struct StreamArgs {
@@ -37,8 +40,13 @@ pub struct OutputArgs {
     /// Also emit every position's score (S lines)
     #[arg(long)]
     pub scores: bool,
-    /// At most this many defect lines per row, the strongest (the row line has the full count)
-    #[arg(long, default_value_t = 16)]
+    /// Threshold of the power channel: the contrast |P+ - P-| / (P+ + P-) of the two
+    /// neighbours' powers (default 0.1; inf turns the channel off)
+    #[arg(long, value_name = "C")]
+    pub power_threshold: Option<f64>,
+    /// List up to this many defective positions per row as D lines, the strongest (the row
+    /// line has the full count; default 0: the object lines describe the defects)
+    #[arg(long, default_value_t = 0)]
     pub max_defect_lines: u16,
     /// Threshold from a calibration file (`dmap calibrate`), the same integer as the
     /// calibration's; refused unless these scoring options are the ones it was made for
@@ -55,8 +63,9 @@ impl Default for OutputArgs {
     fn default() -> Self {
         OutputArgs {
             threshold: None,
+            power_threshold: None,
             scores: false,
-            max_defect_lines: 16,
+            max_defect_lines: 0,
             calibration: None,
             full_scale: u16::MAX,
         }
@@ -88,6 +97,19 @@ impl OutputArgs {
         }
         if t.is_infinite() {
             bail!("--threshold must be finite, got {t}");
+        }
+        Ok(t)
+    }
+
+    /// The power channel's threshold, a contrast: the one given, or the
+    /// default ([`f64::INFINITY`] turns the channel off).
+    pub fn power_threshold_units(&self) -> Result<f64> {
+        let t = self.power_threshold.unwrap_or(DEFAULT_POWER_THRESHOLD);
+        if t.is_nan() || t < 0.0 {
+            bail!(
+                "--power-threshold must be a non-negative contrast (inf: off), got {}",
+                fmt_num(t)
+            );
         }
         Ok(t)
     }
@@ -134,6 +156,7 @@ impl OutputArgs {
         Ok(Settings {
             cols: cols as u32,
             threshold: scorer.threshold_from_units(t),
+            power_threshold: cvm_core::power::threshold_from_units(self.power_threshold_units()?),
             scores: self.scores,
             max_defect_lines_per_row: self.max_defect_lines,
             firmware_version: cvm_core::VERSION,

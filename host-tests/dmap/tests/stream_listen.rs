@@ -365,7 +365,10 @@ fn bandwidth_figures_of_the_protocol_document() {
         g0: 0,
         g1: 0,
         mag: 1_234_567_890,
-        flags: 0,
+        strength: 65536,
+        pmag: 123,
+        flags: cvm_core::flags::CVM_DEFECT,
+        ..Default::default()
     };
     let mut row = vec![cvm_core::PositionScore::default(); 124];
     row[123] = p;
@@ -381,6 +384,7 @@ fn bandwidth_figures_of_the_protocol_document() {
             summary,
             scores: &row,
             threshold: 1,
+            power_threshold: 3277,
         },
         16,
         false,
@@ -439,6 +443,7 @@ fn absurd_claimed_size_is_refused() {
     let settings = cvm_core::Settings {
         cols: 4_000_000,
         threshold: 1,
+        power_threshold: 3277,
         scores: true,
         max_defect_lines_per_row: 16,
         firmware_version: "0.1.0",

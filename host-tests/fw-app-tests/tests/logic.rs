@@ -467,6 +467,7 @@ fn scan_file_header_round_trips_and_rejects_garbage() {
         cols: 300,
         rows: 17,
         threshold_units: 0.125,
+        power_threshold_units: 0.0625,
         scores: true,
         max_defect_lines_per_row: 16,
         version_len: 4,
