@@ -44,8 +44,13 @@ const RUNS: usize = 5;
 
 #[derive(Args, Clone, Debug)]
 pub struct BenchArgs {
-    /// Detector geometry J1xJ2
-    #[arg(long, default_value = "15x15", value_parser = parse_geometry)]
+    /// Detector geometry J1xJ2, each axis 1..=16
+    #[arg(
+        long,
+        value_name = "J1xJ2",
+        default_value = "15x15",
+        value_parser = crate::cli_values::j1xj2
+    )]
     pub geometry: (usize, usize),
     #[command(flatten)]
     pub scoring: ScoringArgs,
@@ -55,17 +60,6 @@ pub struct BenchArgs {
     /// Time budget for all implementations together (calibration, warm-up and the timed runs)
     #[arg(long, default_value_t = 30.0, value_name = "S")]
     pub seconds: f64,
-}
-
-fn parse_geometry(s: &str) -> std::result::Result<(usize, usize), String> {
-    let bad = || format!("expected J1xJ2 with each axis in 1..=16 (e.g. 15x15), got '{s}'");
-    let (a, b) = s.split_once(['x', 'X']).ok_or_else(bad)?;
-    let j1: usize = a.trim().parse().map_err(|_| bad())?;
-    let j2: usize = b.trim().parse().map_err(|_| bad())?;
-    if !(1..=16).contains(&j1) || !(1..=16).contains(&j2) {
-        return Err(bad());
-    }
-    Ok((j1, j2))
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -3,6 +3,7 @@
 
 pub mod bench;
 pub mod calibrate;
+pub mod cli_values;
 pub mod emulate;
 pub mod eval;
 pub mod fixed;

@@ -5,8 +5,9 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
-use clap::Args;
+use clap::{ArgAction, Args};
 
+use crate::cli_values::{index, trimmed};
 use crate::font::{draw_text, text_height, text_width};
 use crate::stream::fmt_num;
 
@@ -28,9 +29,15 @@ pub struct RenderArgs {
     /// Channel of a rows x cols x C input: 0 horizontal, 1 vertical, 2 magnitude
     #[arg(long, default_value_t = 2)]
     pub channel: usize,
-    /// Panel titles, comma-separated (default: file names)
-    #[arg(long)]
-    pub titles: Option<String>,
+    /// Panel titles, comma-separated, one per input (default: file names)
+    #[arg(
+        long,
+        value_name = "T1,T2,...",
+        value_delimiter = ',',
+        action = ArgAction::Set,
+        value_parser = trimmed
+    )]
+    pub titles: Option<Vec<String>>,
     /// Colour by log10 of the value (zero and negative values get the bottom colour)
     #[arg(long)]
     pub log: bool,
@@ -44,8 +51,14 @@ pub struct RenderArgs {
     #[arg(long)]
     pub shared: bool,
     /// Draw only rows R0..R0+H and columns C0..C0+W of every input
-    #[arg(long, value_name = "R0,C0,H,W")]
-    pub crop: Option<String>,
+    #[arg(
+        long,
+        value_name = "R0,C0,H,W",
+        value_delimiter = ',',
+        action = ArgAction::Set,
+        value_parser = index
+    )]
+    pub crop: Option<Vec<usize>>,
     /// Pixels per scan position, 1..=64 (default: about 400 pixels per panel side)
     #[arg(long, value_parser = clap::value_parser!(u8).range(1..=64))]
     pub scale: Option<u8>,
@@ -390,8 +403,7 @@ pub fn crop_panel(p: &Panel, (r0, c0, h, w): (usize, usize, usize, usize)) -> Re
 
 pub fn run(a: &RenderArgs) -> Result<()> {
     let titles: Vec<String> = match &a.titles {
-        Some(t) => {
-            let v: Vec<String> = t.split(',').map(|s| s.trim().to_string()).collect();
+        Some(v) => {
             if v.len() != a.inputs.len() {
                 bail!(
                     "--titles has {} entries for {} input files",
@@ -399,7 +411,7 @@ pub fn run(a: &RenderArgs) -> Result<()> {
                     a.inputs.len()
                 );
             }
-            v
+            v.clone()
         }
         None => a
             .inputs
@@ -435,18 +447,15 @@ pub fn run(a: &RenderArgs) -> Result<()> {
     if a.log && (a.vmin.is_some_and(|v| v <= 0.0) || a.vmax.is_some_and(|v| v <= 0.0)) {
         bail!("--log needs positive --vmin/--vmax");
     }
-    let crop = match &a.crop {
+    let crop = match a.crop.as_deref() {
         None => None,
-        Some(c) => {
-            let v: Vec<usize> = c
-                .split(',')
-                .map(|t| t.trim().parse::<usize>())
-                .collect::<std::result::Result<_, _>>()
-                .map_err(|_| anyhow::anyhow!("--crop {c:?}: expected R0,C0,H,W"))?;
-            if v.len() != 4 || v[2] == 0 || v[3] == 0 {
-                bail!("--crop {c:?}: expected R0,C0,H,W with H, W >= 1");
-            }
-            Some((v[0], v[1], v[2], v[3]))
+        Some(&[r0, c0, h, w]) if h >= 1 && w >= 1 => Some((r0, c0, h, w)),
+        Some(v) => {
+            let given: Vec<String> = v.iter().map(usize::to_string).collect();
+            bail!(
+                "--crop {}: expected R0,C0,H,W with H, W >= 1",
+                given.join(",")
+            );
         }
     };
     // The image's size follows from the inputs' shapes: refuse one too

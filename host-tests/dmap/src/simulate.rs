@@ -6,9 +6,11 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
-use clap::{Args, ValueEnum};
+use clap::{ArgAction, Args, ValueEnum};
 use cvm_sim::{Bubble, Config, Face, Interaction, Shape, SurfaceDefect, Vec3, preset};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+
+use crate::cli_values::{finite_f64, finite_f64s, j1xj2};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum PresetArg {
@@ -64,8 +66,15 @@ pub struct SimulateArgs {
     #[arg(long)]
     pub pitch_um: Option<f64>,
     /// Raster centre on the part, "X,Y" in mm
-    #[arg(long, value_name = "X,Y", allow_hyphen_values = true)]
-    pub center_mm: Option<String>,
+    #[arg(
+        long,
+        value_name = "X,Y",
+        allow_hyphen_values = true,
+        value_delimiter = ',',
+        action = ArgAction::Set,
+        value_parser = finite_f64
+    )]
+    pub center_mm: Option<Vec<f64>>,
     /// Beam 1/e² intensity radius (µm)
     #[arg(long)]
     pub waist_um: Option<f64>,
@@ -88,8 +97,13 @@ pub struct SimulateArgs {
     #[arg(long)]
     pub size_mm: Option<f64>,
     /// Air bubble "X,Y,Z,R" in mm (repeatable; replaces the preset's bubbles)
-    #[arg(long = "bubble", value_name = "X,Y,Z,R", allow_hyphen_values = true)]
-    pub bubbles: Vec<String>,
+    #[arg(
+        long = "bubble",
+        value_name = "X,Y,Z,R",
+        allow_hyphen_values = true,
+        value_parser = finite_f64s
+    )]
+    pub bubbles: Vec<Vec<f64>>,
     /// Refractive index of the bubbles
     #[arg(long, default_value_t = 1.0)]
     pub bubble_index: f64,
@@ -97,18 +111,19 @@ pub struct SimulateArgs {
     #[arg(
         long = "scratch",
         value_name = "X0,Y0,X1,Y1[,TILT]",
-        allow_hyphen_values = true
+        allow_hyphen_values = true,
+        value_parser = finite_f64s
     )]
-    pub scratches: Vec<String>,
+    pub scratches: Vec<Vec<f64>>,
     /// Micro-facet size of the rough surface patches (µm)
     #[arg(long)]
     pub facet_um: Option<f64>,
     /// Facet tilt of the rough surface patches, rms per axis (rad)
     #[arg(long)]
     pub tilt_rad: Option<f64>,
-    /// Detector cells "J1xJ2"
-    #[arg(long, value_name = "J1xJ2")]
-    pub detector: Option<String>,
+    /// Detector cells "J1xJ2", each axis 1..=16
+    #[arg(long, value_name = "J1xJ2", value_parser = j1xj2)]
+    pub detector: Option<(usize, usize)>,
     /// Detector pixel pitch (µm)
     #[arg(long)]
     pub pixel_um: Option<f64>,
@@ -156,42 +171,26 @@ pub struct SimulateArgs {
     pub footprint: Option<f64>,
 }
 
-fn parse_floats(s: &str, what: &str, min: usize, max: usize) -> Result<Vec<f64>> {
-    let v: Vec<f64> = s
-        .split(',')
-        .map(|t| t.trim().parse::<f64>())
-        .collect::<std::result::Result<_, _>>()
-        .with_context(|| format!("{what} {s:?}: expected comma-separated numbers"))?;
-    if v.len() < min || v.len() > max || v.iter().any(|x| !x.is_finite()) {
+/// `values` of `flag`, split by clap, if there are `min..=max` of them.
+fn count(values: &[f64], flag: &str, min: usize, max: usize) -> Result<()> {
+    if !(min..=max).contains(&values.len()) {
+        let given: Vec<String> = values.iter().map(f64::to_string).collect();
         bail!(
-            "{what} {s:?}: expected {min}{} finite numbers",
+            "{flag} {}: expected {min}{} comma-separated numbers, got {}",
+            given.join(","),
             if max > min {
-                format!("..{max}")
+                format!("..={max}")
             } else {
                 String::new()
-            }
+            },
+            values.len()
         );
     }
-    Ok(v)
+    Ok(())
 }
 
 /// Most worker threads `--threads` starts.
 pub const MAX_THREADS: usize = 256;
-
-/// Parse "J1xJ2", each axis 1..=16 (what the scorers take).
-fn parse_detector(s: &str) -> Result<(usize, usize)> {
-    let bad =
-        || anyhow::anyhow!("--detector {s:?}: expected J1xJ2 with each axis in 1..=16, e.g. 15x15");
-    let (a, b) = s.split_once(['x', 'X']).ok_or_else(bad)?;
-    let (j1, j2): (usize, usize) = (
-        a.trim().parse().map_err(|_| bad())?,
-        b.trim().parse().map_err(|_| bad())?,
-    );
-    if !(1..=16).contains(&j1) || !(1..=16).contains(&j2) {
-        return Err(bad());
-    }
-    Ok((j1, j2))
-}
 
 /// The simulator configuration: the preset with every given flag applied.
 pub fn config(a: &SimulateArgs) -> Result<Config> {
@@ -206,8 +205,8 @@ pub fn config(a: &SimulateArgs) -> Result<Config> {
     r.pitch = a.pitch_um.map_or(r.pitch, |v| v / 1000.0);
     r.waist = a.waist_um.map_or(r.waist, |v| v / 1000.0);
     r.rays = a.rays.unwrap_or(r.rays);
-    if let Some(s) = &a.center_mm {
-        let v = parse_floats(s, "--center-mm", 2, 2)?;
+    if let Some(v) = &a.center_mm {
+        count(v, "--center-mm", 2, 2)?;
         r.center = (v[0], v[1]);
     }
     let p = &mut c.part;
@@ -267,8 +266,8 @@ pub fn config(a: &SimulateArgs) -> Result<Config> {
         p.bubbles = a
             .bubbles
             .iter()
-            .map(|s| {
-                let v = parse_floats(s, "--bubble", 4, 4)?;
+            .map(|v| {
+                count(v, "--bubble", 4, 4)?;
                 Ok(Bubble {
                     center: Vec3::new(v[0], v[1], v[2]),
                     radius: v[3],
@@ -284,8 +283,8 @@ pub fn config(a: &SimulateArgs) -> Result<Config> {
             .scratches
             .iter()
             .enumerate()
-            .map(|(i, s)| {
-                let v = parse_floats(s, "--scratch", 4, 5)?;
+            .map(|(i, v)| {
+                count(v, "--scratch", 4, 5)?;
                 Ok(SurfaceDefect {
                     face: Face::Front,
                     x0: v[0].min(v[2]),
@@ -308,8 +307,8 @@ pub fn config(a: &SimulateArgs) -> Result<Config> {
         p.defects.clear();
     }
     let rx = &mut c.receiver;
-    if let Some(s) = &a.detector {
-        (rx.j1, rx.j2) = parse_detector(s)?;
+    if let Some(d) = a.detector {
+        (rx.j1, rx.j2) = d;
     }
     rx.pixel = a.pixel_um.map_or(rx.pixel, |v| v / 1000.0);
     rx.spot = a.spot_um.map_or(rx.spot, |v| v / 1000.0);

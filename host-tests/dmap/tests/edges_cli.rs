@@ -804,7 +804,12 @@ fn messages_name_the_file_and_the_real_problem() {
     // One limit for the detector, the scorers' own.
     for det in ["20x20", "0x5", "17x3"] {
         let out = dmap(&["simulate", "--detector", det, "-o", s(&dir.join("a.npy"))]);
-        assert_one_line_error(&out, "each axis in 1..=16");
+        assert_usage_error(&out, "each axis in 1..=16");
+        assert!(
+            stderr(&out).contains("'--detector <J1xJ2>'"),
+            "{}",
+            stderr(&out)
+        );
         assert!(!stderr(&out).contains("64"), "{}", stderr(&out));
     }
     // bench refuses a geometry it cannot time, at once.

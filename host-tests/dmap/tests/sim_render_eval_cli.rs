@@ -24,6 +24,21 @@ fn assert_one_line_error(out: &Output, needle: &str) {
     assert!(!err.contains("panicked"));
 }
 
+/// A usage error (clap refused the value): status 2, one line naming the
+/// option, before any work.
+fn assert_usage_error(out: &Output, option: &str, needle: &str) {
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "stderr: {err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "not one line: {err}");
+    assert!(err.starts_with("dmap: error:"), "{err}");
+    assert!(
+        err.contains(&format!("'{option} <")),
+        "{err:?} lacks {option:?}"
+    );
+    assert!(err.contains(needle), "{err:?} lacks {needle:?}");
+    assert!(out.stdout.is_empty());
+}
+
 #[test]
 fn simulate_writes_scan_and_truth_of_the_asked_shape_whatever_the_threads() {
     let a = tmp("sim-a.npy");
@@ -73,9 +88,18 @@ fn simulate_rejects_bad_parameters_in_one_line() {
     // Every case fails while checking the configuration, before simulating.
     let base = ["simulate", "--preset", "prototype", "-o", s(&o)];
     for (extra, needle) in [
-        (vec!["--detector", "20x20"], "detector"),
-        (vec!["--detector", "9by9"], "J1xJ2"),
-        (vec!["--bubble", "1,2"], "--bubble"),
+        (
+            vec!["--bubble", "1,2"],
+            "--bubble 1,2: expected 4 comma-separated numbers, got 2",
+        ),
+        (
+            vec!["--scratch", "1,2,3,4,0.1,9"],
+            "--scratch 1,2,3,4,0.1,9: expected 4..=5 comma-separated numbers, got 6",
+        ),
+        (
+            vec!["--center-mm", "1"],
+            "--center-mm 1: expected 2 comma-separated numbers, got 1",
+        ),
         (vec!["--bubble", "0,0,-3,0.1"], "not inside the part"),
         (vec!["--bits", "17"], "bit depth"),
         (vec!["--rows", "0"], "at least one position"),
@@ -86,6 +110,37 @@ fn simulate_rejects_bad_parameters_in_one_line() {
     ] {
         assert_one_line_error(&dmap(&[&base[..], &extra[..]].concat()), needle);
     }
+    // Values clap refuses: a usage error naming the option.
+    let axes = "expected J1xJ2 with each axis in 1..=16, e.g. 15x15";
+    for (extra, option, needle) in [
+        (vec!["--detector", "20x20"], "--detector", axes),
+        (vec!["--detector", "0x5"], "--detector", axes),
+        (vec!["--detector", "9by9"], "--detector", axes),
+        (vec!["--detector", "9"], "--detector", axes),
+        (
+            vec!["--bubble", "1,x,3,4"],
+            "--bubble",
+            "'x': expected a finite number",
+        ),
+        (
+            vec!["--scratch=-1,-1,1,inf"],
+            "--scratch",
+            "'inf': expected a finite number",
+        ),
+        (
+            vec!["--center-mm", "1,nan"],
+            "--center-mm",
+            "invalid value 'nan'",
+        ),
+        (
+            vec!["--center-mm", "1,2", "--center-mm", "3,4"],
+            "--center-mm",
+            "cannot be used multiple times",
+        ),
+    ] {
+        assert_usage_error(&dmap(&[&base[..], &extra[..]].concat()), option, needle);
+    }
+    assert!(!o.exists());
     let nowhere = tmp("no/such/dir/x.npy");
     assert_one_line_error(
         &dmap(&[
@@ -101,6 +156,54 @@ fn simulate_rejects_bad_parameters_in_one_line() {
         ]),
         "no/such/dir",
     );
+}
+
+/// `--detector`, `--bubble` and `--scratch` as typed reach the simulator:
+/// the scan has the detector's cells, a bubble or a scratch under the whole
+/// raster makes every position a defect, and without them the raster (far
+/// from the preset's patches) has none.
+#[test]
+fn simulate_takes_detector_bubble_and_scratch_as_typed() {
+    let base = [
+        "simulate",
+        "--preset",
+        "prototype",
+        "--rows",
+        "3",
+        "--cols",
+        "3",
+        "--rays",
+        "64",
+        "--center-mm",
+        "10, 10",
+        "--detector",
+        "5x7",
+        "--threads",
+        "1",
+    ];
+    for (name, extra, defect) in [
+        ("plain", vec![], false),
+        ("bubble", vec!["--bubble", "10,10,2.5,1"], true),
+        ("scratch", vec!["--scratch", "9, 9, 11, 11, 0.2"], true),
+        // Each --bubble is one bubble: the second one lies elsewhere.
+        (
+            "bubbles",
+            vec!["--bubble=-10,-10,2.5,1", "--bubble", "10,10,2.5,1"],
+            true,
+        ),
+    ] {
+        let out = tmp(&format!("typed-{name}.npy"));
+        let truth = tmp(&format!("typed-{name}.truth.npy"));
+        ok(&dmap(&[&base[..], &extra[..], &["-o", s(&out)]].concat()));
+        let scan = npy::read_scan(&out).unwrap();
+        assert_eq!(
+            (scan.rows, scan.cols, scan.geometry.j1(), scan.geometry.j2()),
+            (3, 3, 5, 7),
+            "{name}"
+        );
+        let m = npy::read_mask(&truth).unwrap();
+        assert!(m.data.iter().all(|&t| t == defect), "{name}: {:?}", m.data);
+    }
 }
 
 /// A 4x5 gradient whose magnitude channel is `mag`.
@@ -247,8 +350,35 @@ fn eval_and_render_reject_bad_input_in_one_line() {
     );
     assert_one_line_error(
         &dmap(&["render", s(&g), s(&g), "-o", s(&png), "--titles", "one"]),
-        "--titles",
+        "--titles has 1 entries for 2 input files",
     );
+    let render = ["render", s(&g), "-o", s(&png)];
+    for (crop, needle) in [
+        ("1,2,3", "--crop 1,2,3: expected R0,C0,H,W with H, W >= 1"),
+        ("1,2,3,4,5", "--crop 1,2,3,4,5: expected R0,C0,H,W"),
+        (
+            "0,0,0,2",
+            "--crop 0,0,0,2: expected R0,C0,H,W with H, W >= 1",
+        ),
+    ] {
+        assert_one_line_error(&dmap(&[&render[..], &["--crop", crop]].concat()), needle);
+    }
+    for (extra, option, needle) in [
+        (
+            vec!["--crop", "1,2,a,4"],
+            "--crop",
+            "invalid value 'a' for '--crop <R0,C0,H,W>': expected a whole number >= 0",
+        ),
+        (vec!["--crop", "0,-1,2,2"], "--crop", "invalid value '-1'"),
+        (
+            vec!["--titles", "a", "--titles", "b"],
+            "--titles",
+            "cannot be used multiple times",
+        ),
+    ] {
+        assert_usage_error(&dmap(&[&render[..], &extra[..]].concat()), option, needle);
+    }
+    assert!(!png.exists());
     assert_one_line_error(
         &dmap(&["render", s(&g), "-o", s(&png), "--vmin", "2", "--vmax", "1"]),
         "--vmin",
@@ -277,7 +407,7 @@ fn render_writes_a_png_with_one_panel_per_file() {
         "--scale",
         "10",
         "--titles",
-        "a,b",
+        " a , b ",
         "--log",
     ]));
     let dims = |p: &Path| {
