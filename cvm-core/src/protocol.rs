@@ -94,6 +94,9 @@ impl LineBuf {
         self.bytes(s);
     }
 
+    // Out of line: a line has up to 15 numbers, and inlining each copy of
+    // the digit loop costs far more flash than the call.
+    #[inline(never)]
     pub fn u64(&mut self, v: u64) {
         let mut digits = [0u8; 20];
         let mut n = 0;
@@ -129,6 +132,7 @@ impl LineBuf {
     }
 
     /// Appends `*XXXX\n` and returns the whole line.
+    #[inline(never)]
     pub fn finish(&mut self) -> &[u8] {
         let crc = crc16(self.buf.get(..self.len).unwrap_or(&[]));
         let tail = [
