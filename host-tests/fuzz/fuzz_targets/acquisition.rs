@@ -243,6 +243,8 @@ fn board(u: &mut Unstructured) -> Result<()> {
                 next_row += 1;
             }
             Line::Defect { row, .. } => assert!(open && row + 1 == next_row),
+            // An object is reported after the lines of its last row.
+            Line::Object(o) => assert!(open && o.row1 < next_row),
             Line::Scores { row, .. } => {
                 assert!(open && row + 1 == next_row);
                 s_lines += 1;

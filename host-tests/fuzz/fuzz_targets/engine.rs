@@ -56,7 +56,7 @@ enum Expect {
 struct RowLines {
     summary: RowSummary,
     listed: u32,
-    scores: Vec<Option<(u32, u8)>>,
+    scores: Vec<Option<(u32, u16, u8)>>,
     defect_lines: u32,
 }
 
@@ -77,11 +77,15 @@ struct Model {
     dark: u32,
     saturated: u32,
     defects: u32,
+    /// Object lines of the scan, and their defective positions.
+    objects: u32,
+    object_area: u64,
 }
 
 struct Run<'s> {
     cols: u32,
     threshold: u32,
+    power_threshold: u32,
     scores: bool,
     max_defects: u32,
     full_scale: u16,
@@ -289,12 +293,18 @@ impl Run<'_> {
                     row,
                     col,
                     mag,
+                    pmag,
                     flags: fl,
+                    ..
                 } => {
                     let r = self.model.row.as_mut().expect("defect line outside a row");
                     assert_eq!(row, r.summary.row);
                     r.defect_lines += 1;
-                    assert!(mag >= self.threshold && fl & flags::NO_DATA == 0);
+                    let fired = (mag >= self.threshold, u32::from(pmag) >= self.power_threshold);
+                    assert!(fired.0 || fired.1, "a defect line below both thresholds");
+                    assert_eq!(fl & flags::CVM_DEFECT != 0, fired.0);
+                    assert_eq!(fl & flags::POWER_DEFECT != 0, fired.1);
+                    assert!(fl & flags::NO_DATA == 0);
                     assert!(matches!(self.expect(row, col), Expect::Data(_)));
                 }
                 Line::Scores { row, col0, chars } => {
@@ -304,13 +314,27 @@ impl Run<'_> {
                     for (k, c) in chars.chunks(protocol::SCORE_CHARS).enumerate() {
                         let slot = &mut r.scores[col0 as usize + k];
                         assert!(slot.is_none(), "position sent twice");
-                        *slot = protocol::decode_score(c);
+                        *slot = protocol::decode_score(c).map(|v| (v.mag, v.pmag, v.flags));
                     }
+                }
+                Line::Object(o) => {
+                    // After the lines of its last row, never before.
+                    assert!(o.row1 < self.model.emitted, "object {o:?} before its rows");
+                    assert!(o.area as u64 <= (o.row1 - o.row0 + 1) as u64 * (o.col1 - o.col0 + 1) as u64);
+                    assert!(o.col1 < self.cols && o.channels != 0);
+                    assert!((o.row0..=o.row1).contains(&o.peak_row));
+                    assert!((o.col0..=o.col1).contains(&o.peak_col));
+                    assert!(o.peak >= 1 << 16 || self.threshold == 0 || self.power_threshold == 0);
+                    self.model.objects += 1;
+                    self.model.object_area += u64::from(o.area);
                 }
                 Line::End(e) => {
                     self.close_row();
                     let m = &self.model;
                     let t = e.totals;
+                    // Every defective position is in exactly one object or counted.
+                    assert_eq!(t.objects, m.objects);
+                    assert_eq!(m.object_area + u64::from(t.unobjected), u64::from(t.defects));
                     assert_eq!(t.rows, m.emitted);
                     assert_eq!(t.frames, m.frames);
                     assert_eq!(
@@ -355,7 +379,7 @@ impl Run<'_> {
         let (mut dark, mut sat, mut defects, mut max, mut argmax) = (0, 0, 0, 0, None);
         for (c, v) in got.iter().enumerate() {
             let c = c as u32;
-            let (mag, fl) = v.unwrap_or_else(|| panic!("row {r} col {c} has no score"));
+            let (mag, pmag, fl) = v.unwrap_or_else(|| panic!("row {r} col {c} has no score"));
             match self.expect(r, c) {
                 Expect::NoData => {
                     assert_eq!(
@@ -363,7 +387,7 @@ impl Run<'_> {
                         flags::NO_DATA,
                         "({r}, {c}) must be empty"
                     );
-                    assert_eq!(mag, 0);
+                    assert_eq!((mag, pmag, fl & flags::DEFECT), (0, 0, 0));
                     no_data += 1;
                 }
                 Expect::Data(want) => {
@@ -378,10 +402,15 @@ impl Run<'_> {
                         && !self.has_data(Some(r + 1), Some(c));
                     if alone {
                         assert_eq!(mag, 0, "a map without neighbours is its own neighbour");
+                        assert_eq!(pmag, 0, "a map without neighbours is its own neighbour");
                     }
+                    assert!(u32::from(pmag) <= cvm_core::power::POWER_MAX);
+                    let fired = (mag >= self.threshold, u32::from(pmag) >= self.power_threshold);
+                    assert_eq!(fl & flags::CVM_DEFECT != 0, fired.0, "({r}, {c})");
+                    assert_eq!(fl & flags::POWER_DEFECT != 0, fired.1, "({r}, {c})");
                     dark += u32::from(fl & flags::DARK != 0);
                     sat += u32::from(fl & flags::SATURATED != 0);
-                    defects += u32::from(mag >= self.threshold);
+                    defects += u32::from(fired.0 || fired.1);
                     if argmax.is_none() || mag > max {
                         (max, argmax) = (mag, Some(c));
                     }
@@ -468,9 +497,16 @@ fn run(u: &mut Unstructured) -> Result<()> {
     } else {
         u.int_in_range(0..=1 << 16)?
     };
+    // Power thresholds across the channel's range, and off.
+    let power_threshold = match u.int_in_range(0..=3)? {
+        0 => cvm_core::power::POWER_OFF,
+        1 => u.int_in_range(0..=64)?,
+        _ => u.int_in_range(0..=cvm_core::power::POWER_MAX + 1)?,
+    };
     let settings = Settings {
         cols,
         threshold,
+        power_threshold,
         scores: u.ratio(7, 8)?,
         max_defect_lines_per_row: u.int_in_range(0..=4)?,
         firmware_version: "fuzz",
@@ -484,6 +520,7 @@ fn run(u: &mut Unstructured) -> Result<()> {
     let mut run = Run {
         cols,
         threshold,
+        power_threshold,
         scores: settings.scores,
         max_defects: u32::from(settings.max_defect_lines_per_row),
         full_scale: cfg.full_scale,

@@ -67,6 +67,8 @@ fn totals(u: &mut Unstructured) -> Result<Totals> {
         dark: u.arbitrary()?,
         saturated: u.arbitrary()?,
         defects: u.arbitrary()?,
+        objects: u.arbitrary()?,
+        unobjected: u.arbitrary()?,
         rejected: u.arbitrary()?,
         extra: u.arbitrary()?,
         bad: u.arbitrary()?,
@@ -93,6 +95,7 @@ fn round_trip(u: &mut Unstructured) -> Result<()> {
         normalise: u.arbitrary()?,
         full_scale: u.arbitrary()?,
         threshold,
+        power_threshold: u.arbitrary()?,
         q: u.arbitrary()?,
         scores: true,
         max_defect_lines: u.arbitrary()?,
@@ -109,10 +112,11 @@ fn round_trip(u: &mut Unstructured) -> Result<()> {
         let scores: Vec<PositionScore> = (0..cols)
             .map(|_| {
                 Ok(PositionScore {
-                    g0: 0,
-                    g1: 0,
                     mag: u.arbitrary()?,
+                    pmag: u.arbitrary()?,
+                    strength: u.arbitrary()?,
                     flags: u.arbitrary()?,
+                    ..PositionScore::default()
                 })
             })
             .collect::<Result<_>>()?;
@@ -120,6 +124,8 @@ fn round_trip(u: &mut Unstructured) -> Result<()> {
             row,
             max: u.arbitrary()?,
             argmax: u.arbitrary()?,
+            pmax: u.arbitrary()?,
+            pargmax: u.arbitrary()?,
             defects: u.arbitrary()?,
             no_data: u.arbitrary()?,
             dark: u.arbitrary()?,
@@ -129,6 +135,7 @@ fn round_trip(u: &mut Unstructured) -> Result<()> {
             summary,
             scores: &scores,
             threshold,
+            power_threshold: h.power_threshold,
         };
         protocol::encode_row(&view, max_defects, true, &mut out);
         rows.push((summary, scores));
@@ -181,10 +188,10 @@ fn round_trip(u: &mut Unstructured) -> Result<()> {
         let mut defects: Vec<(u32, &PositionScore)> = scores
             .iter()
             .enumerate()
-            .filter(|(_, p)| p.flags & flags::NO_DATA == 0 && p.mag >= threshold)
+            .filter(|(_, p)| p.flags & flags::NO_DATA == 0 && p.flags & flags::DEFECT != 0)
             .map(|(c, p)| (c as u32, p))
             .collect();
-        defects.sort_by_key(|&(c, p)| (std::cmp::Reverse(p.mag), c));
+        defects.sort_by_key(|&(c, p)| (std::cmp::Reverse(p.strength), c));
         defects.truncate(listed as usize);
         for (col, p) in defects {
             let l = lines.next().expect("defect line");
@@ -194,6 +201,8 @@ fn round_trip(u: &mut Unstructured) -> Result<()> {
                     row: summary.row,
                     col,
                     mag: p.mag,
+                    pmag: p.pmag,
+                    strength: p.strength,
                     flags: p.flags
                 })
             );
@@ -209,8 +218,13 @@ fn round_trip(u: &mut Unstructured) -> Result<()> {
             assert_eq!((row, col0), (summary.row, (k * SCORES_PER_LINE) as u32));
             assert_eq!(chars.len(), chunk.len() * SCORE_CHARS);
             for (c, p) in chars.chunks(SCORE_CHARS).zip(chunk) {
-                // Score lines carry the four defined flag bits.
-                assert_eq!(protocol::decode_score(c), Some((p.mag, p.flags & 0xF)));
+                // Score lines carry the six defined flag bits.
+                let want = protocol::ScoreValue {
+                    mag: p.mag,
+                    pmag: p.pmag,
+                    flags: p.flags & 0x3F,
+                };
+                assert_eq!(protocol::decode_score(c), Some(want));
             }
         }
     }
@@ -238,7 +252,12 @@ fn round_trip(u: &mut Unstructured) -> Result<()> {
         let got = &scan.scores[&summary.row];
         assert_eq!(got.len(), scores.len());
         for (c, p) in scores.iter().enumerate() {
-            assert_eq!(got.get(&(c as u32)), Some(&(p.mag, p.flags & 0xF)));
+            let want = protocol::ScoreValue {
+                mag: p.mag,
+                pmag: p.pmag,
+                flags: p.flags & 0x3F,
+            };
+            assert_eq!(got.get(&(c as u32)), Some(&want));
         }
     }
     Ok(())
