@@ -98,17 +98,33 @@ impl LineBuf {
     // the digit loop costs far more flash than the call.
     #[inline(never)]
     pub fn u64(&mut self, v: u64) {
+        // Nearly every value fits 32 bits, where dividing by 10 is a
+        // multiply; a 64-bit division is a library call per digit.
         let mut digits = [0u8; 20];
         let mut n = 0;
-        let mut v = v;
-        loop {
-            if let Some(d) = digits.get_mut(n) {
-                *d = b'0' + (v % 10) as u8;
-            }
-            n += 1;
-            v /= 10;
-            if v == 0 || n >= digits.len() {
-                break;
+        match u32::try_from(v) {
+            Ok(mut v) => loop {
+                if let Some(d) = digits.get_mut(n) {
+                    *d = b'0' + (v % 10) as u8;
+                }
+                n += 1;
+                v /= 10;
+                if v == 0 || n >= digits.len() {
+                    break;
+                }
+            },
+            Err(_) => {
+                let mut v = v;
+                loop {
+                    if let Some(d) = digits.get_mut(n) {
+                        *d = b'0' + (v % 10) as u8;
+                    }
+                    n += 1;
+                    v /= 10;
+                    if v == 0 || n >= digits.len() {
+                        break;
+                    }
+                }
             }
         }
         for i in (0..n).rev() {

@@ -22,6 +22,7 @@ STAGES = (
     ("embedding: column pass and vertical distance", ("embed::cols",)),
     ("distances", ("squared_difference", "square_distance", "sat_distance")),
     ("normalise, gradient, window", ("cvm_core::scorer", "cvm_core::stream", "magnitude")),
+    ("defect objects", ("cvm_core::objects",)),
     ("sequencing", ("cvm_fw_app::driver", "cvm_fw_app::sequence", "cvm_fw_app::acquire")),
     ("line encoding and queue", ("cvm_core::protocol", "cvm_core::pipeline", "LineSink", "cvm_fw_app::queue",
                                  "QueueSink")),
@@ -36,7 +37,7 @@ STAGES = (
 )
 SCORING = {"sum and saturation flag", "embedding: row pass",
            "embedding: column pass and vertical distance", "distances",
-           "normalise, gradient, window", "sequencing", "line encoding and queue"}
+           "normalise, gradient, window", "defect objects", "sequencing", "line encoding and queue"}
 
 
 def stage_of(name):
