@@ -24,6 +24,8 @@
 #             gradient magnitude in cvm-core/src/scorer.rs
 #   protocol  the line encoder and CRC in cvm-core/src/protocol.rs
 #   pipeline  cvm-core/src/pipeline.rs
+#   decision  the power channel and the object labeller,
+#             cvm-core/src/power.rs and objects.rs
 #   rest      everything else in both crates (tables, configuration, the
 #             protocol parser, acquisition, driver, ...), against every
 #             host test crate that uses them
@@ -54,7 +56,7 @@ while [ $# -gt 0 ] && [ "$1" != "--" ]; do
     shift
 done
 [ "${1-}" = "--" ] && shift
-[ ${#passes[@]} -gt 0 ] || passes=(fw-app stream embed scorer protocol pipeline rest)
+[ ${#passes[@]} -gt 0 ] || passes=(fw-app stream embed scorer protocol pipeline decision rest)
 
 if ! cargo mutants --version >/dev/null 2>&1; then
     cargo install --locked cargo-mutants
@@ -113,9 +115,12 @@ for pass in "${passes[@]}"; do
     protocol) args=(--package cvm-core "${core_tests[@]}" --file cvm-core/src/protocol.rs
         --re "$(fn_re "$protocol_fns")") ;;
     pipeline) args=(--package cvm-core "${core_tests[@]}" --file cvm-core/src/pipeline.rs) ;;
+    decision) args=(--package cvm-core "${core_tests[@]}" --file cvm-core/src/power.rs
+        --file cvm-core/src/objects.rs) ;;
     rest) args=(--package cvm-core --package cvm-fw-app --test-workspace=true
         --exclude fw-app/src/sequence.rs --exclude fw-app/src/queue.rs
         --exclude cvm-core/src/stream.rs --exclude cvm-core/src/pipeline.rs
+        --exclude cvm-core/src/power.rs --exclude cvm-core/src/objects.rs
         --exclude-re "$(fn_re "$embed_fns|$scorer_fns|$protocol_fns")") ;;
     *)
         echo "unknown pass '$pass'" >&2
