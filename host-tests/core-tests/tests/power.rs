@@ -66,3 +66,17 @@ fn threshold_from_units_rounds_up() {
     assert_eq!(power::threshold_from_units(46_340.0 / 32_768.0), 46_340);
     assert!((power::to_units(3277) - 0.100_006_103_515_625).abs() < 1e-15);
 }
+
+/// Whole lines of the magnitude's domain against the reference: every
+/// exact root `(k, 0)` and `(0, k)`, the near-squares `(1, k)` (where
+/// `1 + k²` lies just above `k²`), the diagonal and the top row.
+#[test]
+fn magnitude_is_exact_on_whole_lines() {
+    for k in 0..=32_768u16 {
+        assert_eq!(power::magnitude(k, 0), k);
+        assert_eq!(power::magnitude(0, k), k);
+        assert_eq!(power::magnitude(1, k), power_magnitude_ref(1, k));
+        assert_eq!(power::magnitude(k, k), power_magnitude_ref(k, k));
+        assert_eq!(power::magnitude(32_768, k), power_magnitude_ref(32_768, k));
+    }
+}
