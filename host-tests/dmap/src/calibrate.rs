@@ -1,12 +1,14 @@
-//! `dmap calibrate`: the defect threshold of a scoring configuration from
-//! defect-free reference scans, scored with the firmware's arithmetic (the
+//! `dmap calibrate`: the defect thresholds of a scoring configuration (the
+//! CVM channel's and the power channel's) from defect-free reference scans, scored with the firmware's arithmetic (the
 //! fixed-point scorer `dmap stream` and `dmap score --distance cvm-fixed`
 //! use), written as a calibration file that `dmap stream`, `dmap emulate`
 //! and `dmap twin` apply with `--calibration` (docs/experiments.md,
 //! "Calibration").
 //!
-//! The rule: with `m` the gradient magnitudes of every position of every
-//! reference (integer scores of the scorer's `Q(q)` format),
+//! The rule, the same for each channel: with `m` the channel's magnitudes
+//! of every position of every reference (integers: the CVM gradient
+//! magnitudes in the scorer's `Q(q)` format, the power magnitudes in `Q15`,
+//! `cvm_core::power`),
 //!
 //! ```text
 //! thr = Q_p(m) + ceil(k * 1.4826 * MAD(m)) + 1
@@ -17,19 +19,26 @@
 //! standard deviation of a normal background), `k` the margin in those
 //! units (default 3). A position is defective when its magnitude reaches
 //! `thr`, so with `p = 1` no reference position is. The threshold in
-//! distance units is `thr * 2^-q`, which converts back to exactly `thr`.
+//! distance units is `thr * 2^-q`, which converts back to exactly `thr`;
+//! the power threshold as a contrast is `thr * 2^-15`, likewise exact. A
+//! power threshold above the largest magnitude ([`power::POWER_MAX`], a
+//! reference with a dark neighbour) is recorded as [`power::POWER_OFF`]:
+//! the channel is off.
 //!
 //! The file records the scoring configuration (geometry, kernels, weights,
 //! normalisation, full scale); applying it to any other configuration is
-//! refused. It has room for more channels (`"channels"`): the power
-//! channel of issue 14 adds its own entry there.
+//! refused. Each channel has its entry in `"channels"` (`"cvm"`, `"power"`:
+//! `threshold`, `thr`, `q`). Version 1 files, made before the power
+//! channel, have no power entry and are refused with a request to
+//! calibrate again: applying only half a calibration would leave the power
+//! channel at a default the references never checked.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, anyhow, bail};
 use clap::Args;
-use cvm_core::{Config, Kernels, Scorer, Weights, flags};
+use cvm_core::{Config, Kernels, Scorer, Weights, flags, power};
 use serde_json::{Value, json};
 
 use crate::npy::MappedScan;
@@ -38,8 +47,9 @@ use crate::stream::fmt_num;
 
 /// Identifies a calibration file.
 pub const FORMAT: &str = "dmap-calibration";
-/// Version of the file layout; a reader refuses other versions.
-pub const VERSION: u64 = 1;
+/// Version of the file layout; a reader refuses other versions. Version 2
+/// added the power channel (`channels.power`).
+pub const VERSION: u64 = 2;
 /// MAD to the standard deviation of a normal distribution.
 pub const MAD_TO_SIGMA: f64 = 1.4826;
 
@@ -143,9 +153,18 @@ pub fn threshold(st: &Stats, rule: &Rule) -> u32 {
     }
 }
 
-/// Gradient magnitudes of every position of a scan with data, in the
+/// Both channels' magnitudes of the positions of a scan that have data.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Magnitudes {
+    /// CVM gradient magnitudes, `Q(q)`.
+    pub cvm: Vec<u32>,
+    /// Power magnitudes, `Q15`.
+    pub power: Vec<u32>,
+}
+
+/// Both channels' magnitudes of every position of a scan with data, in the
 /// firmware's arithmetic.
-pub fn magnitudes(scorer: &Scorer, scan: &MappedScan) -> Result<Vec<u32>> {
+pub fn magnitudes(scorer: &Scorer, scan: &MappedScan) -> Result<Magnitudes> {
     let n = scan.geometry.cells();
     let mut data = vec![0u16; scan.maps() * n];
     let mut scratch = Vec::new();
@@ -154,13 +173,49 @@ pub fn magnitudes(scorer: &Scorer, scan: &MappedScan) -> Result<Vec<u32>> {
         scan.maps_u16(row * scan.cols, out, &mut scratch)?;
         scan.release(0..(row + 1) * scan.cols);
     }
-    Ok(
-        crate::fixed::score_scan(scorer, scan.rows, scan.cols, &data)
-            .into_iter()
-            .filter(|s| s.flags & flags::NO_DATA == 0)
-            .map(|s| s.mag)
-            .collect(),
-    )
+    let mut m = Magnitudes::default();
+    for s in crate::fixed::score_scan(scorer, scan.rows, scan.cols, &data) {
+        if s.flags & flags::NO_DATA == 0 {
+            m.cvm.push(s.mag);
+            m.power.push(u32::from(s.pmag));
+        }
+    }
+    Ok(m)
+}
+
+/// The power channel's threshold from the rule's: itself when a magnitude
+/// can reach it, else [`power::POWER_OFF`] (both convert to a contrast and
+/// back exactly).
+pub fn power_thr(thr: u32) -> u32 {
+    if thr <= power::POWER_MAX {
+        thr
+    } else {
+        power::POWER_OFF
+    }
+}
+
+/// One channel's calibration over references' magnitudes `all` (one list
+/// per reference): the pooled statistics, the threshold (after `fix`) and,
+/// with more than one reference, per reference the threshold of the
+/// others and how many of its positions reach that.
+fn channel(all: &[Vec<u32>], rule: &Rule, fix: fn(u32) -> u32) -> (Stats, u32, Vec<(u32, usize)>) {
+    let pooled: Vec<u32> = all.iter().flatten().copied().collect();
+    let st = stats(&pooled, rule);
+    let thr = fix(threshold(&st, rule));
+    let mut loo = Vec::new();
+    if all.len() > 1 {
+        for i in 0..all.len() {
+            let others: Vec<u32> = all
+                .iter()
+                .enumerate()
+                .filter(|&(j, _)| j != i)
+                .flat_map(|(_, m)| m.iter().copied())
+                .collect();
+            let t = fix(threshold(&stats(&others, rule), rule));
+            loo.push((t, all[i].iter().filter(|&&x| x >= t).count()));
+        }
+    }
+    (st, thr, loo)
 }
 
 /// The scoring configuration as recorded in a calibration file.
@@ -213,6 +268,10 @@ pub struct Calibration {
     pub threshold: f64,
     pub thr: u32,
     pub q: i32,
+    /// The power channel's threshold, a contrast and its `Q15` integer
+    /// (at most [`power::POWER_MAX`], or [`power::POWER_OFF`]).
+    pub power_threshold: f64,
+    pub pthr: u32,
 }
 
 impl Calibration {
@@ -224,6 +283,11 @@ impl Calibration {
             serde_json::from_str(&text).with_context(|| format!("{p}: not a JSON calibration"))?;
         if v["format"] != FORMAT {
             bail!("{p}: not a calibration file (no \"format\": \"{FORMAT}\")");
+        }
+        if v["version"] == 1 {
+            bail!(
+                "{p}: calibration file version 1 has no power-channel threshold (made before the power channel): run dmap calibrate again"
+            );
         }
         if v["version"] != VERSION {
             bail!(
@@ -267,11 +331,44 @@ impl Calibration {
             );
         }
         let threshold = exact;
+        let pch = &v["channels"]["power"];
+        let power_threshold = pch["threshold"]
+            .as_f64()
+            .filter(|t| t.is_finite() && *t >= 0.0)
+            .ok_or_else(|| anyhow!("{p}: channels.power.threshold missing or not a number >= 0"))?;
+        let pthr = pch["thr"]
+            .as_u64()
+            .and_then(|t| u32::try_from(t).ok())
+            .filter(|&t| power_thr(t) == t)
+            .ok_or_else(|| {
+                anyhow!(
+                    "{p}: channels.power.thr missing or not a power threshold (0..={} or {} for off)",
+                    power::POWER_MAX,
+                    power::POWER_OFF
+                )
+            })?;
+        if pch["q"] != power::POWER_FRAC {
+            bail!(
+                "{p}: channels.power.q must be {} (Q15 contrasts)",
+                power::POWER_FRAC
+            );
+        }
+        let pexact = power::to_units(pthr);
+        if (pexact - power_threshold).abs() > 1e-12 * pexact.max(f64::MIN_POSITIVE) {
+            bail!(
+                "{p}: power threshold {} is not the integer {pthr} in Q15 ({})",
+                fmt_num(power_threshold),
+                fmt_num(pexact)
+            );
+        }
+        debug_assert_eq!(power::threshold_from_units(pexact), pthr);
         Ok(Calibration {
             config: v["config"].clone(),
             threshold,
             thr,
             q,
+            power_threshold: pexact,
+            pthr,
         })
     }
 
@@ -447,39 +544,35 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
             );
         }
         let m = magnitudes(scorer, &scan)?;
-        if m.is_empty() {
+        if m.cvm.is_empty() {
             bail!("{} has no position with data", path.display());
         }
-        per_ref.push((path.clone(), scan.rows, scan.cols, stats(&m, &rule)));
+        per_ref.push((
+            path.clone(),
+            scan.rows,
+            scan.cols,
+            stats(&m.cvm, &rule),
+            stats(&m.power, &rule),
+        ));
         all.push(m);
     }
     let Some((config, scorer, _)) = setup else {
         bail!("no reference scan given")
     };
-    let pooled: Vec<u32> = all.iter().flatten().copied().collect();
-    let st = stats(&pooled, &rule);
-    let thr = threshold(&st, &rule);
+    let (cvm_all, pow_all): (Vec<Vec<u32>>, Vec<Vec<u32>>) =
+        all.into_iter().map(|m| (m.cvm, m.power)).unzip();
+    let (st, thr, loo) = channel(&cvm_all, &rule, |t| t);
+    let (pst, pthr, ploo) = channel(&pow_all, &rule, power_thr);
     let units = scorer.score_to_units(thr);
     debug_assert_eq!(scorer.threshold_from_units(units), thr);
+    let punits = power::to_units(pthr);
+    debug_assert_eq!(power::threshold_from_units(punits), pthr);
     let to_units = |v: f64| v * scorer.score_to_units(1);
-    // Leave one out: each reference against the threshold of the others.
-    let mut loo = Vec::new();
-    if all.len() > 1 {
-        for i in 0..all.len() {
-            let others: Vec<u32> = all
-                .iter()
-                .enumerate()
-                .filter(|&(j, _)| j != i)
-                .flat_map(|(_, m)| m.iter().copied())
-                .collect();
-            let t = threshold(&stats(&others, &rule), &rule);
-            loo.push((t, all[i].iter().filter(|&&x| x >= t).count()));
-        }
-    }
+    let pto_units = |v: f64| v * power::to_units(1);
     let refs: Vec<Value> = per_ref
         .iter()
         .enumerate()
-        .map(|(i, (path, rows, cols, s))| {
+        .map(|(i, (path, rows, cols, s, ps))| {
             let mut r = json!({
                 "file": path.display().to_string(),
                 "rows": rows,
@@ -487,10 +580,19 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
                 "max": to_units(f64::from(s.max)),
                 "median": to_units(s.median),
                 "mad": to_units(s.mad),
+                "power": {
+                    "max": pto_units(f64::from(ps.max)),
+                    "median": pto_units(ps.median),
+                    "mad": pto_units(ps.mad),
+                },
             });
             if let Some((t, n)) = loo.get(i) {
                 r["others_threshold"] = json!(scorer.score_to_units(*t));
                 r["at_or_above_others_threshold"] = json!(n);
+            }
+            if let Some((t, n)) = ploo.get(i) {
+                r["power"]["others_threshold"] = json!(power::to_units(*t));
+                r["power"]["at_or_above_others_threshold"] = json!(n);
             }
             r
         })
@@ -500,7 +602,7 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
         "version": VERSION,
         "config": config_json(&config)?,
         "rule": {
-            "text": "thr = Q_p(m) + ceil(k * 1.4826 * MAD(m)) + 1 over the magnitudes m of all reference positions (integer scores); defective when magnitude >= thr",
+            "text": "per channel, thr = Q_p(m) + ceil(k * 1.4826 * MAD(m)) + 1 over the channel's magnitudes m of all reference positions (integers: cvm in Q(q), power in Q15; a power thr above 46340 is recorded as 4294967295, off); defective when a channel's magnitude >= its thr",
             "quantile": rule.quantile,
             "k": rule.k,
         },
@@ -514,6 +616,16 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
                 "quantile_value": to_units(f64::from(st.quantile)),
                 "median": to_units(st.median),
                 "mad": to_units(st.mad),
+            },
+            "power": {
+                "threshold": punits,
+                "thr": pthr,
+                "q": power::POWER_FRAC,
+                "positions": pst.n,
+                "max": pto_units(f64::from(pst.max)),
+                "quantile_value": pto_units(f64::from(pst.quantile)),
+                "median": pto_units(pst.median),
+                "mad": pto_units(pst.mad),
             }
         },
         "references": refs,
@@ -528,7 +640,7 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
     })?;
     let _ = writeln!(
         std::io::stderr(),
-        "dmap calibrate: {} positions of {} reference(s): max {}, median {}, MAD {} -> threshold {} (integer {} in Q({}))",
+        "dmap calibrate: {} positions of {} reference(s): max {}, median {}, MAD {} -> threshold {} (integer {} in Q({})); power: max {}, median {}, MAD {} -> threshold {}",
         st.n,
         a.refs.len(),
         fmt_num(to_units(f64::from(st.max))),
@@ -536,7 +648,15 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
         fmt_num(to_units(st.mad)),
         fmt_num(units),
         thr,
-        scorer.score_frac_bits()
+        scorer.score_frac_bits(),
+        fmt_num(pto_units(f64::from(pst.max))),
+        fmt_num(pto_units(pst.median)),
+        fmt_num(pto_units(pst.mad)),
+        if pthr == power::POWER_OFF {
+            "off (above every power magnitude)".to_string()
+        } else {
+            format!("{} (integer {pthr} in Q15)", fmt_num(punits))
+        }
     );
     Ok(())
 }
@@ -563,6 +683,17 @@ mod tests {
         };
         assert_eq!(threshold(&stats(&m, &r9), &r9), 10);
         assert_eq!(threshold(&stats(&[u32::MAX], &r), &r), u32::MAX);
+    }
+
+    #[test]
+    fn power_threshold_above_every_magnitude_is_off() {
+        assert_eq!(power_thr(0), 0);
+        assert_eq!(power_thr(power::POWER_MAX), power::POWER_MAX);
+        assert_eq!(power_thr(power::POWER_MAX + 1), power::POWER_OFF);
+        // Both kinds convert to a contrast and back exactly.
+        for t in [0, 1, 3277, power::POWER_MAX, power::POWER_OFF] {
+            assert_eq!(power::threshold_from_units(power::to_units(t)), t);
+        }
     }
 
     #[test]

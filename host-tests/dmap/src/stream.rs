@@ -48,9 +48,10 @@ pub struct OutputArgs {
     /// line has the full count; default 0: the object lines describe the defects)
     #[arg(long, default_value_t = 0)]
     pub max_defect_lines: u16,
-    /// Threshold from a calibration file (`dmap calibrate`), the same integer as the
-    /// calibration's; refused unless these scoring options are the ones it was made for
-    #[arg(long, value_name = "CAL.json", conflicts_with = "threshold")]
+    /// Both channels' thresholds from a calibration file (`dmap calibrate`), the same
+    /// integers as the calibration's; refused unless these scoring options are the ones
+    /// it was made for
+    #[arg(long, value_name = "CAL.json", conflicts_with_all = ["threshold", "power_threshold"])]
     pub calibration: Option<PathBuf>,
     /// Full scale of the detector: a sample at or above it flags its map saturated
     /// (header `fs`; 4095 for a 12-bit ADC)
@@ -101,9 +102,14 @@ impl OutputArgs {
         Ok(t)
     }
 
-    /// The power channel's threshold, a contrast: the one given, or the
-    /// default ([`f64::INFINITY`] turns the channel off).
+    /// The power channel's threshold, a contrast: the calibration's (its
+    /// `Q15` integer over `2^15`, which converts back to exactly that
+    /// integer), the one given, or the default ([`f64::INFINITY`] turns the
+    /// channel off).
     pub fn power_threshold_units(&self) -> Result<f64> {
+        if let Some(path) = &self.calibration {
+            return Ok(crate::calibrate::Calibration::load(path)?.power_threshold);
+        }
         let t = self.power_threshold.unwrap_or(DEFAULT_POWER_THRESHOLD);
         if t.is_nan() || t < 0.0 {
             bail!(
