@@ -1,14 +1,16 @@
 //! `dmap listen`: decodes the firmware's result lines (from a file, stdin or
 //! a serial port), checks every CRC, reports damaged lines by number and
-//! keeps going, and rebuilds each scan's score image and summary.
+//! keeps going, and rebuilds each scan's score images, defect objects and
+//! summary.
 
 use crate::npy::write_gradient;
 use crate::stream::fmt_num;
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use cvm_core::flags;
-use cvm_core::protocol::{self, EndInfo, Line, ResetCause};
-use std::collections::BTreeMap;
+use cvm_core::objects::Object;
+use cvm_core::protocol::{self, EndInfo, Line, ResetCause, ScoreValue};
+use std::collections::{BTreeMap, BTreeSet};
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
 
@@ -31,17 +33,41 @@ pub struct ListenArgs {
     /// With --port: stop after this many scans have ended (0 = run until interrupted)
     #[arg(long, default_value_t = 1)]
     pub scans: usize,
-    /// Write the score image of docs/method.md §2 (magnitude in [..., 2], NaN where no
-    /// score arrived); a second scan goes to OUT_2.npy, and so on
+    /// Write the score image of docs/method.md §2: float64, shape (rows, cols, 3), the
+    /// magnitude in [..., 2] (distance units), NaN in [..., 0] and [..., 1] (the components
+    /// do not travel) and where no score arrived; a second scan goes to OUT_2.npy, and so on
     #[arg(short, long, value_name = "OUT.npy")]
     pub output: Option<PathBuf>,
+    /// Write the power channel's image (docs/method.md §6) in the same shape and layout as
+    /// -o, so that dmap render and dmap eval read it alike: the power magnitude (a
+    /// contrast, 0 to 1.41) in [..., 2], NaN in [..., 0] and [..., 1] and where no score
+    /// arrived; a second scan goes to OUT_2.npy, and so on
+    #[arg(long, value_name = "OUT.npy")]
+    pub power_output: Option<PathBuf>,
+    /// Scan pitch in µm (the same on both axes): object sizes in mm besides positions.
+    /// An object's extent is one position wider on each side than its defect (Eq. 1
+    /// compares a position's two neighbours); the defect size printed is the extent less
+    /// 2 positions per axis, at least 1
+    #[arg(long, value_name = "P", value_parser = positive_f64)]
+    pub pitch_um: Option<f64>,
     /// Decode at most this many scans in one run; later scans are reported, not kept
     #[arg(long, default_value_t = DEFAULT_MAX_SCANS, value_name = "N",
           value_parser = clap::value_parser!(u32).range(1..=MAX_SCANS as i64))]
     pub max_scans: u32,
-    /// Print the summary as one JSON object per scan instead of text
+    /// Print the summary as one JSON document instead of text: {"objects", "totals"} of
+    /// the last (or only) scan, "problems" of the whole stream, and "scans" (every scan's
+    /// header, objects, defect lines, totals and problems); see docs/protocol.md
     #[arg(long)]
     pub json: bool,
+}
+
+/// A finite number above 0 (`--pitch-um`).
+fn positive_f64(s: &str) -> Result<f64, String> {
+    s.trim()
+        .parse::<f64>()
+        .ok()
+        .filter(|v| v.is_finite() && *v > 0.0)
+        .ok_or_else(|| "expected a finite number above 0".to_string())
 }
 
 /// A damaged or unexpected line.
@@ -65,7 +91,57 @@ pub struct Defect {
     pub col: u32,
     /// Magnitude in distance units.
     pub score: f64,
+    /// Power magnitude, a contrast (`pmag / 2^15`).
+    pub power: f64,
+    /// How far past its threshold the strongest channel that fired is,
+    /// `Q16` (65536 = at the threshold).
+    pub strength: u32,
     pub flags: u8,
+}
+
+/// Strength (`Q16` ratio to the threshold) as a ratio.
+pub fn strength_ratio(strength: u32) -> f64 {
+    strength as f64 / 65536.0
+}
+
+/// `"cvm"`, `"power"`: the channels of a flag or `channels` value.
+pub fn channel_names(bits: u8) -> Vec<&'static str> {
+    let mut v = Vec::new();
+    if bits & flags::CVM_DEFECT != 0 {
+        v.push("cvm");
+    }
+    if bits & flags::POWER_DEFECT != 0 {
+        v.push("power");
+    }
+    v
+}
+
+/// Size of a defect object along its rows and columns, in positions.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ObjectSize {
+    /// Detected extent (height, width): `row1 - row0 + 1`, `col1 - col0 + 1`.
+    pub extent: (u64, u64),
+    /// The defect's size: the extent less one position on each side (at
+    /// least 1). Eq. 1 compares a position's two neighbours, so the
+    /// positions just outside a defect score like its edge.
+    pub size: (u64, u64),
+}
+
+impl ObjectSize {
+    pub fn of(o: &Object) -> Self {
+        let h = u64::from(o.row1.saturating_sub(o.row0)) + 1;
+        let w = u64::from(o.col1.saturating_sub(o.col0)) + 1;
+        let corrected = |n: u64| n.saturating_sub(2).max(1);
+        ObjectSize {
+            extent: (h, w),
+            size: (corrected(h), corrected(w)),
+        }
+    }
+}
+
+/// A `Q8` centroid coordinate in positions.
+pub fn q8(v: u64) -> f64 {
+    v as f64 / 256.0
 }
 
 /// Everything decoded about one scan.
@@ -79,6 +155,14 @@ pub struct ScanResult {
     /// Score format: integer scores are `s / 2^q` distance units.
     pub q: i32,
     pub threshold: f64,
+    /// Power channel threshold as a contrast (`pthr / 2^15`); `None`: the
+    /// channel is off (`pthr` above every power magnitude).
+    pub power_threshold: Option<f64>,
+    /// `k`, `b`, `w` and `norm` of the header.
+    pub kernels: char,
+    pub kernel_size: u8,
+    pub weights: String,
+    pub normalise: bool,
     pub scores_enabled: bool,
     /// Full scale of the samples (`fs`).
     pub full_scale: u16,
@@ -87,15 +171,23 @@ pub struct ScanResult {
     /// Why the board last started (`rst`), and its starts since power-on (`boots`).
     pub reset_cause: Option<ResetCause>,
     pub boots: u32,
-    /// Magnitudes and flags received, by row then column (integer scores).
-    /// Sparse, so that memory follows the lines received, never the
-    /// geometry a (possibly corrupted) header claims.
-    pub scores: BTreeMap<u32, BTreeMap<u32, (u32, u8)>>,
+    /// Magnitudes, power magnitudes and flags received, by row then
+    /// column (integers as the lines carry them). Sparse, so that memory
+    /// follows the lines received, never the geometry a (possibly
+    /// corrupted) header claims.
+    pub scores: BTreeMap<u32, BTreeMap<u32, ScoreValue>>,
     /// Row summaries received.
     pub rows: BTreeMap<u32, cvm_core::RowSummary>,
     pub defects: Vec<Defect>,
     /// Defects counted by row lines but not listed (per-row cap).
     pub unlisted_defects: u64,
+    /// Defect objects (`O` lines) in the order they arrived.
+    pub objects: Vec<Object>,
+    /// `O` lines that arrived in the scan, kept or not (for the end
+    /// line's `obj`).
+    pub objects_arrived: u64,
+    /// Ids of the objects that arrived.
+    object_ids: BTreeSet<u32>,
     pub end: Option<EndInfo>,
     /// Problems found while decoding this scan (beyond damaged lines; the
     /// first [`MAX_PROBLEMS`]).
@@ -109,16 +201,22 @@ pub struct ScanResult {
 }
 
 /// The line order of docs/protocol.md: rows ascending, each its `R` line,
-/// its `D` lines strongest first, its `S` lines by column.
+/// its `D` lines strongest first, its `S` lines by column, then the `O`
+/// lines of the objects it closed in increasing id; at the scan's end, the
+/// `O` lines of the objects still open.
 #[derive(Clone, Copy, Debug, Default)]
 struct Order {
     /// The row of the last `R` line, its `listed` count and the `D` lines
     /// that arrived for it.
     row: Option<(u32, u32, u32)>,
-    /// Magnitude and column of the row's last `D` line.
+    /// Strength and column of the row's last `D` line.
     last_defect: Option<(u32, u32)>,
     /// `col0` of the row's last `S` line.
     last_scores: Option<u32>,
+    /// Since the last `R` line: the last `O` line's id, and whether its
+    /// object ends in that very row (only the end of the scan closes such
+    /// an object).
+    last_object: Option<(u32, bool)>,
 }
 
 impl ScanResult {
@@ -170,13 +268,29 @@ impl ScanResult {
     /// so components 0 and 1 are NaN; NaN also where no score arrived or
     /// the position had no data.
     pub fn image(&self) -> Vec<f64> {
+        self.plane(|v| self.units(v.mag), |d| d.score)
+    }
+
+    /// The power channel's image in the layout of [`ScanResult::image`]:
+    /// the power magnitude (a contrast) in component 2, NaN elsewhere.
+    pub fn power_image(&self) -> Vec<f64> {
+        self.plane(|v| cvm_core::power::to_units(v.pmag as u32), |d| d.power)
+    }
+
+    /// `(rows, cols, 3)` with `value` of each score in component 2 (from
+    /// the defect lines when the scan has no score lines).
+    fn plane(
+        &self,
+        value: impl Fn(&ScoreValue) -> f64,
+        defect: impl Fn(&Defect) -> f64,
+    ) -> Vec<f64> {
         let (rows, cols) = (self.n_rows(), self.cols);
         let mut img = vec![f64::NAN; rows * cols * 3];
         for (&r, line) in &self.scores {
-            for (&c, (mag, fl)) in line {
+            for (&c, v) in line {
                 let c = c as usize;
-                if fl & flags::NO_DATA == 0 && (r as usize) < rows && c < cols {
-                    img[(r as usize * cols + c) * 3 + 2] = self.units(*mag);
+                if v.flags & flags::NO_DATA == 0 && (r as usize) < rows && c < cols {
+                    img[(r as usize * cols + c) * 3 + 2] = value(v);
                 }
             }
         }
@@ -185,7 +299,7 @@ impl ScanResult {
             for d in &self.defects {
                 let (r, c) = (d.row as usize, d.col as usize);
                 if r < rows && c < cols {
-                    img[(r * cols + c) * 3 + 2] = d.score;
+                    img[(r * cols + c) * 3 + 2] = defect(d);
                 }
             }
         }
@@ -197,8 +311,8 @@ impl ScanResult {
         let mut with = 0;
         let mut without = 0;
         for line in self.scores.values() {
-            for (_, fl) in line.values() {
-                if fl & flags::NO_DATA == 0 {
+            for v in line.values() {
+                if v.flags & flags::NO_DATA == 0 {
                     with += 1;
                 } else {
                     without += 1;
@@ -375,8 +489,7 @@ impl Decoder {
             }
         };
         match line {
-            // Objects are read by the object report (not yet in this decoder).
-            Line::Object(_) => {}
+            Line::Object(o) => self.object(o),
             Line::Header(h) => {
                 self.skipping = false;
                 if let Some(prev) = self.current.take() {
@@ -405,6 +518,12 @@ impl Decoder {
                     max_defect_lines: h.max_defect_lines,
                     reset_cause: Some(h.reset_cause),
                     boots: h.boots,
+                    kernels: h.kernels as char,
+                    kernel_size: h.kernel_size,
+                    weights: h.weights.to_string(),
+                    normalise: h.normalise,
+                    power_threshold: (h.power_threshold <= cvm_core::power::POWER_MAX)
+                        .then(|| cvm_core::power::to_units(h.power_threshold)),
                     ..ScanResult::default()
                 };
                 s.threshold = s.units(h.threshold);
@@ -440,6 +559,12 @@ impl Decoder {
                         summary.row
                     ));
                 }
+                if let (Some((prev, ..)), Some((id, true))) = (order.row, order.last_object) {
+                    self.problem(format!(
+                        "object {id} ends in row {prev} but row {}'s line follows it: only the scan's end closes an object in the last row reported (out of order)",
+                        summary.row
+                    ));
+                }
                 self.check_defects_arrived(order);
                 let Some(s) = self.current.as_mut() else {
                     return;
@@ -455,8 +580,9 @@ impl Decoder {
                 row,
                 col,
                 mag,
+                pmag,
+                strength,
                 flags,
-                ..
             } => {
                 let Some(s) = self.current.as_mut() else {
                     return self.error("defect line outside a scan (header lost?)");
@@ -471,6 +597,8 @@ impl Decoder {
                     row,
                     col,
                     score,
+                    power: cvm_core::power::to_units(pmag as u32),
+                    strength,
                     flags,
                 });
                 let order = &mut s.order;
@@ -484,22 +612,32 @@ impl Decoder {
                     Some(_) if order.last_scores.is_some() => Some(format!(
                         "defect line of row {row} after its score lines (out of order)"
                     )),
+                    Some(_) if order.last_object.is_some() => Some(format!(
+                        "defect line of row {row} after the object lines of its row (out of order)"
+                    )),
                     Some((_, listed, arrived)) if arrived >= listed => Some(format!(
                         "row {row} lists {listed} defect line(s); more arrived"
                     )),
                     Some(_) => match order.last_defect {
-                        Some((m, c)) if mag > m || (mag == m && col <= c) => Some(format!(
-                            "defect lines of row {row} not strongest first (column {col} after column {c})"
-                        )),
+                        Some((m, c)) if strength > m || (strength == m && col <= c) => {
+                            Some(format!(
+                                "defect lines of row {row} not strongest first (column {col} after column {c})"
+                            ))
+                        }
                         _ => None,
                     },
                 };
                 if let Some((_, _, arrived)) = order.row.as_mut() {
                     *arrived += 1;
                 }
-                order.last_defect = Some((mag, col));
+                order.last_defect = Some((strength, col));
                 if let Some(what) = what {
                     self.problem(what);
+                }
+                if flags & cvm_core::flags::DEFECT == 0 || strength < 1 << 16 {
+                    self.problem(format!(
+                        "defect line of row {row} column {col} is no defect (flags {flags}, strength {strength})"
+                    ));
                 }
             }
             Line::Scores { row, col0, chars } => {
@@ -516,6 +654,9 @@ impl Decoder {
                     )),
                     (_, Some(c)) if col0 <= c => Some(format!(
                         "score line of row {row} from column {col0} after the one from column {c} (out of order)"
+                    )),
+                    _ if order.last_object.is_some() => Some(format!(
+                        "score line of row {row} after the object lines of its row (out of order)"
                     )),
                     _ => None,
                 };
@@ -541,7 +682,7 @@ impl Decoder {
                 for (k, c) in chars.chunks(protocol::SCORE_CHARS).enumerate() {
                     // In range: `col0 + n <= cols` was checked above.
                     if let Some(v) = protocol::decode_score(c) {
-                        let again = line.insert(col0 + k as u32, (v.mag, v.flags)).is_some();
+                        let again = line.insert(col0 + k as u32, v).is_some();
                         dup |= again;
                         added += usize::from(!again);
                     }
@@ -569,6 +710,64 @@ impl Decoder {
                 self.scans.push(s);
             }
         }
+    }
+
+    /// An `O` line: filed with its scan, its place in the line order and
+    /// its fields checked.
+    fn object(&mut self, o: Object) {
+        let Some(s) = self.current.as_mut() else {
+            return self.error("object line outside a scan (header lost?)");
+        };
+        s.objects_arrived += 1;
+        let id = o.id;
+        let mut what = Vec::new();
+        let order = &mut s.order;
+        let ends_here = match order.row {
+            None => {
+                what.push(format!("object {id} before any row line (out of order)"));
+                false
+            }
+            Some((r, ..)) if o.row1 > r => {
+                what.push(format!(
+                    "object {id} ends in row {}, after the last row reported ({r}): an object line follows the lines of the row that closes it (out of order)",
+                    o.row1
+                ));
+                false
+            }
+            Some((r, ..)) => {
+                let ends_here = o.row1 == r;
+                match order.last_object {
+                    Some((prev, true)) if !ends_here => what.push(format!(
+                        "object {id}, closed by row {r}, after object {prev}, which only the scan's end closes (out of order)"
+                    )),
+                    Some((prev, prev_ends)) if prev_ends == ends_here && id <= prev => {
+                        what.push(format!(
+                            "object lines after row {r} not in increasing id ({id} after {prev})"
+                        ))
+                    }
+                    _ => {}
+                }
+                ends_here
+            }
+        };
+        order.last_object = Some((id, ends_here));
+        if !s.object_ids.insert(id) {
+            what.push(format!("object {id} reported twice in the scan"));
+        }
+        if let Some(bad) = object_fault(&o, s.cols) {
+            what.push(format!("object {id}: {bad}"));
+        }
+        for w in what {
+            self.problem(w);
+        }
+        let Some(s) = self.current.as_mut() else {
+            return;
+        };
+        if s.objects.len() >= MAX_DEFECTS || self.kept >= self.max_kept {
+            return self.problem("more object lines than an image can hold; the rest ignored");
+        }
+        self.kept += 1;
+        s.objects.push(o);
     }
 
     /// After the last line of a row: as many `D` lines as its `R` line listed.
@@ -607,6 +806,30 @@ impl Decoder {
                 ),
             });
         }
+        if let Some(e) = s.end {
+            let (claimed, arrived) = (u64::from(e.totals.objects), s.objects_arrived);
+            if claimed != arrived {
+                s.add_problem(LineError {
+                    line: self.line_no,
+                    what: format!(
+                        "end line counts {claimed} object(s), {arrived} object line(s) arrived"
+                    ),
+                });
+            } else if s.objects.len() as u64 == arrived {
+                // Every defective position is in one object or counted in `unobj`.
+                let covered: u64 = s.objects.iter().map(|o| u64::from(o.area)).sum();
+                let left_out = u64::from(e.totals.unobjected);
+                if covered + left_out != u64::from(e.totals.defects) {
+                    s.add_problem(LineError {
+                        line: self.line_no,
+                        what: format!(
+                            "objects cover {covered} position(s) and {left_out} were left out of every object, but the end line counts {} defect(s)",
+                            e.totals.defects
+                        ),
+                    });
+                }
+            }
+        }
         let misplaced = s.end.map_or(0, |e| e.totals.misplaced);
         if misplaced > 0 {
             s.add_problem(LineError {
@@ -639,6 +862,49 @@ impl Decoder {
             self.error("stream ended before the scan's end line");
             self.scans.push(s);
         }
+    }
+}
+
+/// What is impossible about an object of a scan of `cols` columns, if
+/// anything: a box past the last column, an area of 0 or beyond its box,
+/// a peak outside its box or below the threshold, no channel, a centroid
+/// outside its box.
+fn object_fault(o: &Object, cols: usize) -> Option<String> {
+    let (h, w) = (
+        u64::from(o.row1 - o.row0) + 1,
+        u64::from(o.col1 - o.col0) + 1,
+    );
+    let inside = |r: u32, c: u32| (o.row0..=o.row1).contains(&r) && (o.col0..=o.col1).contains(&c);
+    let box_q8 = |v: u64, a: u32, b: u32| (u64::from(a) << 8..=u64::from(b) << 8).contains(&v);
+    if o.col1 as usize >= cols {
+        Some(format!(
+            "columns {}-{} run past the scan's {cols} columns",
+            o.col0, o.col1
+        ))
+    } else if o.area == 0 || u64::from(o.area) > h * w {
+        Some(format!("area {} does not fit its {h}x{w} box", o.area))
+    } else if !inside(o.peak_row, o.peak_col) {
+        Some(format!(
+            "peak at row {} column {} outside its box",
+            o.peak_row, o.peak_col
+        ))
+    } else if o.peak < 1 << 16 {
+        Some(format!(
+            "peak strength {} below the threshold (65536)",
+            o.peak
+        ))
+    } else if o.channels == 0 {
+        Some("no channel fired".to_string())
+    } else if !box_q8(o.centroid_row_q8, o.row0, o.row1)
+        || !box_q8(o.centroid_col_q8, o.col0, o.col1)
+    {
+        Some(format!(
+            "centroid ({:.2}, {:.2}) outside its box",
+            q8(o.centroid_row_q8),
+            q8(o.centroid_col_q8)
+        ))
+    } else {
+        None
     }
 }
 
@@ -778,21 +1044,85 @@ fn output_path(base: &Path, k: usize) -> PathBuf {
     base.with_file_name(format!("{stem}_{}.npy", k + 1))
 }
 
+/// Objects listed per scan in the text summary.
+pub const TEXT_OBJECTS: usize = 100;
+
+/// [`summary_text_with`] without a pitch: sizes in positions only.
 pub fn summary_text(dec: &Decoder) -> String {
+    summary_text_with(dec, None)
+}
+
+/// `3x5 positions`, and with a pitch `(1.00 x 1.67 mm)`: height (rows)
+/// by width (columns).
+fn size_text((h, w): (u64, u64), pitch_um: Option<f64>) -> String {
+    match pitch_um {
+        Some(p) => format!("{h}x{w} positions ({:.2} x {:.2} mm)", mm(h, p), mm(w, p)),
+        None => format!("{h}x{w} positions"),
+    }
+}
+
+/// `n` positions at a pitch of `pitch_um` µm, in mm.
+fn mm(n: u64, pitch_um: f64) -> f64 {
+    n as f64 * pitch_um / 1000.0
+}
+
+/// A value for the report: four decimals, or four significant digits in
+/// exponent form when it is huge or tiny.
+fn short(v: f64) -> String {
+    let a = v.abs();
+    if v == 0.0 || !v.is_finite() || (1e-3..1e6).contains(&a) {
+        format!("{v:.4}")
+    } else {
+        format!("{v:.3e}")
+    }
+}
+
+/// One object of the text summary.
+pub fn object_text(o: &Object, s: &ScanResult, pitch_um: Option<f64>) -> String {
+    let size = ObjectSize::of(o);
+    format!(
+        "object {}: rows {}-{}, cols {}-{}, area {}, extent {}, defect {}; peak {:.2}x threshold at row {} col {} (magnitude {}, power {}); centroid row {:.2} col {:.2}; channels {}",
+        o.id,
+        o.row0,
+        o.row1,
+        o.col0,
+        o.col1,
+        o.area,
+        size_text(size.extent, pitch_um),
+        size_text(size.size, pitch_um),
+        strength_ratio(o.peak),
+        o.peak_row,
+        o.peak_col,
+        short(s.units(o.peak_mag)),
+        short(cvm_core::power::to_units(o.peak_power as u32)),
+        q8(o.centroid_row_q8),
+        q8(o.centroid_col_q8),
+        channel_names(o.channels).join("+")
+    )
+}
+
+/// The human report: per scan its header, defect lines, objects, totals
+/// and problems; then the stream's line errors. With `pitch_um`, object
+/// sizes in mm too.
+pub fn summary_text_with(dec: &Decoder, pitch_um: Option<f64>) -> String {
     use std::fmt::Write;
     let mut o = String::new();
     for (k, s) in dec.scans.iter().enumerate() {
         let (with, without) = s.coverage();
         let _ = writeln!(
             o,
-            "scan {}: firmware {}, {}x{} maps, {} rows x {} cols, threshold {}",
+            "scan {}: firmware {}, {}x{} maps, {} rows x {} cols, threshold {}, {}",
             k + 1,
             s.firmware,
             s.geometry.0,
             s.geometry.1,
             s.n_rows(),
             s.cols,
-            fmt_num(s.threshold)
+            fmt_num(s.threshold),
+            match s.power_threshold {
+                Some(t) => format!("power threshold {} (contrast)", short(t)),
+                None => "power channel off".to_string(),
+            }
         );
         let _ = writeln!(
             o,
@@ -808,12 +1138,38 @@ pub fn summary_text(dec: &Decoder) -> String {
         for d in s.defects.iter().take(20) {
             let _ = writeln!(
                 o,
-                "    row {:4} col {:4} score {:.6}",
-                d.row, d.col, d.score
+                "    row {:4} col {:4} score {:.6} power {:.6} strength {:.2}x threshold, {}",
+                d.row,
+                d.col,
+                d.score,
+                d.power,
+                strength_ratio(d.strength),
+                channel_names(d.flags).join("+")
             );
         }
         if s.defects.len() > 20 {
             let _ = writeln!(o, "    ... {} more", s.defects.len() - 20);
+        }
+        let _ = writeln!(o, "  objects: {}", s.objects.len());
+        for obj in s.objects.iter().take(TEXT_OBJECTS) {
+            let _ = writeln!(o, "    {}", object_text(obj, s, pitch_um));
+        }
+        if s.objects.len() > TEXT_OBJECTS {
+            let _ = writeln!(
+                o,
+                "    ... {} more (all of them in --json)",
+                s.objects.len() - TEXT_OBJECTS
+            );
+        }
+        if let Some(e) = s.end
+            && e.totals.unobjected > 0
+        {
+            let _ = writeln!(
+                o,
+                "    {} defective position(s) are in no object (more than {} objects or runs open at once): an object may be reported in parts",
+                e.totals.unobjected,
+                cvm_core::objects::MAX_OBJECTS
+            );
         }
         if s.scores_enabled {
             let _ = writeln!(
@@ -856,79 +1212,137 @@ pub fn summary_text(dec: &Decoder) -> String {
     o
 }
 
-/// The end line's key in JSON: `sat` is written out.
-fn json_key(key: &str) -> &str {
-    match key {
-        "sat" => "saturated",
-        k => k,
-    }
-}
-
-/// `rows 300 frames 90000 ... dropped 0`: the end line's totals in its order.
+/// `rows 300 frames 90000 ... dropped 0`: the end line's totals in its
+/// order (`sat` written out).
 fn totals_text(e: &EndInfo) -> String {
     let mut t = e.totals;
     let mut parts: Vec<String> = protocol::END_FIELDS
         .iter()
-        .map(|(key, field)| format!("{} {}", json_key(key), field(&mut t)))
+        .map(|(key, field)| {
+            let key = if *key == "sat" { "saturated" } else { key };
+            format!("{key} {}", field(&mut t))
+        })
         .collect();
     parts.push(format!("{} {}", protocol::DROPPED, e.dropped));
     parts.join(" ")
 }
 
-/// One JSON object per scan (each with the stream's line errors and
-/// whether the stream was damaged); a stream without any scan still gets
-/// one object, with `"firmware": null`, so that its damage is never silent.
-pub fn summary_json(dec: &Decoder) -> Vec<serde_json::Value> {
-    let line_errors: Vec<serde_json::Value> = dec
-        .errors
-        .iter()
-        .map(|p| serde_json::json!({"line": p.line, "what": p.what}))
-        .collect();
-    let damaged = !dec.damage().is_empty();
-    if dec.scans.is_empty() {
-        return vec![serde_json::json!({
-            "firmware": null,
-            "problems": [],
-            "line_errors": line_errors,
-            "line_error_count": dec.error_count(),
-            "scans_skipped": dec.scans_skipped,
-            "damaged": damaged,
-        })];
+/// The end line's totals as a JSON object, keyed as in the line.
+pub fn totals_json(e: &EndInfo) -> serde_json::Value {
+    let mut t = e.totals;
+    let mut m = serde_json::Map::new();
+    for (key, field) in protocol::END_FIELDS {
+        m.insert(key.into(), (*field(&mut t)).into());
     }
-    dec.scans
-        .iter()
-        .map(|s| {
-            let end = s.end.map(|e| {
-                let mut t = e.totals;
-                let mut m = serde_json::Map::new();
-                for (key, field) in protocol::END_FIELDS {
-                    m.insert(json_key(key).into(), (*field(&mut t)).into());
-                }
-                m.insert(protocol::DROPPED.into(), e.dropped.into());
-                serde_json::Value::Object(m)
-            });
-            serde_json::json!({
-                "version": s.version,
-                "firmware": s.firmware,
-                "full_scale": s.full_scale,
-                "max_defect_lines": s.max_defect_lines,
-                "reset_cause": s.reset_cause.map(|c| c.as_str()),
-                "boots": s.boots,
-                "geometry": [s.geometry.0, s.geometry.1],
-                "rows": s.n_rows(),
-                "cols": s.cols,
-                "threshold": s.threshold,
-                "defects": s.defects.iter().map(|d| serde_json::json!({"row": d.row, "col": d.col, "score": d.score})).collect::<Vec<_>>(),
-                "totals": end,
-                "problems": s.problems.iter().map(|p| serde_json::json!({"line": p.line, "what": p.what})).collect::<Vec<_>>(),
-                "problem_count": s.problem_count(),
-                "line_errors": line_errors,
-                "line_error_count": dec.error_count(),
-                "scans_skipped": dec.scans_skipped,
-                "damaged": damaged,
-            })
-        })
+    m.insert(protocol::DROPPED.into(), e.dropped.into());
+    serde_json::Value::Object(m)
+}
+
+/// One object in JSON: `peak` and `centroid` as numbers of positions and
+/// threshold ratios, sizes in positions, and in mm with `pitch_um`.
+pub fn object_json(o: &Object, s: &ScanResult, pitch_um: Option<f64>) -> serde_json::Value {
+    let size = ObjectSize::of(o);
+    let mut v = serde_json::json!({
+        "id": o.id,
+        "rows": [o.row0, o.row1],
+        "cols": [o.col0, o.col1],
+        "area": o.area,
+        "extent": [size.extent.0, size.extent.1],
+        "size": [size.size.0, size.size.1],
+        "peak": strength_ratio(o.peak),
+        "peak_at": [o.peak_row, o.peak_col],
+        "peak_magnitude": s.units(o.peak_mag),
+        "peak_power": cvm_core::power::to_units(o.peak_power as u32),
+        "centroid": [q8(o.centroid_row_q8), q8(o.centroid_col_q8)],
+        "channels": channel_names(o.channels),
+    });
+    if let (Some(p), Some(m)) = (pitch_um, v.as_object_mut()) {
+        m.insert(
+            "extent_mm".into(),
+            serde_json::json!([mm(size.extent.0, p), mm(size.extent.1, p)]),
+        );
+        m.insert(
+            "size_mm".into(),
+            serde_json::json!([mm(size.size.0, p), mm(size.size.1, p)]),
+        );
+    }
+    v
+}
+
+fn problems_json(v: &[LineError]) -> Vec<serde_json::Value> {
+    v.iter()
+        .map(|p| serde_json::json!({"line": p.line, "what": p.what}))
         .collect()
+}
+
+/// One scan in JSON.
+pub fn scan_json(s: &ScanResult, pitch_um: Option<f64>) -> serde_json::Value {
+    serde_json::json!({
+        "header": {
+            "version": s.version,
+            "firmware": s.firmware,
+            "geometry": [s.geometry.0, s.geometry.1],
+            "cols": s.cols,
+            "kernels": s.kernels.to_string(),
+            "kernel_size": s.kernel_size,
+            "weights": s.weights,
+            "normalise": s.normalise,
+            "full_scale": s.full_scale,
+            "threshold": s.threshold,
+            "power_threshold": s.power_threshold,
+            "q": s.q,
+            "scores": s.scores_enabled,
+            "max_defect_lines": s.max_defect_lines,
+            "reset_cause": s.reset_cause.map(|c| c.as_str()),
+            "boots": s.boots,
+        },
+        "rows": s.n_rows(),
+        "objects": s.objects.iter().map(|o| object_json(o, s, pitch_um)).collect::<Vec<_>>(),
+        "defects": s.defects.iter().map(|d| serde_json::json!({
+            "row": d.row,
+            "col": d.col,
+            "score": d.score,
+            "power": d.power,
+            "strength": strength_ratio(d.strength),
+            "channels": channel_names(d.flags),
+            "flags": d.flags,
+        })).collect::<Vec<_>>(),
+        "totals": s.end.as_ref().map(totals_json),
+        "problems": problems_json(&s.problems),
+        "problem_count": s.problem_count(),
+    })
+}
+
+/// The whole stream as one JSON document: `objects` and `totals` of the
+/// last (or only) scan (`[]` and `null` without one), `problems` of the
+/// whole stream (each scan's, with `"scan"` its number from 1, then the
+/// line errors, with `"scan": null`), and `scans`, every scan with its
+/// header, objects, defect lines, totals and problems.
+pub fn summary_json(dec: &Decoder, pitch_um: Option<f64>) -> serde_json::Value {
+    let last = dec.scans.last();
+    let mut problems = Vec::new();
+    for (k, s) in dec.scans.iter().enumerate() {
+        for p in &s.problems {
+            problems.push(serde_json::json!({"scan": k + 1, "line": p.line, "what": p.what}));
+        }
+    }
+    for p in &dec.errors {
+        problems.push(serde_json::json!({"scan": null, "line": p.line, "what": p.what}));
+    }
+    let problem_count =
+        dec.error_count() + dec.scans.iter().map(|s| s.problem_count()).sum::<usize>();
+    serde_json::json!({
+        "objects": last.map_or_else(Vec::new, |s| s.objects.iter().map(|o| object_json(o, s, pitch_um)).collect()),
+        "totals": last.and_then(|s| s.end.as_ref().map(totals_json)),
+        "problems": problems,
+        "problem_count": problem_count,
+        "damaged": !dec.damage().is_empty(),
+        "line_errors": problems_json(&dec.errors),
+        "line_error_count": dec.error_count(),
+        "scans_skipped": dec.scans_skipped,
+        "pitch_um": pitch_um,
+        "scans": dec.scans.iter().map(|s| scan_json(s, pitch_um)).collect::<Vec<_>>(),
+    })
 }
 
 /// Largest score image `dmap listen -o` writes (about 800 MB of f64).
@@ -965,14 +1379,31 @@ pub fn run(args: &ListenArgs) -> Result<()> {
             args.scans
         );
     }
-    if let Some(out) = &args.output {
+    let outputs: Vec<(&str, &PathBuf)> =
+        [("-o", &args.output), ("--power-output", &args.power_output)]
+            .into_iter()
+            .filter_map(|(name, p)| p.as_ref().map(|p| (name, p)))
+            .collect();
+    for &(name, out) in &outputs {
         if out.as_os_str() == "-" {
-            bail!("-o -: standard output carries the summary; give the image a file name");
+            bail!("{name} -: standard output carries the summary; give the image a file name");
         }
         // Every name this run may write (OUT.npy, OUT_2.npy, ...) against the input.
         if let Some(input) = &args.input {
             for k in 0..max_scans {
                 crate::out::refuse_inputs(&output_path(out, k), &[Path::new(input)])?;
+            }
+        }
+    }
+    if let (Some(a), Some(b)) = (&args.output, &args.power_output) {
+        for k in 0..max_scans {
+            for j in 0..max_scans {
+                if crate::out::same_destination(&output_path(a, k), &output_path(b, j)) {
+                    bail!(
+                        "-o and --power-output would both write {}",
+                        output_path(a, k).display()
+                    );
+                }
             }
         }
     }
@@ -992,35 +1423,41 @@ pub fn run(args: &ListenArgs) -> Result<()> {
         (None, None) => bail!("give --input FILE (or -) or --port DEV"),
     };
     let mut failures = Vec::new();
-    if let Some(out) = &args.output {
-        if dec.scans.is_empty() {
-            failures.push(format!(
-                "no scan in the stream (no header line decoded); nothing written to {}",
-                out.display()
-            ));
-        }
-        for (k, s) in dec.scans.iter().enumerate() {
+    for (k, s) in dec.scans.iter().enumerate() {
+        // The size comes from what the stream claims: refuse an image that
+        // what arrived does not justify rather than exhaust memory and disk.
+        let refusal = image_refusal(s);
+        for &(name, out) in &outputs {
             let path = output_path(out, k);
-            // The size comes from what the stream claims: refuse an image
-            // that what arrived does not justify rather than exhaust
-            // memory and disk.
-            match image_refusal(s) {
+            match &refusal {
                 Some(why) => failures.push(format!(
                     "scan {} {why}; {} not written",
                     k + 1,
                     path.display()
                 )),
-                None => write_gradient(&path, s.n_rows(), s.cols, &s.image())?,
+                None => {
+                    let img = if name == "-o" {
+                        s.image()
+                    } else {
+                        s.power_image()
+                    };
+                    write_gradient(&path, s.n_rows(), s.cols, &img)?
+                }
             }
         }
     }
+    if dec.scans.is_empty() {
+        for &(_, out) in &outputs {
+            failures.push(format!(
+                "no scan in the stream (no header line decoded); nothing written to {}",
+                out.display()
+            ));
+        }
+    }
     let text = if args.json {
-        summary_json(&dec)
-            .iter()
-            .map(|v| format!("{v}\n"))
-            .collect::<String>()
+        format!("{}\n", summary_json(&dec, args.pitch_um))
     } else {
-        summary_text(&dec)
+        summary_text_with(&dec, args.pitch_um)
     };
     crate::out::stdout(text.as_bytes())?;
     let damage = dec.damage();
@@ -1059,11 +1496,13 @@ mod tests {
         let settings = crate::stream::OutputArgs {
             threshold: Some(0.0),
             scores: true,
+            max_defect_lines: 20,
             ..Default::default()
         }
         .settings(&scorer, 10)
         .unwrap();
-        // Two rows of ten columns: 2 row lines, 20 scores, 20 defects a scan.
+        // Two rows of ten columns: 2 row lines, 20 scores, 20 defects and
+        // (every position a defect) one object a scan.
         let frames: Vec<u16> = (0..20 * 9).map(|i| (i * 37 % 1000) as u16).collect();
         let one = crate::stream::stream_scan(&scorer, settings, 2, &frames).unwrap();
         let mut dec = Decoder::new().with_budget(100);
@@ -1075,10 +1514,10 @@ mod tests {
         let held: Vec<usize> = dec
             .scans
             .iter()
-            .map(|s| s.rows.len() + s.defects.len() + s.n_scores)
+            .map(|s| s.rows.len() + s.defects.len() + s.n_scores + s.objects.len())
             .collect();
-        // 42 each, until the budget of 100 runs out in the third scan.
-        assert_eq!(held[..2], [42, 42]);
+        // 43 each, until the budget of 100 runs out in the third scan.
+        assert_eq!(held[..2], [43, 43]);
         assert!(held[2] <= 16, "{held:?}");
         assert!(dec.scans[0].problems.is_empty() && dec.scans[1].problems.is_empty());
         assert!(dec.scans[2].problem_count() > 0);

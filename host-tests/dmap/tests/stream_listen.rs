@@ -92,14 +92,33 @@ fn stream_then_listen_reproduces_cvm_fixed() {
                 same(&magnitudes(&s.image()), &magnitudes(&want)),
                 "{rows}x{cols} {j1}x{j2} {args:?}"
             );
-            // Defects decoded are exactly the positions at or above the threshold.
-            let thr = scorer.threshold_from_units(0.05);
             let batch = score_scan(&scorer, rows, cols, &data);
-            let want_def: Vec<(u32, u32)> = batch
+            // The power channel's image: every position's power magnitude.
+            let want_power: Vec<f64> = batch
                 .iter()
-                .enumerate()
-                .filter(|(_, p)| p.mag >= thr)
-                .map(|(i, _)| ((i / cols) as u32, (i % cols) as u32))
+                .map(|p| {
+                    if p.flags & cvm_core::flags::NO_DATA != 0 {
+                        f64::NAN
+                    } else {
+                        p.pmag as f64 / 32768.0
+                    }
+                })
+                .collect();
+            assert!(same(&magnitudes(&s.power_image()), &want_power));
+            // Defects decoded are exactly the positions where a channel
+            // reaches its threshold.
+            let thr = scorer.threshold_from_units(0.05);
+            let pthr = cvm_core::power::threshold_from_units(0.1);
+            let defective: Vec<bool> = batch
+                .iter()
+                .map(|p| {
+                    p.flags & cvm_core::flags::NO_DATA == 0
+                        && (p.mag >= thr || p.pmag as u32 >= pthr)
+                })
+                .collect();
+            let want_def: Vec<(u32, u32)> = (0..rows * cols)
+                .filter(|&i| defective[i])
+                .map(|i| ((i / cols) as u32, (i % cols) as u32))
                 .collect();
             let mut got_def: Vec<(u32, u32)> = s.defects.iter().map(|d| (d.row, d.col)).collect();
             // D lines come strongest first within a row.
@@ -108,8 +127,62 @@ fn stream_then_listen_reproduces_cvm_fixed() {
             let e = s.end.unwrap();
             assert_eq!(e.totals.frames as usize, rows * cols);
             assert_eq!(e.totals.rows as usize, rows);
+            // The objects are the 8-connected components of the defects
+            // (unless the object table overflowed).
+            if e.totals.unobjected == 0 {
+                let mut got: Vec<_> = s
+                    .objects
+                    .iter()
+                    .map(|o| ((o.row0, o.row1), (o.col0, o.col1), o.area))
+                    .collect();
+                got.sort();
+                assert_eq!(
+                    got,
+                    components(rows, cols, &defective),
+                    "{rows}x{cols} {j1}x{j2} {args:?}"
+                );
+            }
         }
     }
+}
+
+/// First and last row, first and last column, area.
+type Extent = ((u32, u32), (u32, u32), u32);
+
+/// Bounding rows, columns and area of the 8-connected components of
+/// `set` (row-major), sorted: a flood fill, independent of the core's
+/// streaming labeller.
+fn components(rows: usize, cols: usize, set: &[bool]) -> Vec<Extent> {
+    let mut seen = vec![false; rows * cols];
+    let mut out = Vec::new();
+    for start in 0..rows * cols {
+        if !set[start] || seen[start] {
+            continue;
+        }
+        seen[start] = true;
+        let mut stack = vec![start];
+        let (mut r0, mut r1, mut c0, mut c1, mut area) = (rows, 0, cols, 0, 0u32);
+        while let Some(i) = stack.pop() {
+            let (r, c) = (i / cols, i % cols);
+            (r0, r1, c0, c1) = (r0.min(r), r1.max(r), c0.min(c), c1.max(c));
+            area += 1;
+            for dr in -1i64..=1 {
+                for dc in -1i64..=1 {
+                    let (nr, nc) = (r as i64 + dr, c as i64 + dc);
+                    if (0..rows as i64).contains(&nr) && (0..cols as i64).contains(&nc) {
+                        let j = nr as usize * cols + nc as usize;
+                        if set[j] && !seen[j] {
+                            seen[j] = true;
+                            stack.push(j);
+                        }
+                    }
+                }
+            }
+        }
+        out.push(((r0 as u32, r1 as u32), (c0 as u32, c1 as u32), area));
+    }
+    out.sort();
+    out
 }
 
 fn sample_stream() -> (Scorer, Vec<u8>, usize, usize) {
@@ -193,7 +266,7 @@ fn damage_is_reported_and_the_rest_survives() {
                 f.next();
                 let lr: usize = f.next().unwrap().parse().unwrap();
                 let c0: usize = f.next().unwrap().parse().unwrap();
-                row == lr && (c0..c0 + 32).contains(&(i % cols))
+                row == lr && (c0..c0 + cvm_core::protocol::SCORES_PER_LINE).contains(&(i % cols))
             };
             if on_line {
                 assert!(a.is_nan());
@@ -327,17 +400,42 @@ fn binaries_agree() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
-/// The byte counts quoted in docs/protocol.md ("Bandwidth"), measured on a
-/// 300-column scan of 15x15 maps.
+/// The lines of one row of `scores` (with `summary`), as the encoder
+/// writes them with a cap of `dcap` `D` lines and no `S` lines.
+fn row_lines(
+    summary: cvm_core::RowSummary,
+    scores: &[cvm_core::PositionScore],
+    dcap: u16,
+) -> Vec<Vec<u8>> {
+    let mut sink = dmap::stream::VecSink::default();
+    cvm_core::protocol::encode_row(
+        &cvm_core::RowView {
+            summary,
+            scores,
+            threshold: 1,
+            power_threshold: 3277,
+        },
+        dcap,
+        false,
+        &mut sink,
+    );
+    lines(&sink.0)
+}
+
+/// The byte counts quoted in docs/protocol.md ("Bandwidth"): measured on a
+/// 300-column scan of 15x15 maps, on lines of chosen values, and on lines
+/// with the widest value the encoder can write in every field.
 #[test]
 fn bandwidth_figures_of_the_protocol_document() {
+    use cvm_core::protocol::{self, HeaderInfo, ResetCause};
     let (rows, cols, j1, j2) = (3, 300, 15, 15);
     let mut r = ChaCha8Rng::seed_from_u64(8);
     let data = scan(&mut r, rows, cols, j1 * j2);
     let scorer = ScoringArgs::default().scorer(j1, j2).unwrap();
-    // A threshold no position reaches: no D lines.
+    // Thresholds no position reaches: no D and no O lines.
     let out = OutputArgs {
         threshold: Some(1e9),
+        power_threshold: Some(f64::INFINITY),
         scores: true,
         max_defect_lines: 16,
         calibration: None,
@@ -351,48 +449,165 @@ fn bandwidth_figures_of_the_protocol_document() {
             .map(|l| l.len())
             .collect::<Vec<_>>()
     };
+    assert!(per_type(b'D').is_empty() && per_type(b'O').is_empty());
     assert!(
-        per_type(b'R').iter().all(|&n| n <= 95),
+        per_type(b'R').iter().all(|&n| n <= 47),
         "{:?}",
         per_type(b'R')
     );
-    // 1 955 bytes per row for three-digit row numbers, 20 fewer for one-digit ones.
-    assert_eq!(per_type(b'S').iter().sum::<usize>(), rows * (1955 - 20));
-    assert!(per_type(b'S').iter().all(|&n| n <= 208));
-    // A defect line with a 10-digit magnitude at row 299, column 123.
-    let mut sink = dmap::stream::VecSink::default();
+    // 2 902 bytes per row for three-digit row numbers, 26 fewer for one-digit ones.
+    assert_eq!(per_type(b'S').len(), rows * 13);
+    assert_eq!(per_type(b'S').iter().sum::<usize>(), rows * (2902 - 26));
+    // A full line with a one-digit row and a three-digit col0: 2 bytes
+    // less than with a three-digit row.
+    assert_eq!(per_type(b'S').iter().max(), Some(&(232 - 2)));
+
+    // Row 299 with one defect at column 123: a 10-digit magnitude, a
+    // 4-digit power magnitude, strength 1.5, found by the distance.
     let p = cvm_core::PositionScore {
-        g0: 0,
-        g1: 0,
         mag: 1_234_567_890,
-        strength: 65536,
-        pmag: 123,
+        strength: 98304,
+        pmag: 4567,
         flags: cvm_core::flags::CVM_DEFECT,
         ..Default::default()
     };
-    let mut row = vec![cvm_core::PositionScore::default(); 124];
+    let mut row = vec![cvm_core::PositionScore::default(); 125];
     row[123] = p;
+    row[124].pmag = 4568;
     let summary = cvm_core::RowSummary {
         row: 299,
         max: p.mag,
         argmax: Some(123),
+        pmax: 4568,
+        pargmax: Some(124),
         defects: 1,
         ..Default::default()
     };
-    cvm_core::protocol::encode_row(
-        &cvm_core::RowView {
-            summary,
-            scores: &row,
-            threshold: 1,
-            power_threshold: 3277,
+    let ls = row_lines(summary, &row, 16);
+    assert_eq!((ls[0].len(), ls[1].len()), (45, 40));
+    // An object of rows 120-126, columns 40-47.
+    let o = cvm_core::objects::Object {
+        id: 3,
+        row0: 120,
+        row1: 126,
+        col0: 40,
+        col1: 47,
+        area: 38,
+        peak: 213_909,
+        peak_row: 123,
+        peak_col: 44,
+        peak_mag: 1_234_567_890,
+        peak_power: 4567,
+        channels: cvm_core::flags::DEFECT,
+        centroid_row_q8: 31_565,
+        centroid_col_q8: 11_335,
+    };
+    let mut sink = dmap::stream::VecSink::default();
+    protocol::encode_object(&o, &mut sink);
+    assert_eq!(sink.0.len(), 71);
+
+    // The widest value of every field.
+    let max = u32::MAX;
+    let wide = cvm_core::PositionScore {
+        mag: max,
+        strength: max,
+        pmag: cvm_core::power::POWER_MAX as u16,
+        // Every flag a defect can carry (a defect always has data).
+        flags: 62,
+        ..Default::default()
+    };
+    let summary = cvm_core::RowSummary {
+        row: max,
+        max,
+        argmax: Some(max),
+        pmax: cvm_core::power::POWER_MAX,
+        pargmax: Some(max),
+        defects: max,
+        no_data: max,
+        dark: max,
+        saturated: max,
+    };
+    // `listed` is at most the cap, 65535.
+    let ls = row_lines(summary, &[wide], u16::MAX);
+    assert_eq!(ls[0].len(), 107);
+    // The column is at most the row's last one; a row of 2^32 columns is
+    // no row this encoder sees, so its width is counted by hand: 10 digits
+    // for column 0's 1.
+    assert_eq!(ls[1].len() + 9, 60);
+    let mut sink = dmap::stream::VecSink::default();
+    protocol::encode_object(
+        &cvm_core::objects::Object {
+            id: max,
+            row0: max,
+            row1: max,
+            col0: max,
+            col1: max,
+            area: max,
+            peak: max,
+            peak_row: max,
+            peak_col: max,
+            peak_mag: max,
+            peak_power: cvm_core::power::POWER_MAX as u16,
+            channels: cvm_core::flags::DEFECT,
+            centroid_row_q8: u64::from(max) << 8,
+            centroid_col_q8: u64::from(max) << 8,
         },
-        16,
-        false,
         &mut sink,
     );
-    let ls = lines(&sink.0);
-    assert_eq!(ls[0].len(), 36);
-    assert_eq!(ls[1].len(), 28);
+    assert_eq!(sink.0.len(), 154);
+    let mut sink = dmap::stream::VecSink::default();
+    protocol::encode_end(
+        &cvm_core::Totals {
+            rows: max,
+            frames: max,
+            missing: max,
+            dark: max,
+            saturated: max,
+            defects: max,
+            objects: max,
+            unobjected: max,
+            rejected: max,
+            extra: max,
+            bad: max,
+            clipped: max,
+            misplaced: max,
+        },
+        max,
+        &mut sink,
+    );
+    assert_eq!(sink.0.len(), 253);
+    let mut sink = dmap::stream::VecSink::default();
+    protocol::encode_header(
+        &HeaderInfo {
+            version: protocol::VERSION,
+            firmware: "cvm-fw-0.1.0-0123456789ab",
+            j1: 16,
+            j2: 16,
+            cols: max,
+            kernels: b'P',
+            kernel_size: 255,
+            weights: "separable",
+            normalise: true,
+            full_scale: u16::MAX,
+            threshold: max,
+            power_threshold: max,
+            q: -120,
+            scores: true,
+            max_defect_lines: u16::MAX,
+            reset_cause: ResetCause::Other,
+            boots: max,
+        },
+        &mut sink,
+    );
+    assert_eq!(sink.0.len(), 186);
+    // The score line of a row numbered 2^32 - 1 from a 10-digit col0.
+    let s_max = "S,".len() + 10 + 1 + 10 + 1 + 24 * protocol::SCORE_CHARS + "*XXXX\n".len();
+    assert_eq!(s_max, 246);
+    assert!(
+        [107, 60, 154, 253, 186, 246]
+            .iter()
+            .all(|&n| n <= protocol::MAX_LINE)
+    );
 }
 
 /// `body*XXXX\n` with its CRC-16/CCITT-FALSE.
@@ -411,10 +626,10 @@ fn absurd_geometry_in_valid_lines_costs_no_memory() {
     // keeps only the scores that arrived.
     let mut dec = Decoder::new();
     for body in [
-        "H,v=3,fw=x,j=3x3,cols=4000000000,k=P,b=0,w=uniform,norm=1,fs=65535,thr=1,q=20,scores=1,dcap=16,rst=por,boots=1",
-        "R,2,0,-,0,0,1,0,0",
-        "S,2,3999999999,AAAAAB",
-        "E,rows=4000000000,frames=0,missing=0,dark=0,sat=0,defects=0,rejected=0,extra=0,bad=0,clipped=0,misplaced=0,dropped=0",
+        "H,v=4,fw=x,j=3x3,cols=4000000000,k=P,b=0,w=uniform,norm=1,fs=65535,thr=1,pthr=3277,q=20,scores=1,dcap=16,rst=por,boots=1",
+        "R,2,0,-,0,-,0,0,1,0,0",
+        "S,2,3999999999,AAAAAAAAB",
+        "E,rows=4000000000,frames=0,missing=0,dark=0,sat=0,defects=0,obj=0,unobj=0,rejected=0,extra=0,bad=0,clipped=0,misplaced=0,dropped=0",
     ] {
         dec.feed(&line_with_crc(body));
     }
@@ -422,7 +637,14 @@ fn absurd_geometry_in_valid_lines_costs_no_memory() {
     assert!(dec.errors.is_empty(), "{:?}", dec.errors);
     let s = &dec.scans[0];
     assert_eq!(s.scores[&2].len(), 1);
-    assert_eq!(s.scores[&2][&3_999_999_999], (1, 0));
+    assert_eq!(
+        s.scores[&2][&3_999_999_999],
+        cvm_core::protocol::ScoreValue {
+            mag: 1,
+            pmag: 0,
+            flags: 0
+        }
+    );
     let rows = s
         .problems
         .iter()
@@ -492,7 +714,7 @@ fn protocol_document_examples_parse() {
         .filter(|l| {
             l.len() > 7
                 && l.as_bytes()[1] == b','
-                && b"HRDSE".contains(&l.as_bytes()[0])
+                && b"HRDSOE".contains(&l.as_bytes()[0])
                 && !l.contains('<')
                 && l.contains('*')
         })
@@ -502,13 +724,14 @@ fn protocol_document_examples_parse() {
         let line = format!("{l}\n");
         match protocol::parse(line.as_bytes()) {
             Ok(Line::Header(h)) => assert_eq!(h.version, protocol::VERSION),
-            Ok(Line::End(e)) => assert_eq!(e.totals.frames, 90_000),
+            // A scan of 300 x 300 positions.
+            Ok(Line::End(e)) => assert_eq!(e.totals.frames + e.totals.missing, 90_000),
             Ok(_) => {}
             Err(e) => panic!("{l}: {e}"),
         }
         kinds.push_str(&l[..1]);
     }
-    assert_eq!(kinds, "HHRDDSE", "{examples:?}");
+    assert_eq!(kinds, "HHRDDDSOE", "{examples:?}");
     // Key tables: the first column of the rows after `| key | meaning |`.
     let table_after = |heading: &str| -> Vec<String> {
         let from = doc.find(heading).unwrap();
@@ -618,7 +841,7 @@ fn out_of_order_lines_are_reported() {
     // A D line moved after its row's S lines, and one dropped.
     let mut v = ls.clone();
     let dl = v.remove(first);
-    let s_last = idx(&|l| starts(l, &format!("S,{row_with_two},32,")));
+    let s_last = idx(&|l| starts(l, &format!("S,{row_with_two},24,")));
     v.insert(s_last, dl);
     let d = feed(&v);
     let p: Vec<&str> = d.scans[0]
@@ -648,7 +871,7 @@ fn out_of_order_lines_are_reported() {
     let mut v = ls.clone();
     let (s0, s1) = (
         idx(&|l| starts(l, "S,1,0,")),
-        idx(&|l| starts(l, "S,1,32,")),
+        idx(&|l| starts(l, "S,1,24,")),
     );
     v.swap(s0, s1);
     let d = feed(&v);
@@ -659,7 +882,7 @@ fn out_of_order_lines_are_reported() {
         .collect();
     assert!(
         p.iter()
-            .any(|w| w.contains("from column 0 after the one from column 32")),
+            .any(|w| w.contains("from column 0 after the one from column 24")),
         "{p:?}"
     );
 }
@@ -706,12 +929,12 @@ fn full_scale_reaches_the_header_and_the_scoring() {
     let s = &dec.scans[0];
     assert_eq!(
         (s.version, s.full_scale, s.max_defect_lines, s.boots),
-        (3, 4095, 3, 1)
+        (4, 4095, 3, 1)
     );
     assert_eq!(s.reset_cause, Some(cvm_core::protocol::ResetCause::PowerOn));
     assert_eq!(s.end.unwrap().totals.saturated as usize, saturated);
     let text = String::from_utf8_lossy(&out.stdout);
-    assert!(text.starts_with("H,v=3,"), "{text}");
+    assert!(text.starts_with("H,v=4,"), "{text}");
     assert!(text.lines().next().unwrap().contains(",fs=4095,"), "{text}");
     let listen = std::process::Command::new(exe)
         .args(["listen", "--input", "-"])
@@ -729,7 +952,7 @@ fn full_scale_reaches_the_header_and_the_scoring() {
     let summary = String::from_utf8_lossy(&listen.stdout);
     assert!(
         summary.contains(
-            "protocol v3, full scale 4095, at most 3 defect line(s) per row, reset cause por, start 1 since power-on"
+            "protocol v4, full scale 4095, at most 3 defect line(s) per row, reset cause por, start 1 since power-on"
         ),
         "{summary}"
     );
