@@ -1,9 +1,12 @@
 #!/usr/bin/env bash
 # Re-runs the experiments of docs/experiments.md with the dmap tools, with the
 # simulator's realistic noise (shot, read, ADC, laser fluctuation and drift):
-#  1. prototype preset (Tables 1 and 2): cvm (firmware fixed point), emd, --raw;
+#  1. prototype preset (Tables 1 and 2): cvm (firmware fixed point), emd, --raw, and
+#     cvm + power: the objects the firmware reports (O lines of dmap stream with both
+#     channels' calibrated thresholds, read by scripts/fw_objects.py);
 #  2. paper-sim preset with a 300 um detector spot (Fig. 3), and as the preset is,
 #     also with raw maps scored in f64 (rawf: the fixed-point raw format is coarse);
+#     cvm + power as for the prototype;
 #  3. defect-free parts of each, other seeds: thresholds calibrated on seeds
 #     11-15 (prototype) or 11-13 (paper-sim), false objects counted on seeds
 #     21-30, which the calibration never saw; the defective part is seed 1.
@@ -58,6 +61,22 @@ false_objects() { # DIST CAL STEMS... -> "n n n ..."
   done
   echo "false objects on unseen defect-free parts: ${counts[*]}"
 }
+# The objects as the firmware reports them: dmap stream with both channels' thresholds
+# from the calibration, its O lines against the truth (and, from the S lines, each
+# defect's peak magnitudes against the thresholds).
+board_objects() { # STEM TRUTH CAL
+  run stream "$1.npy" --scores --calibration "$3" > "$1.lines"
+  python3 "$root/scripts/fw_objects.py" "$1.lines" "$2"
+}
+board_false() { # CAL STEMS... -> "n n n ..."
+  local c=$1; shift
+  local counts=()
+  for t in "$@"; do
+    run stream "$t.npy" --calibration "$c" > "$t.lines"
+    counts+=("$(python3 "$root/scripts/fw_objects.py" "$t.lines" --count)")
+  done
+  echo "firmware objects on unseen defect-free parts: ${counts[*]}"
+}
 cal_seeds_p="11 12 13 14 15"
 cal_seeds_s="11 12 13"
 test_seeds="21 22 23 24 25 26 27 28 29 30"
@@ -76,6 +95,9 @@ for d in cvm emd raw; do
   objects "proto_$d.npy" proto.truth.npy "cal_proto_$d.json"
   false_objects "$d" "cal_proto_$d.json" $(for s in $test_seeds; do echo "proto_free_s$s"; done)
 done
+echo "-- prototype, cvm + power (firmware objects, thresholds of cal_proto_cvm.json)"
+board_objects proto proto.truth.npy cal_proto_cvm.json
+board_false cal_proto_cvm.json $(for s in $test_seeds; do echo "proto_free_s$s"; done)
 run render proto_emd.npy proto_cvm.npy proto_free_s21_emd.npy proto_free_s21_cvm.npy proto.truth.npy \
   --titles "EMD,CVM,EMD defect-free,CVM defect-free,truth" --scale 6 -o "$img/prototype.png"
 
@@ -102,6 +124,9 @@ for v in simblur sim; do
     objects "${v}_$d.npy" "$v.truth.npy" "cal_${v}_$d.json"
     false_objects "$d" "cal_${v}_$d.json" $(for s in $tests; do echo "${v}_free_s$s"; done)
   done
+  echo "-- $v, cvm + power (firmware objects, thresholds of cal_${v}_cvm.json)"
+  board_objects "$v" "$v.truth.npy" "cal_${v}_cvm.json"
+  board_false "cal_${v}_cvm.json" $(for s in $test_seeds; do echo "${v}_free_s$s"; done)
 done
 run render simblur_cvm.npy simblur_emd.npy simblur_rawf.npy --titles "CVM,EMD,CVM raw (f64)" --scale 1 -o "$img/simblur.png"
 run render simblur_cvm.npy simblur_emd.npy simblur_rawf.npy --titles "CVM lower left,EMD lower left,raw lower left" --crop 244,19,21,51 --scale 4 --log -o "$img/simblur_lower_left.png"
