@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The product's main job without a board: simulate a scan of a lens with
 # known defects, run it through the firmware on the emulated Cortex-M board
-# (QEMU mps2-an386), decode the firmware's UART lines, and draw the defect map.
+# (QEMU mps2-an386), decode the firmware's UART lines, list the defect objects
+# the firmware reported (sizes in mm), and draw the defect map.
 #
 #   scripts/demo.sh [OUT_DIR]     (default: out/demo)
 set -euo pipefail
@@ -9,7 +10,9 @@ cd "$(dirname "$0")/.."
 root=$PWD
 out=${1:-out/demo}
 threshold=${THRESHOLD:-0.5}
+pitch_um=334   # the prototype preset's scan pitch
 start=$(date +%s)
+command -v python3 > /dev/null || { echo "demo.sh: needs python3 (standard library only) for the object summary" >&2; exit 1; }
 bash scripts/setup.sh
 
 echo "== building the host tools and the emulated firmware" >&2
@@ -43,11 +46,17 @@ echo
 echo "Summary"
 echo "-------"
 sed -n '1,2p;/totals:/p;/line errors/p' "$out/listen.txt"
-echo "planted defects vs the firmware's scores (threshold $threshold):"
-"$dmap" eval "$out/scores.npy" --truth "$out/truth.npy" --threshold "$threshold" | sed -n '/^defect/,$p'
+# The firmware's object lines (O): one per defect, extent one position smaller on
+# each side than reported (Eq. 1's central differences reach one position out).
+echo "defect objects the firmware reported (CVM threshold $threshold, power contrast 0.1; size corrected by one position per side, $pitch_um um pitch):"
+python3 scripts/fw_objects.py "$out/uart.txt" --pitch-um "$pitch_um" | sed 's/^/  /'
+echo "against the planted defects (truth rows/cols, reported extent, error before and after the correction):"
+python3 scripts/fw_objects.py "$out/uart.txt" "$out/truth.npy" > "$out/objects.txt"
+cat "$out/objects.txt"
+if grep -q '^2/2 defects found, 0 false objects, 2 objects' "$out/objects.txt"; then objects=ok; else objects=WRONG; fi
 sed -n 's/.*beams=\([0-9]*\).*instructions_per_beam=\([0-9]*\).*/emulated Cortex-M4: \1 beams, \2 instructions per beam (normalise, embed, gradient, decide, encode)/p' "$out/firmware.log"
 awk -v b="$(wc -c < "$out/uart.txt")" -v t="$t1" -v s="$t0" -v same="$same" \
     'BEGIN { printf "emulated firmware: %d UART bytes in %.1f s; host pipeline output: %s\n", b, t - s, same }'
 echo "defect map: $out/defects.png   (score image: $out/scores.npy, lines: $out/uart.txt)"
 echo "total time: $(( $(date +%s) - start )) s"
-[ "$same" = identical ]
+[ "$same" = identical ] && [ "$objects" = ok ]
