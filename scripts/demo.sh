@@ -35,7 +35,7 @@ cat "$out/firmware.log" >&2
 t1=$(date +%s.%N)
 
 echo "== decoding the UART lines" >&2
-"$dmap" listen --input "$out/uart.txt" -o "$out/scores.npy" > "$out/listen.txt"
+"$dmap" listen --input "$out/uart.txt" --pitch-um "$pitch_um" -o "$out/scores.npy" > "$out/listen.txt"
 "$dmap" render "$out/scores.npy" -o "$out/defects.png" --titles "emulated firmware: CVM gradient magnitude"
 
 # The same scan on the host pipeline must give the same bytes.
@@ -45,12 +45,11 @@ if cmp -s "$out/uart.txt" "$out/host.txt"; then same="identical"; else same="DIF
 echo
 echo "Summary"
 echo "-------"
-sed -n '1,2p;/totals:/p;/line errors/p' "$out/listen.txt"
-# The firmware's object lines (O): one per defect, extent one position smaller on
-# each side than reported (Eq. 1's central differences reach one position out).
-echo "defect objects the firmware reported (CVM threshold $threshold, power contrast 0.1; size corrected by one position per side, $pitch_um um pitch):"
-python3 scripts/fw_objects.py "$out/uart.txt" --pitch-um "$pitch_um" | sed 's/^/  /'
-echo "against the planted defects (truth rows/cols, reported extent, error before and after the correction):"
+# The firmware's object lines (O) as dmap listen decodes them: one per defect, its
+# extent and the defect's size, one position smaller on each side (Eq. 1's central
+# differences reach one position out), in mm at the scan pitch.
+sed -n '1,2p;/^  objects:/p;/^    object /p;/totals:/p;/line errors/p' "$out/listen.txt"
+echo "the firmware's objects against the planted defects (truth rows/cols, reported extent, error before and after the correction):"
 python3 scripts/fw_objects.py "$out/uart.txt" "$out/truth.npy" > "$out/objects.txt"
 cat "$out/objects.txt"
 if grep -q '^2/2 defects found, 0 false objects, 2 objects' "$out/objects.txt"; then objects=ok; else objects=WRONG; fi
