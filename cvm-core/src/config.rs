@@ -75,6 +75,16 @@ pub struct Config {
 }
 
 impl Config {
+    /// `i32` words of one prepared map: `J1 J2` for the paper kernels'
+    /// embedding, `(K + 1) J1 J2` for the square kernels' box sums.
+    pub const fn state_words(&self) -> usize {
+        let cells = self.geometry.cells();
+        match self.kernels {
+            Kernels::Paper { .. } => cells,
+            Kernels::Square { kmax } => (kmax as usize + 1) * cells,
+        }
+    }
+
     /// The paper's default: paper kernels, uniform weights, normalised maps.
     pub const fn paper(geometry: Geometry) -> Self {
         Config {

@@ -256,9 +256,14 @@ impl Scorer {
         self.config.geometry
     }
 
-    /// `J1 * J2`: length of a frame and of a map's state.
+    /// `J1 * J2`: length of a frame.
     pub const fn cells(&self) -> usize {
         self.config.geometry.cells()
+    }
+
+    /// `i32` words of one prepared map ([`Config::state_words`]).
+    pub const fn state_words(&self) -> usize {
+        self.config.state_words()
     }
 
     /// Integer scores are real distances times `2^q`.
@@ -343,8 +348,9 @@ impl Scorer {
         (fl, sum, conv)
     }
 
-    /// Normalises and embeds one raw frame into `state` (`J1 * J2` words):
-    /// the per-map work, done once per beam. Returns the map's flags.
+    /// Normalises and embeds one raw frame into `state`
+    /// ([`Scorer::state_words`] words): the per-map work, done once per
+    /// beam. Returns the map's flags.
     pub fn prepare(&self, frame: &[u16], state: &mut [i32]) -> Result<u8, FrameError> {
         self.prepare_with(frame, state, &mut Scratch::new())
     }
@@ -390,27 +396,18 @@ impl Scorer {
         if frame.len() != n {
             return Err(FrameError::Length);
         }
-        let Some(state) = state.get_mut(..n) else {
+        let Some(state) = state.get_mut(..self.state_words()) else {
             return Err(FrameError::Length);
         };
         match self.kind {
             Kind::Square { kmax } => {
-                if !diff {
-                    let (flags, power) = self.normalise_power(frame, state)?;
-                    return Ok(Prepared {
-                        flags,
-                        power,
-                        score: 0,
-                    });
-                }
-                let new = scratch.v.as_flattened_mut().get_mut(..n).unwrap_or(&mut []);
-                let (flags, power) = self.normalise_power(frame, new)?;
-                let score = self.to_score(self.square_distance(state, new, kmax as usize));
-                state.copy_from_slice(new);
+                let x = scratch.v.as_flattened_mut().get_mut(..n).unwrap_or(&mut []);
+                let (flags, power) = self.normalise_power(frame, x)?;
+                let acc = self.box_sums(x, state, kmax as usize, diff);
                 Ok(Prepared {
                     flags,
                     power,
-                    score,
+                    score: if diff { self.to_score(acc) } else { 0 },
                 })
             }
             Kind::Paper => {
@@ -459,53 +456,82 @@ impl Scorer {
 
     /// Score of the distance between two prepared maps, `Q(q)`, saturating.
     pub fn distance(&self, a: &[i32], b: &[i32]) -> u32 {
-        let n = self.cells();
+        let n = self.state_words();
         let (Some(a), Some(b)) = (a.get(..n), b.get(..n)) else {
             return u32::MAX;
         };
-        let acc = match self.kind {
-            Kind::Paper => squared_difference(a, b),
-            Kind::Square { kmax } => self.square_distance(a, b, kmax as usize),
-        };
-        self.to_score(acc)
+        // Both kernel sets store an embedding whose squared Euclidean
+        // distance is the CVM distance.
+        self.to_score(squared_difference(a, b))
     }
 
-    /// Σ_k Σ_j (box sum of D = a - b)² through a summed-area table of `D`.
-    fn square_distance(&self, a: &[i32], b: &[i32], kmax: usize) -> u64 {
+    /// The square kernels' embedding of a normalised map `x`: for each
+    /// `k = 0..=kmax` and each cell, the sum of `x` over the cell's box of
+    /// half-width `k` (clipped at the map's border), `k`-major, from one
+    /// summed-area table: `(kmax + 1) J1 J2` words, `O(K N)` per map. The
+    /// distance of two maps is then `Σ (e1 - e2)²` over those words,
+    /// because a box sum is linear: `B(x1) - B(x2) = B(x1 - x2)`, the very
+    /// terms of Eq. 8. Every box sum of a map (`x >= 0`) lies between 0 and
+    /// the map's total, which the table already holds in `i32`, so the
+    /// words and their differences fit `i32`; their squares and sum are the
+    /// terms and sum the scorer's bounds were derived for.
+    ///
+    /// With `diff`, also returns `Σ (old - new)²` against the embedding
+    /// `state` held (the streaming engine's vertical component), computed
+    /// word by word as each word is overwritten.
+    fn box_sums(&self, x: &[i32], state: &mut [i32], kmax: usize, diff: bool) -> u64 {
+        // Rows of 32 words, every column index masked to 0..32 (the largest
+        // is 16): no bounds checks in the inner loops, no panics. Row 0 is
+        // the zero row; row i + 1 is written from row i in place.
+        const W: usize = 32;
         let j1 = self.config.geometry.j1 as usize;
         let j2 = self.config.geometry.j2 as usize;
-        let w = j2 + 1;
-        // sat[(i+1)*w + (k+1)] = Σ_{i'<=i, k'<=k} D[i'][k'].
-        let mut sat = [0i32; (MAX_J + 1) * (MAX_J + 1)];
-        for i in 0..j1 {
-            let mut row = 0i32;
-            for k in 0..j2 {
-                let idx = i * j2 + k;
-                let d = match (a.get(idx), b.get(idx)) {
-                    (Some(&x), Some(&y)) => x - y,
-                    _ => 0,
-                };
-                row += d;
-                let above = sat.get(i * w + k + 1).copied().unwrap_or(0);
-                if let Some(s) = sat.get_mut((i + 1) * w + k + 1) {
-                    *s = above + row;
-                }
+        // sat[i+1][k+1] = Σ_{i'<=i, k'<=k} x[i'][k'].
+        let mut sat = [[0i32; W]; MAX_J + 1];
+        for (i, xrow) in x.chunks_exact(j2.max(1)).take(j1).enumerate() {
+            let (done, rest) = sat.split_at_mut((i + 1).min(MAX_J));
+            let (Some(above), Some(row)) = (done.last(), rest.first_mut()) else {
+                break;
+            };
+            let mut run = 0i32;
+            for (k, &v) in xrow.iter().enumerate() {
+                run = run.wrapping_add(v);
+                row[(k + 1) & (W - 1)] = above[(k + 1) & (W - 1)].wrapping_add(run);
             }
         }
-        let at = |i: usize, k: usize| sat.get(i * w + k).copied().unwrap_or(0) as i64;
-        let mut acc: u64 = 0;
+        let mut acc: i64 = 0;
+        let mut words = state.iter_mut();
         for h in 0..=kmax {
+            // Column bounds of every cell's box along axis 2, as table indices.
+            let mut klo = [0usize; MAX_J];
+            let mut khi = [0usize; MAX_J];
+            for k in 0..j2 {
+                let (lo, hi) = crate::tables::box_range(k, h, j2);
+                klo[k & (MAX_J - 1)] = lo;
+                khi[k & (MAX_J - 1)] = hi + 1;
+            }
             for i in 0..j1 {
                 let (ilo, ihi) = crate::tables::box_range(i, h, j1);
-                for k in 0..j2 {
-                    let (klo, khi) = crate::tables::box_range(k, h, j2);
-                    let s =
-                        at(ihi + 1, khi + 1) - at(ilo, khi + 1) - at(ihi + 1, klo) + at(ilo, klo);
-                    acc += (s * s) as u64;
+                let (Some(top), Some(bot)) = (sat.get(ilo), sat.get(ihi + 1)) else {
+                    continue;
+                };
+                for (&lo, &hi) in klo.iter().zip(&khi).take(j2) {
+                    let (lo, hi) = (lo & (W - 1), hi & (W - 1));
+                    let e = bot[hi]
+                        .wrapping_sub(top[hi])
+                        .wrapping_sub(bot[lo])
+                        .wrapping_add(top[lo]);
+                    if let Some(word) = words.next() {
+                        if diff {
+                            let d = word.wrapping_sub(e) as i64;
+                            acc = acc.wrapping_add(d * d);
+                        }
+                        *word = e;
+                    }
                 }
             }
         }
-        acc
+        acc as u64
     }
 
     /// `Q(2f)` squared distance to a `Q(q)` score, rounded, saturating.

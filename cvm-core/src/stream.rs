@@ -141,7 +141,7 @@ pub struct Totals {
 pub enum EngineError {
     /// `cols` is 0 or above the engine's compile-time capacity.
     Columns,
-    /// A row buffer is shorter than [`row_words`].
+    /// A row buffer is shorter than [`row_words_for`].
     Buffer,
 }
 
@@ -171,9 +171,15 @@ pub enum PushOutcome {
 /// rather than turning the gap into that many empty rows.
 pub const MAX_ROW_JUMP: u32 = 1024;
 
-/// `i32` words of one row buffer.
+/// `i32` words of one row buffer for paper kernels (`J1 J2` words per map).
 pub const fn row_words(cols: usize, j1: usize, j2: usize) -> usize {
     cols * j1 * j2
+}
+
+/// `i32` words of one row buffer for any configuration
+/// ([`crate::Config::state_words`] per map).
+pub const fn row_words_for(cols: usize, config: &crate::Config) -> usize {
+    cols * config.state_words()
 }
 
 /// Bytes of engine state for `cols` columns: the two row buffers plus the
@@ -185,7 +191,10 @@ pub const fn window_bytes(cols: usize, j1: usize, j2: usize) -> usize {
 /// The streaming engine, for at most `MAX_COLS` columns.
 pub struct Engine<'a, const MAX_COLS: usize> {
     scorer: &'a Scorer,
+    /// Samples per frame.
     cells: usize,
+    /// Words per prepared map in a row buffer.
+    words: usize,
     cols: usize,
     threshold: u32,
     power_threshold: u32,
@@ -221,13 +230,14 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
             return Err(EngineError::Columns);
         }
         let cells = scorer.cells();
-        let words = row_words(cols, cells, 1);
+        let words = row_words_for(cols, scorer.config());
         if row_a.len() < words || row_b.len() < words {
             return Err(EngineError::Buffer);
         }
         Ok(Engine {
             scorer,
             cells,
+            words: scorer.state_words(),
             cols,
             threshold,
             power_threshold: POWER_OFF,
@@ -400,10 +410,10 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
     }
 
     fn slot(&self, buf: usize, col: usize) -> &[i32] {
-        let start = col * self.cells;
+        let start = col * self.words;
         self.bufs
             .get(buf)
-            .and_then(|b| b.get(start..start + self.cells))
+            .and_then(|b| b.get(start..start + self.words))
             .unwrap_or(&[])
     }
 
@@ -422,9 +432,9 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
         // The new map is prepared straight into slot c. When both
         // neighbours of (r-1, c) have data, their distance comes out of the
         // embedding as it overwrites (r-2, c).
-        let start = c * self.cells;
+        let start = c * self.words;
         let fuse = mid_ok && up_ok;
-        let prepared = match (frame, self.bufs[b].get_mut(start..start + self.cells)) {
+        let prepared = match (frame, self.bufs[b].get_mut(start..start + self.words)) {
             (Some(f), Some(slot)) => self.scorer.prepare_map(f, slot, &mut self.scratch, fuse),
             _ => Err(FrameError::Length),
         };

@@ -22,7 +22,7 @@ use core::cell::RefCell;
 use cortex_m_rt::entry;
 use cvm_core::pipeline::{Pipeline, Settings};
 use cvm_core::protocol::{MAX_LINE, ResetCause};
-use cvm_core::stream::row_words;
+use cvm_core::stream::{row_words, row_words_for};
 use cvm_core::{MAX_J, Scorer};
 use cvm_fw_app::acquire::Acquisition;
 use cvm_fw_app::decode::frame_bytes;
@@ -157,12 +157,15 @@ async fn scan_task(syst: cortex_m::peripheral::SYST) {
         reset_cause: ResetCause::PowerOn,
         boots: 1,
     };
-    let words = row_words(
-        header.cols as usize,
-        scorer.geometry().j1 as usize,
-        scorer.geometry().j2 as usize,
-    );
-    let (row_a, row_b) = (&mut ROW_A.take()[..words], &mut ROW_B.take()[..words]);
+    // Square kernels keep (K + 1) box sums per cell: fewer columns fit.
+    let words = row_words_for(header.cols as usize, scorer.config());
+    let (Some(row_a), Some(row_b)) = (ROW_A.take().get_mut(..words), ROW_B.take().get_mut(..words))
+    else {
+        fail(
+            EXIT_INPUT,
+            "scan too wide for the board's row buffers with these kernels",
+        )
+    };
     let pipeline = match Pipeline::<MAX_COLS>::new(scorer, settings, row_a, row_b) {
         Ok(p) => p,
         Err(_) => fail(EXIT_INTERNAL, "pipeline refused its buffers"),

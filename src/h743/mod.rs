@@ -31,7 +31,7 @@ use cortex_m_rt::entry;
 use cvm_core::Scorer;
 use cvm_core::pipeline::{Pipeline, Settings};
 use cvm_core::protocol::MAX_LINE;
-use cvm_core::stream::row_words;
+use cvm_core::stream::row_words_for;
 use cvm_fw_app::acquire::Acquisition;
 use cvm_fw_app::driver::ScanDriver;
 use cvm_fw_app::queue::LineQueue;
@@ -88,7 +88,7 @@ pub struct Pins {
 }
 
 const CELLS: usize = CORE.geometry.cells();
-const ROW_WORDS: usize = row_words(MAX_COLS, J1 as usize, J2 as usize);
+const ROW_WORDS: usize = row_words_for(MAX_COLS, &CORE);
 
 /// Scoring tables, built by the compiler (in flash).
 const TABLES: Scorer = match Scorer::new(&CORE) {

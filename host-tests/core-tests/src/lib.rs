@@ -132,7 +132,7 @@ pub fn run_engine_with(
     power_threshold: u32,
     frames: &[(cvm_core::Position, Option<Vec<u16>>)],
 ) -> (Vec<(RowSummary, Vec<PositionScore>)>, Totals) {
-    let words = cvm_core::stream::row_words(cols, scorer.cells(), 1);
+    let words = cvm_core::stream::row_words_for(cols, scorer.config());
     let (mut a, mut b) = (vec![0i32; words], vec![0i32; words]);
     let mut engine =
         Box::new(Engine::<256>::new(scorer, cols as u32, threshold, &mut a, &mut b).unwrap());

@@ -40,14 +40,15 @@ fn batch_with_gaps(
     present: &[bool],
 ) -> Vec<PositionScore> {
     let n = scorer.cells();
-    let mut st = vec![0i32; rows * cols * n];
+    let w = scorer.state_words();
+    let mut st = vec![0i32; rows * cols * w];
     let mut fl = vec![0u8; rows * cols];
     for i in 0..rows * cols {
         fl[i] = scorer
-            .prepare(&data[i * n..(i + 1) * n], &mut st[i * n..(i + 1) * n])
+            .prepare(&data[i * n..(i + 1) * n], &mut st[i * w..(i + 1) * w])
             .unwrap();
     }
-    let s = |i: usize| &st[i * n..(i + 1) * n];
+    let s = |i: usize| &st[i * w..(i + 1) * w];
     let pw = |i: usize| {
         data[i * n..(i + 1) * n]
             .iter()

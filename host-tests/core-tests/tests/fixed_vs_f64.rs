@@ -23,7 +23,7 @@ use dmap::options::{KernelArg, ScoringArgs, WeightArg};
 const PER_DISTANCE_STEPS: f64 = 2.0;
 
 fn fixed(scorer: &Scorer, a: &[u16], b: &[u16]) -> (f64, u32) {
-    let n = scorer.cells();
+    let n = scorer.state_words();
     let (mut sa, mut sb) = (vec![0i32; n], vec![0i32; n]);
     scorer.prepare(a, &mut sa).unwrap();
     scorer.prepare(b, &mut sb).unwrap();

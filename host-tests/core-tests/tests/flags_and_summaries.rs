@@ -70,12 +70,12 @@ fn flags_match_the_frame_for_every_entry_point() {
         for &fs in FULL_SCALES {
             for cfg in configs(j1, j2, fs) {
                 let scorer = Scorer::new(&cfg).unwrap();
-                let mut held = vec![0i32; cells];
+                let mut held = vec![0i32; scorer.state_words()];
                 scorer.prepare(&vec![7; cells], &mut held).unwrap();
                 let mut scratch = cvm_core::scorer::Scratch::new();
                 for frame in frames(cells, usize::from(j2), fs, u64::from(fs) + cells as u64) {
                     let want = frame_flags(&frame, fs);
-                    let mut state = vec![0i32; cells];
+                    let mut state = vec![0i32; scorer.state_words()];
                     let what = format!("{j1}x{j2} fs={fs} {cfg:?} frame {frame:?}");
                     assert_eq!(scorer.prepare(&frame, &mut state), Ok(want), "{what}");
                     let mut x = vec![0i32; cells];

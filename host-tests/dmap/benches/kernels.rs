@@ -37,11 +37,11 @@ fn kernels(c: &mut Criterion) {
             b.iter(|| scorer.normalise(black_box(fa), &mut x))
         });
         let mut scratch = Scratch::new();
-        let mut ea = vec![0i32; n];
+        let mut ea = vec![0i32; scorer.state_words()];
         group.bench_function("fixed/prepare", |b| {
             b.iter(|| scorer.prepare_with(black_box(fa), &mut ea, &mut scratch))
         });
-        let mut eb = vec![0i32; n];
+        let mut eb = vec![0i32; scorer.state_words()];
         scorer.prepare(fb, &mut eb).expect("frame of J1*J2 samples");
         scorer.prepare(fa, &mut ea).expect("frame of J1*J2 samples");
         group.bench_function("fixed/distance", |b| {

@@ -315,7 +315,7 @@ impl Kernels {
             boots: 1,
         };
         let n = scan.cells();
-        let words = cvm_core::stream::row_words(scan.cols, n, 1);
+        let words = cvm_core::stream::row_words_for(scan.cols, self.scorer.config());
         let (mut a, mut b) = (vec![0i32; words], vec![0i32; words]);
         let mut pipeline = Box::new(
             Pipeline::<MAX_COLS>::new(&self.scorer, settings, &mut a, &mut b)

@@ -20,18 +20,19 @@ pub fn score_scan(scorer: &Scorer, rows: usize, cols: usize, data: &[u16]) -> Ve
         rows * cols * n,
         "scan length does not match its shape"
     );
-    let mut states = vec![0i32; rows * cols * n];
+    let w = scorer.state_words();
+    let mut states = vec![0i32; rows * cols * w];
     let mut fl = vec![0u8; rows * cols];
     for (i, (frame, state)) in data
         .chunks_exact(n)
-        .zip(states.chunks_exact_mut(n))
+        .zip(states.chunks_exact_mut(w))
         .enumerate()
     {
         fl[i] = scorer
             .prepare(frame, state)
             .expect("frame length checked above");
     }
-    let state = |r: usize, c: usize| &states[(r * cols + c) * n..(r * cols + c + 1) * n];
+    let state = |r: usize, c: usize| &states[(r * cols + c) * w..(r * cols + c + 1) * w];
     let powers: Vec<u32> = data
         .chunks_exact(n)
         .map(|f| f.iter().map(|&a| u32::from(a)).sum())

@@ -215,7 +215,7 @@ impl Banded for FixedPrepare<'_> {
         Ok(counts
             .par_chunks(n)
             .map(|frame| {
-                let mut state = vec![0i32; n];
+                let mut state = vec![0i32; self.0.state_words()];
                 // The length is the scorer's: the scan's geometry made it.
                 let _ = self.0.prepare(frame, &mut state);
                 state

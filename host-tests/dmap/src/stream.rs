@@ -248,7 +248,7 @@ pub fn stream_scan(
             data.len()
         );
     }
-    let words = cvm_core::stream::row_words(cols, n, 1);
+    let words = cvm_core::stream::row_words_for(cols, scorer.config());
     let (mut a, mut b) = (vec![0i32; words], vec![0i32; words]);
     let mut pipeline = Box::new(
         Pipeline::<MAX_COLS>::new(scorer, settings, &mut a, &mut b)
@@ -287,7 +287,7 @@ pub fn stream_mapped(
             scan.rows
         );
     }
-    let words = cvm_core::stream::row_words(cols, n, 1);
+    let words = cvm_core::stream::row_words_for(cols, scorer.config());
     let (mut a, mut b) = (vec![0i32; words], vec![0i32; words]);
     let mut pipeline = Box::new(
         Pipeline::<MAX_COLS>::new(scorer, settings, &mut a, &mut b)
