@@ -790,6 +790,10 @@ fn parse_object<'s>(
     f: &mut Fields<'s, impl Iterator<Item = &'s [u8]>>,
 ) -> Result<Object, ParseError> {
     let e = ParseError::Format;
+    let mut v = [0u32; 10];
+    for x in &mut v {
+        *x = f.u32()?;
+    }
     let [
         id,
         row0,
@@ -801,18 +805,7 @@ fn parse_object<'s>(
         peak_row,
         peak_col,
         peak_mag,
-    ] = [
-        f.u32()?,
-        f.u32()?,
-        f.u32()?,
-        f.u32()?,
-        f.u32()?,
-        f.u32()?,
-        f.u32()?,
-        f.u32()?,
-        f.u32()?,
-        f.u32()?,
-    ];
+    ] = v;
     let peak_power = u16::try_from(f.u32()?).map_err(|_| e)?;
     let centroid_row_q8 = parse_u64(f.next()?).ok_or(e)?;
     let centroid_col_q8 = parse_u64(f.next()?).ok_or(e)?;

@@ -323,7 +323,7 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
                     let (a, b) = (self.slot(1 - pb, c), self.slot(pb, c));
                     (
                         self.scorer.distance(a, b),
-                        self.power_contrast(1 - pb, pb, c),
+                        contrast(self.power(1 - pb, c), self.power(pb, c)),
                     )
                 } else {
                     (0, 0)
@@ -463,14 +463,7 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
         // by (r-1, c) itself. Without a new map slot c still holds (r-2, c).
         if mid_ok {
             let down_ok = own & flags::NO_DATA == 0;
-            let pget = |buf: usize| {
-                self.powers
-                    .get(buf)
-                    .and_then(|p| p.get(c))
-                    .copied()
-                    .unwrap_or(0)
-            };
-            let (up_p, mid_p) = (pget(b), pget(1 - b));
+            let (up_p, mid_p) = (self.power(b, c), self.power(1 - b, c));
             let (g1, p1) = match (up_ok, down_ok) {
                 (true, true) => (fused, contrast(up_p, pw)),
                 (true, false) => (
@@ -531,7 +524,7 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
             (
                 self.scorer
                     .distance(self.slot(b, left), self.slot(b, right)),
-                self.power_contrast_cols(b, left, right),
+                contrast(self.power(b, left), self.power(b, right)),
             )
         };
         if let Some(s) = self.cur_row().get_mut(c) {
@@ -540,28 +533,13 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
         }
     }
 
-    /// Power contrast of slot `c` of buffers `a` and `b`.
-    fn power_contrast(&self, a: usize, b: usize, c: usize) -> u16 {
-        let get = |buf: usize| {
-            self.powers
-                .get(buf)
-                .and_then(|p| p.get(c))
-                .copied()
-                .unwrap_or(0)
-        };
-        contrast(get(a), get(b))
-    }
-
-    /// Power contrast of slots `l` and `r` of buffer `b`.
-    fn power_contrast_cols(&self, b: usize, l: usize, r: usize) -> u16 {
-        let get = |c: usize| {
-            self.powers
-                .get(b)
-                .and_then(|p| p.get(c))
-                .copied()
-                .unwrap_or(0)
-        };
-        contrast(get(l), get(r))
+    /// Power of the map in slot `c` of buffer `buf` (0 where none is held).
+    fn power(&self, buf: usize, c: usize) -> u32 {
+        self.powers
+            .get(buf)
+            .and_then(|p| p.get(c))
+            .copied()
+            .unwrap_or(0)
     }
 
     /// The current row ends: remaining positions have no data, the last

@@ -300,7 +300,10 @@ impl Run<'_> {
                     let r = self.model.row.as_mut().expect("defect line outside a row");
                     assert_eq!(row, r.summary.row);
                     r.defect_lines += 1;
-                    let fired = (mag >= self.threshold, u32::from(pmag) >= self.power_threshold);
+                    let fired = (
+                        mag >= self.threshold,
+                        u32::from(pmag) >= self.power_threshold,
+                    );
                     assert!(fired.0 || fired.1, "a defect line below both thresholds");
                     assert_eq!(fl & flags::CVM_DEFECT != 0, fired.0);
                     assert_eq!(fl & flags::POWER_DEFECT != 0, fired.1);
@@ -320,7 +323,10 @@ impl Run<'_> {
                 Line::Object(o) => {
                     // After the lines of its last row, never before.
                     assert!(o.row1 < self.model.emitted, "object {o:?} before its rows");
-                    assert!(o.area as u64 <= (o.row1 - o.row0 + 1) as u64 * (o.col1 - o.col0 + 1) as u64);
+                    assert!(
+                        o.area as u64
+                            <= (o.row1 - o.row0 + 1) as u64 * (o.col1 - o.col0 + 1) as u64
+                    );
                     assert!(o.col1 < self.cols && o.channels != 0);
                     assert!((o.row0..=o.row1).contains(&o.peak_row));
                     assert!((o.col0..=o.col1).contains(&o.peak_col));
@@ -334,7 +340,10 @@ impl Run<'_> {
                     let t = e.totals;
                     // Every defective position is in exactly one object or counted.
                     assert_eq!(t.objects, m.objects);
-                    assert_eq!(m.object_area + u64::from(t.unobjected), u64::from(t.defects));
+                    assert_eq!(
+                        m.object_area + u64::from(t.unobjected),
+                        u64::from(t.defects)
+                    );
                     assert_eq!(t.rows, m.emitted);
                     assert_eq!(t.frames, m.frames);
                     assert_eq!(
@@ -405,7 +414,10 @@ impl Run<'_> {
                         assert_eq!(pmag, 0, "a map without neighbours is its own neighbour");
                     }
                     assert!(u32::from(pmag) <= cvm_core::power::POWER_MAX);
-                    let fired = (mag >= self.threshold, u32::from(pmag) >= self.power_threshold);
+                    let fired = (
+                        mag >= self.threshold,
+                        u32::from(pmag) >= self.power_threshold,
+                    );
                     assert_eq!(fl & flags::CVM_DEFECT != 0, fired.0, "({r}, {c})");
                     assert_eq!(fl & flags::POWER_DEFECT != 0, fired.1, "({r}, {c})");
                     dark += u32::from(fl & flags::DARK != 0);
