@@ -32,7 +32,11 @@ fn main() {
     if h743 {
         let out = PathBuf::from(env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
         let spec = env::var("CVM_H743_SCAN").unwrap_or_default();
-        let consts = match h743_scan(&spec) {
+        let cal = env::var_os("CVM_H743_CALIBRATION").map(PathBuf::from);
+        if let Some(path) = &cal {
+            println!("cargo:rerun-if-changed={}", path.display());
+        }
+        let consts = match h743_scan(&spec, cal.as_deref()) {
             Ok(c) => c,
             Err(e) => {
                 println!("cargo:warning=CVM_H743_SCAN: {e}");
@@ -41,6 +45,7 @@ fn main() {
         };
         std::fs::write(out.join("h743_scan.rs"), consts).expect("writing OUT_DIR/h743_scan.rs");
         println!("cargo:rerun-if-env-changed=CVM_H743_SCAN");
+        println!("cargo:rerun-if-env-changed=CVM_H743_CALIBRATION");
     }
 
     println!("cargo:rustc-link-arg-bins=--nmagic");
@@ -58,7 +63,12 @@ fn main() {
 /// (uniform|unit), normalise, threshold, pthr (the power channel's
 /// threshold, a contrast; `inf` turns it off), scores, max_defect_lines,
 /// fs (full scale), fw (the version in the header).
-fn h743_scan(spec: &str) -> Result<String, String> {
+///
+/// `CVM_H743_CALIBRATION` names a calibration file (`dmap calibrate`): its
+/// two thresholds are compiled in, after checking that it was made for
+/// this very configuration (geometry, kernels, weights, normalisation,
+/// full scale); `threshold` and `pthr` may then not be given.
+fn h743_scan(spec: &str, calibration: Option<&std::path::Path>) -> Result<String, String> {
     let mut j1 = 15u8;
     let mut j2 = 15u8;
     let mut cols = 300usize;
@@ -120,6 +130,31 @@ fn h743_scan(spec: &str) -> Result<String, String> {
     if cols == 0 || rows == 0 {
         return Err("cols and rows must be at least 1".into());
     }
+    if let Some(path) = calibration {
+        if spec
+            .split_whitespace()
+            .any(|p| p.starts_with("threshold=") || p.starts_with("pthr="))
+        {
+            return Err(
+                "threshold and pthr come from CVM_H743_CALIBRATION; do not give them too".into(),
+            );
+        }
+        let resolved_b = match (kernels.as_str(), b) {
+            ("paper", b) => b.unwrap_or(0),
+            (_, Some(k)) => k,
+            (_, None) => j1.max(j2) - 1,
+        };
+        let config = serde_json::json!({
+            "j1": j1,
+            "j2": j2,
+            "kernels": kernels,
+            "b": resolved_b,
+            "weights": weights,
+            "normalise": normalise,
+            "full_scale": full_scale,
+        });
+        (threshold, pthr) = calibration_thresholds(path, &config)?;
+    }
     if !threshold.is_finite() || threshold < 0.0 {
         return Err(format!("threshold={threshold}: must be finite and >= 0"));
     }
@@ -160,4 +195,44 @@ fn h743_scan(spec: &str) -> Result<String, String> {
         "pub const FIRMWARE_VERSION_OVERRIDE: Option<&str> = {fw:?};"
     );
     Ok(s)
+}
+
+/// The CVM and power thresholds (distance units, contrast) of a
+/// calibration file, refused unless it is a `dmap calibrate` file of
+/// version 2 made for `config`.
+fn calibration_thresholds(
+    path: &std::path::Path,
+    config: &serde_json::Value,
+) -> Result<(f64, f64), String> {
+    let p = path.display();
+    let text = std::fs::read_to_string(path).map_err(|e| format!("{p}: {e}"))?;
+    let v: serde_json::Value =
+        serde_json::from_str(&text).map_err(|e| format!("{p}: not JSON: {e}"))?;
+    if v["format"] != "dmap-calibration" {
+        return Err(format!("{p}: not a dmap calibration file"));
+    }
+    if v["version"] != 2 {
+        return Err(format!(
+            "{p}: calibration file version {} (this firmware reads 2; run dmap calibrate again)",
+            v["version"]
+        ));
+    }
+    let Some(fields) = config.as_object() else {
+        return Err("internal: configuration is not an object".into());
+    };
+    for (key, want) in fields {
+        let got = &v["config"][key];
+        if got != want {
+            return Err(format!(
+                "{p}: made for {key}={got}, this build has {key}={want} (CVM_H743_SCAN)"
+            ));
+        }
+    }
+    let units = |channel: &str| {
+        v["channels"][channel]["threshold"]
+            .as_f64()
+            .filter(|t| t.is_finite() && *t >= 0.0)
+            .ok_or_else(|| format!("{p}: channels.{channel}.threshold missing or not a number >= 0"))
+    };
+    Ok((units("cvm")?, units("power")?))
 }

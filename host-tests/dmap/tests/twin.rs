@@ -349,3 +349,92 @@ fn twin_model_dies_with_dmap() {
         "the model's scan file {scan_file} is left behind"
     );
 }
+
+/// The H743 firmware built with a calibration file compiled in
+/// (`CVM_H743_CALIBRATION`) applies both of its thresholds bit for bit:
+/// its output equals `dmap stream --calibration` with that file; and a
+/// build for another configuration than the file's is refused.
+#[test]
+fn twin_firmware_with_a_compiled_in_calibration_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let (refs, scan) = (dir.path().join("ref.npy"), dir.path().join("scan.npy"));
+    write_scan(&refs, 9, 9, 7);
+    write_scan(&scan, 9, 9, 8);
+    let cal = dir.path().join("cal.json");
+    let (refs, scan, cal) = (
+        refs.to_str().unwrap(),
+        scan.to_str().unwrap(),
+        cal.to_str().unwrap(),
+    );
+    let args = ["calibrate", refs, "-o", cal];
+    ok(&args, &dmap(&args));
+    let args = ["stream", scan, "--scores", "--calibration", cal];
+    let host = dmap(&args);
+    ok(&args, &host);
+
+    // The same target directory as `dmap twin`'s builds (their compiled
+    // dependencies are reused), under the lock those builds take.
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let target = root.join("target/twin");
+    std::fs::create_dir_all(target.join("elf")).unwrap();
+    let lock = std::fs::File::create(target.join("elf/.lock")).unwrap();
+    lock.lock().unwrap();
+    let build = |spec: &str| {
+        Command::new(env!("CARGO"))
+            .current_dir(&root)
+            .args(["build", "--release", "--target-dir"])
+            .arg(&target)
+            .env("CVM_H743_SCAN", spec)
+            .env("CVM_H743_CALIBRATION", cal)
+            .env_remove("CARGO_TARGET_DIR")
+            .env_remove("CARGO_BUILD_TARGET")
+            .env_remove("RUSTFLAGS")
+            .env_remove("CARGO_ENCODED_RUSTFLAGS")
+            .output()
+            .unwrap()
+    };
+    let spec = format!(
+        "j1=9 j2=9 cols={COLS} rows={ROWS} scores=true fw={}",
+        cvm_core::VERSION
+    );
+    let out = build(&spec);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let elf = dir.path().join("calibrated.elf");
+    std::fs::copy(target.join("thumbv7em-none-eabihf/release/cvm-fw"), &elf).unwrap();
+    let args = [
+        "twin",
+        scan,
+        "--scores",
+        "--calibration",
+        cal,
+        "--elf",
+        elf.to_str().unwrap(),
+    ];
+    let twin = dmap(&args);
+    ok(&args, &twin);
+    assert!(
+        twin.stdout == host.stdout,
+        "--- stream\n{}\n--- twin\n{}",
+        String::from_utf8_lossy(&host.stdout),
+        String::from_utf8_lossy(&twin.stdout)
+    );
+    // The header carries the calibration's integers, not the defaults.
+    let text = String::from_utf8_lossy(&host.stdout);
+    assert!(!text.contains(",thr=4194304,"), "{text}");
+    assert!(!text.contains(",pthr=3277,"), "{text}");
+
+    // Made for 9x9 normalised maps: a raw build is refused, naming the field.
+    let out = build(&format!("{spec} normalise=false"));
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("normalise"), "{err}");
+    // And the thresholds may not be given twice.
+    let out = build(&format!("{spec} threshold=0.3"));
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("do not give them too"));
+    drop(lock);
+}

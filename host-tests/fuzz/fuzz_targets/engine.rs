@@ -19,7 +19,7 @@ use cvm_core::config::{Config, Geometry, Kernels, Weights};
 use cvm_core::flags;
 use cvm_core::pipeline::{Pipeline, Settings};
 use cvm_core::protocol::{self, Line, LineSink, Priority};
-use cvm_core::stream::{MAX_ROW_JUMP, Position, PushOutcome, Totals, row_words};
+use cvm_core::stream::{MAX_ROW_JUMP, Position, PushOutcome, Totals, row_words_for};
 use cvm_core::{RowSummary, Scorer};
 use libfuzzer_sys::arbitrary::{Result, Unstructured};
 use libfuzzer_sys::fuzz_target;
@@ -526,7 +526,7 @@ fn run(u: &mut Unstructured) -> Result<()> {
         boots: u.arbitrary()?,
     };
     let cells = scorer.cells();
-    let words = row_words(cols as usize, cells, 1);
+    let words = row_words_for(cols as usize, scorer.config());
     let (mut a, mut b) = (vec![0; words], vec![0; words]);
     let pipeline = Pipeline::<MAX_COLS>::new(&scorer, settings, &mut a, &mut b).expect("pipeline");
     let mut run = Run {
