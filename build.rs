@@ -232,7 +232,9 @@ fn calibration_thresholds(
         v["channels"][channel]["threshold"]
             .as_f64()
             .filter(|t| t.is_finite() && *t >= 0.0)
-            .ok_or_else(|| format!("{p}: channels.{channel}.threshold missing or not a number >= 0"))
+            .ok_or_else(|| {
+                format!("{p}: channels.{channel}.threshold missing or not a number >= 0")
+            })
     };
     Ok((units("cvm")?, units("power")?))
 }
