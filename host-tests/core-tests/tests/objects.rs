@@ -36,12 +36,17 @@ impl Grid {
             };
             lab.push_row(&view, &mut |o| got.push(*o));
         }
+        // Before the end: the objects the rows closed, the positions left out.
         let (reported, unobjected) = (lab.reported(), lab.unobjected());
+        assert_eq!(reported as usize, got.len());
         let mut totals = cvm_core::Totals::default();
         lab.finish_with(&mut |o| got.push(*o), &mut totals);
         assert_eq!(totals.objects as usize, got.len());
-        assert!(reported as usize <= got.len());
-        (got, totals.objects, unobjected.max(totals.unobjected))
+        // Left-out positions are counted when their row is taken in.
+        assert_eq!(unobjected, totals.unobjected);
+        // A finished labeller starts again from nothing.
+        assert_eq!((lab.reported(), lab.unobjected()), (0, 0));
+        (got, totals.objects, totals.unobjected)
     }
 }
 
