@@ -208,13 +208,13 @@ impl Objects {
         }
     }
 
-    /// Objects reported since the last [`Objects::finish`].
+    /// Objects reported since the last [`Objects::finish_with`].
     pub fn reported(&self) -> u32 {
         self.reported
     }
 
     /// Defective positions left out of every object since the last
-    /// [`Objects::finish`].
+    /// [`Objects::finish_with`].
     pub fn unobjected(&self) -> u32 {
         self.unobjected
     }
@@ -249,13 +249,8 @@ impl Objects {
         self.close_where(out, |o| o.last_row != row);
     }
 
-    /// Ends the scan: every open object goes to `out`; the counts restart.
-    pub fn finish(&mut self, out: &mut dyn FnMut(&Object)) {
-        self.close_all(out);
-        *self = Objects::new();
-    }
-
-    /// [`Objects::finish`], with the scan's counts written into `totals`.
+    /// Ends the scan: every open object goes to `out`, the scan's counts
+    /// into `totals`, and the counts restart.
     pub fn finish_with(&mut self, out: &mut dyn FnMut(&Object), totals: &mut Totals) {
         self.close_all(out);
         totals.objects = self.reported;
