@@ -285,12 +285,15 @@ impl Objects {
                 Some(_) => {}
             }
         }
+        // A run the table cannot keep opens no object (it would stay empty).
+        let n = self.n_runs.get(cur).copied().unwrap_or(0);
+        let room = n < MAX_OBJECTS;
         let slot = match slot {
             Some(s) => Some(s),
-            None => self.open_slot(row, c0u),
+            None if room => self.open_slot(row, c0u),
+            None => None,
         };
-        let n = self.n_runs.get(cur).copied().unwrap_or(0);
-        let (Some(s), true) = (slot, n < MAX_OBJECTS) else {
+        let (Some(s), true) = (slot, room) else {
             self.unobjected = self.unobjected.saturating_add((c1 - c0) as u32);
             return;
         };
@@ -323,7 +326,7 @@ impl Objects {
                 col1: col,
                 ..Object::default()
             },
-            last_row: row,
+            // `last_row` is set by the first `add`, which follows at once.
             used: true,
             ..Open::default()
         };
