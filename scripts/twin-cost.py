@@ -18,7 +18,14 @@ matrix and AHB run at 200 MHz; flash has 2 wait states at that clock; the
 M7's write buffer absorbs most of a store's latency): these are the
 model's assumptions, not measurements, and can be changed with
 `--cost REGION=READ/WRITE`. Accesses are attributed to the scoring path
-by the function of the block that makes them."""
+by the function of the instruction that makes them.
+
+The accesses are found by decoding each instruction the scoring path runs
+(Capstone) and computing its addresses from the registers before it runs,
+not with Unicorn's memory hooks: a read hook on a load inside a Thumb IT
+block leaves Unicorn's IT state set after the block, so that a later
+instruction runs as if conditional (unicorn-engine/unicorn#2309; the
+firmware then goes wrong, e.g. an invalid instruction at a branch)."""
 
 import argparse
 import bisect
@@ -27,8 +34,11 @@ import sys
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "host-tests", "twin"))
 
+import capstone  # noqa: E402
+from capstone import arm_const as csarm  # noqa: E402
 from elftools.elf.elffile import ELFFile  # noqa: E402
-from unicorn import UC_HOOK_MEM_READ, UC_HOOK_MEM_WRITE, UC_MEM_WRITE  # noqa: E402
+from unicorn import UC_HOOK_CODE  # noqa: E402
+from unicorn import arm_const as ucarm  # noqa: E402
 
 from h743twin.machine import cycles_of_ms  # noqa: E402
 from h743twin.profile import SCORING, add_scan_args, boot_for_scan, stage_of  # noqa: E402
@@ -95,6 +105,102 @@ def objects_of(path):
     return name_of
 
 
+# Capstone register names -> Unicorn registers.
+UC_REG = {f"r{i}": getattr(ucarm, f"UC_ARM_REG_R{i}") for i in range(13)}
+UC_REG.update({"sb": ucarm.UC_ARM_REG_R9, "sl": ucarm.UC_ARM_REG_R10, "fp": ucarm.UC_ARM_REG_R11,
+               "ip": ucarm.UC_ARM_REG_R12, "sp": ucarm.UC_ARM_REG_SP, "lr": ucarm.UC_ARM_REG_LR,
+               "pc": ucarm.UC_ARM_REG_PC})
+MULTI_LOAD = ("ldm", "pop", "vldm", "vpop")
+MULTI_STORE = ("stm", "push", "vstm", "vpush")
+
+
+def condition_holds(cc, xpsr):
+    """Whether an instruction with condition `cc` (Capstone) runs under
+    the flags of `xpsr`."""
+    n, z, c, v = (xpsr >> 31) & 1, (xpsr >> 30) & 1, (xpsr >> 29) & 1, (xpsr >> 28) & 1
+    table = {
+        csarm.ARM_CC_EQ: z, csarm.ARM_CC_NE: not z, csarm.ARM_CC_HS: c, csarm.ARM_CC_LO: not c,
+        csarm.ARM_CC_MI: n, csarm.ARM_CC_PL: not n, csarm.ARM_CC_VS: v, csarm.ARM_CC_VC: not v,
+        csarm.ARM_CC_HI: c and not z, csarm.ARM_CC_LS: (not c) or z, csarm.ARM_CC_GE: n == v,
+        csarm.ARM_CC_LT: n != v, csarm.ARM_CC_GT: (not z) and n == v,
+        csarm.ARM_CC_LE: z or n != v,
+    }
+    return bool(table.get(cc, True))
+
+
+class Accesses:
+    """The data accesses of an instruction, decoded once per address:
+    `(kind, write, ...)` with `kind` "mem" (one operand `[base, index,
+    disp]`, `words` accesses) or "multi" (a register list from a base
+    register, ascending or descending)."""
+
+    def __init__(self, uc):
+        self.uc = uc
+        self.md = capstone.Cs(capstone.CS_ARCH_ARM, capstone.CS_MODE_THUMB | capstone.CS_MODE_MCLASS)
+        self.md.detail = True
+        self.cache = {}
+
+    def decode(self, addr, size):
+        insn = next(self.md.disasm(bytes(self.uc.mem_read(addr, size)), addr), None)
+        if insn is None:
+            return (None, [])
+        m = insn.mnemonic.split(".")[0]
+        ops = insn.operands
+        out = []
+        if m.startswith(MULTI_LOAD) or m.startswith(MULTI_STORE):
+            write = m.startswith(MULTI_STORE)
+            regs = [o for o in ops if o.type == csarm.ARM_OP_REG]
+            if m.startswith(("push", "pop", "vpush", "vpop")):
+                base, listed = "sp", regs
+            else:
+                base, listed = insn.reg_name(regs[0].reg), regs[1:]
+            words = sum(2 if insn.reg_name(o.reg).startswith("d") else 1 for o in listed)
+            down = m.startswith(("push", "vpush")) or m.endswith("db")
+            out.append(("multi", write, base, down, words))
+        else:
+            for o in ops:
+                if o.type != csarm.ARM_OP_MEM:
+                    continue
+                write = m.startswith(("st", "vst"))
+                words = 2 if m.startswith(("ldrd", "strd")) else 1
+                if m.startswith(("vldr", "vstr")) and insn.reg_name(ops[0].reg).startswith("d"):
+                    words = 2
+                base = insn.reg_name(o.mem.base) if o.mem.base else None
+                index = insn.reg_name(o.mem.index) if o.mem.index else None
+                scale = 1 << o.shift.value if o.shift.type == csarm.ARM_SFT_LSL else 1
+                if m.startswith("tbh"):
+                    scale = 2
+                out.append(("mem", write, base, index, scale, o.mem.disp, words))
+        return (insn.cc, out)
+
+    def of(self, addr, size):
+        """[(address, write, words)] of the instruction at `addr`, from the
+        registers now (before it runs); empty when its condition fails."""
+        d = self.cache.get(addr)
+        if d is None:
+            d = self.decode(addr, size)
+            self.cache[addr] = d
+        cc, acc = d
+        if not acc:
+            return []
+        uc = self.uc
+        if cc not in (None, csarm.ARM_CC_AL, csarm.ARM_CC_INVALID) and not condition_holds(
+                cc, uc.reg_read(ucarm.UC_ARM_REG_XPSR)):
+            return []
+        res = []
+        for a in acc:
+            if a[0] == "multi":
+                _, write, base, down, words = a
+                b = uc.reg_read(UC_REG[base])
+                res.append((b - 4 * words if down else b, write, words))
+            else:
+                _, write, base, index, scale, disp, words = a
+                b = ((addr + 4) & ~3) if base == "pc" else uc.reg_read(UC_REG[base]) if base else 0
+                i = uc.reg_read(UC_REG[index]) * scale if index else 0
+                res.append(((b + i + disp) & 0xFFFFFFFF, write, words))
+        return res
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="twin-cost")
     add_scan_args(ap)
@@ -120,16 +226,18 @@ def main(argv=None):
             scoring_block[addr] = hit
         return hit
 
-    def on_mem(uc, access, addr, size, value, data):
-        if not in_scoring(m.core.last_block[0]):
-            return
-        reg = region_of(addr)
-        obj = obj_of(addr) or ("stack" if reg == "DTCM" else reg)
-        key = (reg, obj, access == UC_MEM_WRITE)
-        counts[key] = counts.get(key, 0) + 1
+    acc = Accesses(m.core.uc)
 
-    for _, lo, hi in REGIONS[:-1]:
-        m.core.uc.hook_add(UC_HOOK_MEM_READ | UC_HOOK_MEM_WRITE, on_mem, begin=lo, end=hi - 1)
+    def on_code(uc, addr, size, data):
+        if not in_scoring(addr):
+            return
+        for a, write, words in acc.of(addr, size):
+            reg = region_of(a)
+            obj = obj_of(a) or ("stack" if reg == "DTCM" else reg)
+            key = (reg, obj, write)
+            counts[key] = counts.get(key, 0) + words
+
+    m.core.uc.hook_add(UC_HOOK_CODE, on_code, begin=REGIONS[1][1], end=REGIONS[1][2] - 1)
     m.run(det.done_at + cycles_of_ms(5))
     beams = det.sent
     instr = sum(v for k, v in m.core.profile.items() if stage_of(k) in SCORING)

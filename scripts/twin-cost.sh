@@ -8,6 +8,11 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
+# The cost model decodes instructions with Capstone (see twin-cost.py).
+if ! python3 -c "import capstone" >/dev/null 2>&1; then
+    echo "twin-cost: installing capstone" >&2
+    python3 -m pip install --quiet --disable-pip-version-check capstone==5.0.7
+fi
 for j in 9 15; do
     CVM_H743_SCAN="j1=$j j2=$j cols=12 rows=6 scores=true" \
         cargo build --release --target-dir target/twin >&2
