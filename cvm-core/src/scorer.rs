@@ -411,7 +411,9 @@ impl Scorer {
                 })
             }
             Kind::Paper => {
-                let (sum, sat) = embed::sum_and_saturation(frame, self.config.full_scale);
+                let mut copy = embed::FrameCopy::new();
+                let (sum, sat, frame) =
+                    embed::sum_and_saturation(frame, self.config.full_scale, &mut copy);
                 let mut fl = 0;
                 if sat {
                     fl |= flags::SATURATED;

@@ -13,7 +13,7 @@
 
 use core::mem::MaybeUninit;
 
-use crate::config::MAX_J;
+use crate::config::{MAX_CELLS, MAX_J};
 use crate::tables::{Mat, abs, cholesky_psd, pivot_tolerance, pow2, round};
 
 /// Largest block of a folded axis (`ceil(16 / 2)`).
@@ -178,10 +178,31 @@ const fn pack(r: &Mat, n: usize, p: u32) -> [i32; TRI] {
     out
 }
 
+/// A copy of a frame's samples, made by [`sum_and_saturation`] while it
+/// reads them: on the H743 it is on the stack, in DTCM, so that the row
+/// pass reads the samples without wait states from there instead of from
+/// the DMA buffer in AXI SRAM. Uninitialised until copied into.
+#[repr(C, align(4))]
+pub struct FrameCopy([MaybeUninit<u16>; MAX_CELLS]);
+
+impl FrameCopy {
+    pub const fn new() -> FrameCopy {
+        FrameCopy([MaybeUninit::uninit(); MAX_CELLS])
+    }
+}
+
+impl Default for FrameCopy {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
 /// The sum of all samples of a frame and whether a sample reached
 /// `full_scale` (the saturation flag): the only per-map quantities needed
 /// before the row pass. At most `256 * 65535 < 2^24`: the sum cannot
-/// overflow.
+/// overflow. Also returns the samples to embed: `copy`, filled on the way
+/// (one store per word read), or `frame` itself when the frame is not
+/// word-aligned or longer than a map can be (never in the firmware).
 ///
 /// The frame is read as 32-bit words of two samples (sample order does not
 /// matter for either result): per word one `UXTAH` and one `ADD ..., LSR
@@ -191,41 +212,159 @@ const fn pack(r: &Mat, n: usize, p: u32) -> [i32; TRI] {
 /// instructions per sample instead of five. The words come in blocks of
 /// four, which the compiler loads with one `LDM`.
 #[inline(never)]
-pub fn sum_and_saturation(frame: &[u16], full_scale: u16) -> (u32, bool) {
+pub fn sum_and_saturation<'a>(
+    frame: &'a [u16],
+    full_scale: u16,
+    copy: &'a mut FrameCopy,
+) -> (u32, bool, &'a [u16]) {
     if full_scale == 0 {
         // Every sample reaches a full scale of 0 (a frame is never empty).
         let mut sum = 0u32;
         for &a in frame {
             sum += a as u32;
         }
-        return (sum, true);
+        return (sum, true, frame);
     }
     let below = (full_scale - 1) as u32;
     let below2 = below | (below << 16);
     // SAFETY: every bit pattern is a valid `u32`; `align_to` only splits
     // off the unaligned ends.
     let (head, words, tail) = unsafe { frame.align_to::<u32>() };
-    let (mut lo, mut hi, mut over) = (0u32, 0u32, 0u32);
-    let blocks = words.chunks_exact(4);
-    let rest = blocks.remainder();
-    for b in blocks {
-        if let &[w0, w1, w2, w3] = b {
-            lo += ((w0 & 0xFFFF) + (w1 & 0xFFFF)) + ((w2 & 0xFFFF) + (w3 & 0xFFFF));
-            hi += ((w0 >> 16) + (w1 >> 16)) + ((w2 >> 16) + (w3 >> 16));
-            over |= (above2(w0, below2) | above2(w1, below2))
-                | (above2(w2, below2) | above2(w3, below2));
-        }
-    }
-    for &w in rest {
-        lo += w & 0xFFFF;
-        hi += w >> 16;
-        over |= above2(w, below2);
-    }
+    // The copy is word for word, so the frame must start on a word and
+    // fit.
+    let copying = head.is_empty() && frame.len() <= MAX_CELLS;
+    // SAFETY: `FrameCopy` is 4-aligned and `MAX_CELLS` u16 long, i.e.
+    // `MAX_CELLS / 2` words; a `MaybeUninit<u32>` may hold anything.
+    // (`frame.len() <= MAX_CELLS` gives every word of `words` its slot.)
+    let (_, dst, _) = unsafe { copy.0.align_to_mut::<MaybeUninit<u32>>() };
+    let ((mut lo, hi, mut over), copied) = match dst.get_mut(..words.len()) {
+        Some(dst) if copying => (words_sum(words, below2, dst), true),
+        _ => (words_sum(words, below2, &mut []), false),
+    };
     for &a in head.iter().chain(tail) {
         lo += a as u32;
         over |= (a as u32).saturating_sub(below);
     }
-    (lo + hi, over != 0)
+    let sum = lo + hi;
+    let sat = over != 0;
+    if !copied {
+        return (sum, sat, frame);
+    }
+    if let (Some(&t), Some(d)) = (tail.first(), copy.0.get_mut(2 * words.len())) {
+        d.write(t);
+    }
+    // SAFETY: the first `frame.len()` samples of the copy were written
+    // above: `2 * words.len()` by the word loops (every word of `words`
+    // has its slot, `frame.len() <= MAX_CELLS`), then the tail's one
+    // sample (a `u16` slice starting on a word has at most one).
+    let samples =
+        unsafe { core::slice::from_raw_parts(copy.0.as_ptr().cast::<u16>(), frame.len()) };
+    (sum, sat, samples)
+}
+
+/// The low and high halves' sums and the saturation bits of `words`,
+/// copying them to `dst` on the way when it is as long as `words` (empty:
+/// no copy). Two loops, so that the copying one has no per-word test.
+#[inline(always)]
+fn words_sum(words: &[u32], below2: u32, dst: &mut [MaybeUninit<u32>]) -> (u32, u32, u32) {
+    let copying = dst.len() == words.len();
+    // On the Cortex-M the whole blocks of a copy go through the assembly
+    // loop; the rest (and everything elsewhere) through the loops below.
+    #[cfg(target_arch = "arm")]
+    let ((mut lo, mut hi, mut over), words, dst) = if copying && words.len() >= 4 {
+        let k = words.len() / 4 * 4;
+        let (w4, wr) = words.split_at(k);
+        let (d4, dr) = dst.split_at_mut(k);
+        (sum_copy_blocks(w4, d4, below2), wr, dr)
+    } else {
+        ((0u32, 0u32, 0u32), words, dst)
+    };
+    #[cfg(not(target_arch = "arm"))]
+    let (mut lo, mut hi, mut over) = (0u32, 0u32, 0u32);
+    let mut add = |w: u32| {
+        lo += w & 0xFFFF;
+        hi += w >> 16;
+        over |= above2(w, below2);
+    };
+    if copying {
+        for (b, d) in words.chunks_exact(4).zip(dst.chunks_exact_mut(4)) {
+            if let (&[w0, w1, w2, w3], [d0, d1, d2, d3]) = (b, d) {
+                add(w0);
+                add(w1);
+                add(w2);
+                add(w3);
+                d0.write(w0);
+                d1.write(w1);
+                d2.write(w2);
+                d3.write(w3);
+            }
+        }
+        let done = words.len() / 4 * 4;
+        for (w, d) in words.iter().zip(dst.iter_mut()).skip(done) {
+            add(*w);
+            d.write(*w);
+        }
+    } else {
+        for &w in words {
+            add(w);
+        }
+    }
+    (lo, hi, over)
+}
+
+/// The Cortex-M loop of [`words_sum`] over whole blocks of four words
+/// (`words.len() == dst.len()`, a non-zero multiple of 4): per block one
+/// `LDM`, one `STM` (the copy) and per word `UXTAH`, `ADD ..., LSR #16`,
+/// `UQSUB16`, `ORR`. Written by hand because the compiler, with the copy's
+/// pointer as one more live register, spilled the sums to the stack.
+#[cfg(target_arch = "arm")]
+#[inline(always)]
+fn sum_copy_blocks(words: &[u32], dst: &mut [MaybeUninit<u32>], below2: u32) -> (u32, u32, u32) {
+    let (mut lo, mut hi, mut over) = (0u32, 0u32, 0u32);
+    let n = words.len().min(dst.len()) / 4;
+    if n == 0 {
+        return (lo, hi, over);
+    }
+    // SAFETY: reads `4 n` words from `words` and writes `4 n` to `dst`,
+    // both at least that long; registers only otherwise.
+    unsafe {
+        core::arch::asm!(
+            "2:",
+            "ldm {src}!, {{{w0}, {w1}, {w2}, {w3}}}",
+            "stm {dst}!, {{{w0}, {w1}, {w2}, {w3}}}",
+            "uxtah {lo}, {lo}, {w0}",
+            "add {hi}, {hi}, {w0}, lsr #16",
+            "uqsub16 {w0}, {w0}, {b}",
+            "orr {over}, {over}, {w0}",
+            "uxtah {lo}, {lo}, {w1}",
+            "add {hi}, {hi}, {w1}, lsr #16",
+            "uqsub16 {w1}, {w1}, {b}",
+            "orr {over}, {over}, {w1}",
+            "uxtah {lo}, {lo}, {w2}",
+            "add {hi}, {hi}, {w2}, lsr #16",
+            "uqsub16 {w2}, {w2}, {b}",
+            "orr {over}, {over}, {w2}",
+            "uxtah {lo}, {lo}, {w3}",
+            "add {hi}, {hi}, {w3}, lsr #16",
+            "uqsub16 {w3}, {w3}, {b}",
+            "orr {over}, {over}, {w3}",
+            "subs {n}, {n}, #1",
+            "bne 2b",
+            src = inout(reg) words.as_ptr() => _,
+            dst = inout(reg) dst.as_mut_ptr() => _,
+            n = inout(reg) n => _,
+            lo = inout(reg) lo,
+            hi = inout(reg) hi,
+            over = inout(reg) over,
+            b = in(reg) below2,
+            w0 = out(reg) _,
+            w1 = out(reg) _,
+            w2 = out(reg) _,
+            w3 = out(reg) _,
+            options(nostack)
+        );
+    }
+    (lo, hi, over)
 }
 
 /// Both 16-bit halves of `w` minus those of `below2`, saturating at 0
