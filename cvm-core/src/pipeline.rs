@@ -47,7 +47,20 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
         row_a: &'a mut [i32],
         row_b: &'a mut [i32],
     ) -> Result<Self, EngineError> {
-        let mut engine = Engine::new(scorer, settings.cols, settings.threshold, row_a, row_b)?;
+        Self::with_near(scorer, settings, row_a, row_b, &mut [])
+    }
+
+    /// [`Pipeline::new`] with a buffer for the current row's last three
+    /// maps (see [`Engine::with_near`]).
+    pub fn with_near(
+        scorer: &'a Scorer,
+        settings: Settings,
+        row_a: &'a mut [i32],
+        row_b: &'a mut [i32],
+        near: &'a mut [i32],
+    ) -> Result<Self, EngineError> {
+        let (cols, threshold) = (settings.cols, settings.threshold);
+        let mut engine = Engine::with_near(scorer, cols, threshold, row_a, row_b, near)?;
         engine.set_power_threshold(settings.power_threshold);
         Ok(Pipeline {
             engine,

@@ -392,6 +392,23 @@ impl Scorer {
         scratch: &mut Scratch,
         diff: bool,
     ) -> Result<Prepared, FrameError> {
+        self.prepare_map_near(frame, state, &mut [], scratch, diff)
+    }
+
+    /// [`Scorer::prepare_map`] that also writes the prepared map to `near`
+    /// when it holds [`Scorer::state_words`] words (else not): the
+    /// streaming engine keeps the current row's last maps there, in memory
+    /// it reads faster than the row buffers (DTCM on the H743), for the
+    /// horizontal distances. With paper kernels the copy is one more store
+    /// per word in the column pass; square kernels copy the state after.
+    pub fn prepare_map_near(
+        &self,
+        frame: &[u16],
+        state: &mut [i32],
+        near: &mut [i32],
+        scratch: &mut Scratch,
+        diff: bool,
+    ) -> Result<Prepared, FrameError> {
         let n = self.cells();
         if frame.len() != n {
             return Err(FrameError::Length);
@@ -404,6 +421,9 @@ impl Scorer {
                 let x = scratch.v.as_flattened_mut().get_mut(..n).unwrap_or(&mut []);
                 let (flags, power) = self.normalise_power(frame, x)?;
                 let acc = self.box_sums(x, state, kmax as usize, diff);
+                if let Some(near) = near.get_mut(..state.len()) {
+                    near.copy_from_slice(state);
+                }
                 Ok(Prepared {
                     flags,
                     power,
@@ -422,7 +442,16 @@ impl Scorer {
                     fl |= flags::DARK;
                 }
                 let conv = self.scale(sum);
-                let acc = embed::embed(&self.passes, &self.f1, &self.f2, frame, conv, state, diff);
+                let acc = embed::embed(
+                    &self.passes,
+                    &self.f1,
+                    &self.f2,
+                    frame,
+                    conv,
+                    state,
+                    near,
+                    diff,
+                );
                 Ok(Prepared {
                     flags: fl,
                     power: sum,

@@ -182,6 +182,12 @@ pub const fn row_words_for(cols: usize, config: &crate::Config) -> usize {
     cols * config.state_words()
 }
 
+/// Words of the buffer for the current row's last three maps
+/// ([`Engine::with_near`]).
+pub const fn near_words(config: &crate::Config) -> usize {
+    3 * config.state_words()
+}
+
 /// Bytes of engine state for `cols` columns: the two row buffers plus the
 /// per-column flags and powers and two rows of results.
 pub const fn window_bytes(cols: usize, j1: usize, j2: usize) -> usize {
@@ -199,6 +205,11 @@ pub struct Engine<'a, const MAX_COLS: usize> {
     threshold: u32,
     power_threshold: u32,
     bufs: [&'a mut [i32]; 2],
+    /// Empty, or three maps: the current row's last three, column `c` in
+    /// map `c % 3`, written along with the row buffer. The horizontal
+    /// distances read them here instead of from the row buffers (see
+    /// [`Engine::with_near`]).
+    near: &'a mut [i32],
     /// Flags of each slot of each buffer; `NO_DATA` where no state is held.
     meta: [[u8; MAX_COLS]; 2],
     /// Power (sample sum) of the map in each slot of each buffer.
@@ -225,6 +236,24 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
         row_a: &'a mut [i32],
         row_b: &'a mut [i32],
     ) -> Result<Self, EngineError> {
+        Self::with_near(scorer, cols, threshold, row_a, row_b, &mut [])
+    }
+
+    /// [`Engine::new`] with a buffer for the current row's last three maps
+    /// ([`near_words`] long; empty: none). Every map is then written twice,
+    /// to its row buffer and to `near`, and the horizontal distance reads
+    /// its two maps from `near`: on a board whose row buffers are in slow
+    /// memory (the H743's AXI SRAM and SRAM1-3) and `near` in fast memory
+    /// (DTCM), that trades one store per word for two slow loads. The
+    /// results are the same.
+    pub fn with_near(
+        scorer: &'a Scorer,
+        cols: u32,
+        threshold: u32,
+        row_a: &'a mut [i32],
+        row_b: &'a mut [i32],
+        near: &'a mut [i32],
+    ) -> Result<Self, EngineError> {
         let cols = cols as usize;
         if cols == 0 || cols > MAX_COLS {
             return Err(EngineError::Columns);
@@ -232,6 +261,9 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
         let cells = scorer.cells();
         let words = row_words_for(cols, scorer.config());
         if row_a.len() < words || row_b.len() < words {
+            return Err(EngineError::Buffer);
+        }
+        if !near.is_empty() && near.len() < near_words(scorer.config()) {
             return Err(EngineError::Buffer);
         }
         Ok(Engine {
@@ -242,6 +274,7 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
             threshold,
             power_threshold: POWER_OFF,
             bufs: [row_a, row_b],
+            near,
             meta: [[flags::NO_DATA; MAX_COLS]; 2],
             powers: [[0; MAX_COLS]; 2],
             results: [[PositionScore::default(); MAX_COLS]; 2],
@@ -417,6 +450,16 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
             .unwrap_or(&[])
     }
 
+    /// The map of column `col` of the current row (buffer `buf`): from
+    /// `near` when there is one.
+    fn recent(&self, buf: usize, col: usize) -> &[i32] {
+        if self.near.is_empty() {
+            return self.slot(buf, col);
+        }
+        let start = (col % 3) * self.words;
+        self.near.get(start..start + self.words).unwrap_or(&[])
+    }
+
     /// Settles position `(current, next_col)`: with a frame it is prepared
     /// and becomes the lower neighbour of the row above; then the left
     /// neighbour's horizontal component is final.
@@ -434,8 +477,16 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
         // embedding as it overwrites (r-2, c).
         let start = c * self.words;
         let fuse = mid_ok && up_ok;
+        let near_start = (c % 3) * self.words;
+        let near = self
+            .near
+            .get_mut(near_start..near_start + self.words)
+            .unwrap_or(&mut []);
         let prepared = match (frame, self.bufs[b].get_mut(start..start + self.words)) {
-            (Some(f), Some(slot)) => self.scorer.prepare_map(f, slot, &mut self.scratch, fuse),
+            (Some(f), Some(slot)) => {
+                self.scorer
+                    .prepare_map_near(f, slot, near, &mut self.scratch, fuse)
+            }
             _ => Err(FrameError::Length),
         };
         let (own, fused, pw) = match prepared {
@@ -523,7 +574,7 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
         } else {
             (
                 self.scorer
-                    .distance(self.slot(b, left), self.slot(b, right)),
+                    .distance(self.recent(b, left), self.recent(b, right)),
                 contrast(self.power(b, left), self.power(b, right)),
             )
         };

@@ -31,7 +31,7 @@ use cortex_m_rt::entry;
 use cvm_core::Scorer;
 use cvm_core::pipeline::{Pipeline, Settings};
 use cvm_core::protocol::MAX_LINE;
-use cvm_core::stream::row_words_for;
+use cvm_core::stream::{near_words, row_words_for};
 use cvm_fw_app::acquire::Acquisition;
 use cvm_fw_app::driver::ScanDriver;
 use cvm_fw_app::queue::LineQueue;
@@ -116,6 +116,18 @@ unsafe impl Sync for RowBuffer {}
 static ROW_A: RowBuffer = RowBuffer(core::cell::UnsafeCell::new([0; ROW_WORDS]));
 #[unsafe(link_section = ".sram123")]
 static ROW_B: RowBuffer = RowBuffer(core::cell::UnsafeCell::new([0; ROW_WORDS]));
+
+/// The current row's last three maps, in DTCM: every map is written
+/// here as well as to its row buffer, and the horizontal distances read
+/// their two maps from here instead of from AXI SRAM or SRAM1..3
+/// (`Engine::with_near`; about 3 500 stall cycles less per 15x15 beam by
+/// scripts/twin-cost.sh). NOLOAD: every map is written before it is read.
+struct NearMaps(core::cell::UnsafeCell<core::mem::MaybeUninit<[i32; NEAR_WORDS]>>);
+// SAFETY: handed out once, by `main`, before any task runs.
+unsafe impl Sync for NearMaps {}
+const NEAR_WORDS: usize = near_words(&CORE);
+#[unsafe(link_section = ".dtcm")]
+static NEAR: NearMaps = NearMaps(core::cell::UnsafeCell::new(core::mem::MaybeUninit::uninit()));
 
 type Acq = Acquisition<FRAME_BUFFERS, BEAM_LOG>;
 type Queue = LineQueue<QUEUE_BYTES>;
@@ -225,7 +237,15 @@ fn main() -> ! {
         reset_cause: cause,
         boots,
     };
-    let pipeline = match Pipeline::<MAX_COLS>::new(scorer, settings, row_a, row_b) {
+    // SAFETY: handed out here, once, before any task runs; `.dtcm` is
+    // NOLOAD, so it is cleared first (an `i32` may hold any bits, but a
+    // known start keeps runs reproducible).
+    let near: &mut [i32; NEAR_WORDS] = unsafe {
+        let p = NEAR.0.get().cast::<[i32; NEAR_WORDS]>();
+        core::ptr::write_bytes(p, 0, 1);
+        &mut *p
+    };
+    let pipeline = match Pipeline::<MAX_COLS>::with_near(scorer, settings, row_a, row_b, near) {
         Ok(p) => p,
         Err(e) => defmt::panic!("pipeline refused its buffers: {}", e),
     };

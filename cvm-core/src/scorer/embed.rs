@@ -330,24 +330,24 @@ fn sum_copy_blocks(words: &[u32], dst: &mut [MaybeUninit<u32>], below2: u32) -> 
     unsafe {
         core::arch::asm!(
             "2:",
-            "ldm {src}!, {{{w0}, {w1}, {w2}, {w3}}}",
-            "stm {dst}!, {{{w0}, {w1}, {w2}, {w3}}}",
-            "uxtah {lo}, {lo}, {w0}",
-            "add {hi}, {hi}, {w0}, lsr #16",
-            "uqsub16 {w0}, {w0}, {b}",
-            "orr {over}, {over}, {w0}",
-            "uxtah {lo}, {lo}, {w1}",
-            "add {hi}, {hi}, {w1}, lsr #16",
-            "uqsub16 {w1}, {w1}, {b}",
-            "orr {over}, {over}, {w1}",
-            "uxtah {lo}, {lo}, {w2}",
-            "add {hi}, {hi}, {w2}, lsr #16",
-            "uqsub16 {w2}, {w2}, {b}",
-            "orr {over}, {over}, {w2}",
-            "uxtah {lo}, {lo}, {w3}",
-            "add {hi}, {hi}, {w3}, lsr #16",
-            "uqsub16 {w3}, {w3}, {b}",
-            "orr {over}, {over}, {w3}",
+            "ldm {src}!, {{r0, r1, r2, r3}}",
+            "stm {dst}!, {{r0, r1, r2, r3}}",
+            "uxtah {lo}, {lo}, r0",
+            "add {hi}, {hi}, r0, lsr #16",
+            "uqsub16 r0, r0, {b}",
+            "orr {over}, {over}, r0",
+            "uxtah {lo}, {lo}, r1",
+            "add {hi}, {hi}, r1, lsr #16",
+            "uqsub16 r1, r1, {b}",
+            "orr {over}, {over}, r1",
+            "uxtah {lo}, {lo}, r2",
+            "add {hi}, {hi}, r2, lsr #16",
+            "uqsub16 r2, r2, {b}",
+            "orr {over}, {over}, r2",
+            "uxtah {lo}, {lo}, r3",
+            "add {hi}, {hi}, r3, lsr #16",
+            "uqsub16 r3, r3, {b}",
+            "orr {over}, {over}, r3",
             "subs {n}, {n}, #1",
             "bne 2b",
             src = inout(reg) words.as_ptr() => _,
@@ -357,10 +357,12 @@ fn sum_copy_blocks(words: &[u32], dst: &mut [MaybeUninit<u32>], below2: u32) -> 
             hi = inout(reg) hi,
             over = inout(reg) over,
             b = in(reg) below2,
-            w0 = out(reg) _,
-            w1 = out(reg) _,
-            w2 = out(reg) _,
-            w3 = out(reg) _,
+            // r0-r3 hold the four words: `LDM`/`STM` order their register
+            // lists by number, so the list is written in that order.
+            out("r0") _,
+            out("r1") _,
+            out("r2") _,
+            out("r3") _,
             options(nostack)
         );
     }
@@ -471,20 +473,25 @@ fn rows<const H: usize, const G: usize>(
 /// Column pass for an axis 1 of `H + G` cells: for every row `t[k]` (a
 /// folded column of the map), folds it along axis 1 (`t[l] ± t[H+G-1-l]`,
 /// exact), applies the even and the odd block and stores the embedding in
-/// the `k`-th chunk of `e` (even part first).
+/// the `k`-th chunk of `e` (even part first), and in `near` too when it
+/// has the length of `e` (empty: no second copy).
 ///
 /// With `DIFF`, returns `Σ (old - new)²` over the overwritten words: the
 /// squared distance to the map `e` held before, for the price of one load,
 /// one subtraction and one `SMLAL` per word (wrapping, so that a buffer
 /// that held no map cannot make it panic; for two maps it cannot wrap).
 #[inline(never)]
-fn cols<const H: usize, const G: usize, const DIFF: bool>(
+fn cols<const H: usize, const G: usize, const DIFF: bool, const NEAR: bool>(
     f1: &Factor,
     t: &[[MaybeUninit<i32>; MAX_J]],
     e: &mut [i32],
+    near: &mut [i32],
 ) -> u64 {
     let j1 = H + G;
     let mut acc = 0u64;
+    // With `NEAR`, a second copy of the embedding (one more store per
+    // word); `near` is as long as `e` (else `embed` does not choose this).
+    let mut near = near.chunks_exact_mut(j1.max(1));
     for (tr, er) in t.iter().zip(e.chunks_exact_mut(j1.max(1))) {
         let (de, dodd) = er.split_at_mut(H.min(er.len()));
         let (Ok(de), Ok(dodd)) = (
@@ -519,6 +526,14 @@ fn cols<const H: usize, const G: usize, const DIFF: bool>(
         }
         *de = ne;
         *dodd = no;
+        if NEAR && let Some(nr) = near.next() {
+            let (ve, vo) = nr.split_at_mut(H.min(nr.len()));
+            if let (Ok(ve), Ok(vo)) = (<&mut [i32; H]>::try_from(ve), <&mut [i32; G]>::try_from(vo))
+            {
+                *ve = ne;
+                *vo = no;
+            }
+        }
     }
     acc
 }
@@ -526,7 +541,7 @@ fn cols<const H: usize, const G: usize, const DIFF: bool>(
 /// A row pass (see [`rows`]).
 type RowsFn = fn(&Factor, &[u16], usize, (u32, i32), &mut Rows);
 /// A column pass (see [`cols`]).
-type ColsFn = fn(&Factor, &[[MaybeUninit<i32>; MAX_J]], &mut [i32]) -> u64;
+type ColsFn = fn(&Factor, &[[MaybeUninit<i32>; MAX_J]], &mut [i32], &mut [i32]) -> u64;
 
 /// The unrolled passes of one geometry, chosen when the tables are built.
 /// A firmware whose `Scorer` is a compile-time constant references only
@@ -535,8 +550,9 @@ type ColsFn = fn(&Factor, &[[MaybeUninit<i32>; MAX_J]], &mut [i32]) -> u64;
 #[derive(Clone, Copy)]
 pub struct Passes {
     rows: RowsFn,
-    cols: ColsFn,
-    cols_diff: ColsFn,
+    /// The column pass: `[diff as usize + 2 * near as usize]`, so that
+    /// neither the distance nor the second copy costs a test per column.
+    cols: [ColsFn; 4],
 }
 
 impl Passes {
@@ -564,21 +580,22 @@ impl Passes {
         macro_rules! cols_of {
             ($($j:literal => ($h:literal, $g:literal)),*) => {
                 match j1 {
-                    $($j => (cols::<$h, $g, false> as ColsFn, cols::<$h, $g, true> as ColsFn),)*
+                    $($j => [
+                        cols::<$h, $g, false, false> as ColsFn,
+                        cols::<$h, $g, true, false> as ColsFn,
+                        cols::<$h, $g, false, true> as ColsFn,
+                        cols::<$h, $g, true, true> as ColsFn,
+                    ],)*
                     _ => return None,
                 }
             };
         }
-        let (cols, cols_diff) = cols_of!(
+        let cols = cols_of!(
             1 => (1, 0), 2 => (1, 1), 3 => (2, 1), 4 => (2, 2), 5 => (3, 2), 6 => (3, 3),
             7 => (4, 3), 8 => (4, 4), 9 => (5, 4), 10 => (5, 5), 11 => (6, 5), 12 => (6, 6),
             13 => (7, 6), 14 => (7, 7), 15 => (8, 7), 16 => (8, 8)
         );
-        Some(Passes {
-            rows,
-            cols,
-            cols_diff,
-        })
+        Some(Passes { rows, cols })
     }
 }
 
@@ -587,8 +604,11 @@ impl Passes {
 impl PartialEq for Passes {
     fn eq(&self, other: &Self) -> bool {
         core::ptr::fn_addr_eq(self.rows, other.rows)
-            && core::ptr::fn_addr_eq(self.cols, other.cols)
-            && core::ptr::fn_addr_eq(self.cols_diff, other.cols_diff)
+            && self
+                .cols
+                .iter()
+                .zip(other.cols.iter())
+                .all(|(&a, &b)| core::ptr::fn_addr_eq(a, b))
     }
 }
 
@@ -602,8 +622,10 @@ impl core::fmt::Debug for Passes {
 /// along axis 2 in the row pass and along axis 1 in the column pass, stored
 /// folded-column-major in `e` (`j1 * j2` words): `e[k * j1 + i]`, the even
 /// columns of axis 2 first. With `diff`, returns the squared distance
-/// between the map `e` held before and the new one (else 0). `passes` are
-/// those of `f1`'s and `f2`'s geometry.
+/// between the map `e` held before and the new one (else 0). The
+/// embedding is also written to `near` when it is at least as long as `e`
+/// (else not). `passes` are those of `f1`'s and `f2`'s geometry.
+#[allow(clippy::too_many_arguments)]
 pub fn embed(
     passes: &Passes,
     f1: &Factor,
@@ -611,6 +633,7 @@ pub fn embed(
     frame: &[u16],
     conv: (u32, i32),
     e: &mut [i32],
+    near: &mut [i32],
     diff: bool,
 ) -> u64 {
     let j1 = f1.h + f1.g;
@@ -626,13 +649,14 @@ pub fn embed(
     (passes.rows)(f2, frame, j1, conv, t);
     // Even and odd rows of `t` are consecutive, like their chunks of `e`:
     // one call of the column pass (its coefficients are set up once).
-    let (Some(t), Some(e)) = (t.get(..f2.h + f2.g), e.get_mut(..j1 * (f2.h + f2.g))) else {
+    let words = j1 * (f2.h + f2.g);
+    let (Some(t), Some(e)) = (t.get(..f2.h + f2.g), e.get_mut(..words)) else {
         return 0;
     };
-    if diff {
-        (passes.cols_diff)(f1, t, e)
-    } else {
-        (passes.cols)(f1, t, e);
-        0
-    }
+    let (near, with_near) = match near.get_mut(..words) {
+        Some(n) => (n, 2),
+        None => (&mut [][..], 0),
+    };
+    let acc = (passes.cols[usize::from(diff) + with_near])(f1, t, e, near);
+    if diff { acc } else { 0 }
 }

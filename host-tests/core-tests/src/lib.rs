@@ -124,7 +124,10 @@ pub fn run_engine(
     run_engine_with(scorer, cols, threshold, cvm_core::power::POWER_OFF, frames)
 }
 
-/// [`run_engine`] with the power channel's threshold.
+/// [`run_engine`] with the power channel's threshold. Runs the engine
+/// twice, without and with the buffer of the current row's last maps
+/// ([`Engine::with_near`]), and checks that both give the same rows and
+/// totals: every test through here covers both.
 pub fn run_engine_with(
     scorer: &Scorer,
     cols: usize,
@@ -132,10 +135,36 @@ pub fn run_engine_with(
     power_threshold: u32,
     frames: &[(cvm_core::Position, Option<Vec<u16>>)],
 ) -> (Vec<(RowSummary, Vec<PositionScore>)>, Totals) {
+    let plain = run_engine_near(scorer, cols, threshold, power_threshold, frames, false);
+    let near = run_engine_near(scorer, cols, threshold, power_threshold, frames, true);
+    assert!(
+        plain == near,
+        "the engine with the near buffer gives other results"
+    );
+    plain
+}
+
+/// One run of [`run_engine_with`]: with a near buffer (filled with junk
+/// first, so that a read of a word it was not given shows) or without.
+pub fn run_engine_near(
+    scorer: &Scorer,
+    cols: usize,
+    threshold: u32,
+    power_threshold: u32,
+    frames: &[(cvm_core::Position, Option<Vec<u16>>)],
+    with_near: bool,
+) -> (Vec<(RowSummary, Vec<PositionScore>)>, Totals) {
     let words = cvm_core::stream::row_words_for(cols, scorer.config());
     let (mut a, mut b) = (vec![0i32; words], vec![0i32; words]);
-    let mut engine =
-        Box::new(Engine::<256>::new(scorer, cols as u32, threshold, &mut a, &mut b).unwrap());
+    let mut near = if with_near {
+        vec![0x5A5A_5A5Ai32; cvm_core::stream::near_words(scorer.config())]
+    } else {
+        Vec::new()
+    };
+    let mut engine = Box::new(
+        Engine::<256>::with_near(scorer, cols as u32, threshold, &mut a, &mut b, &mut near)
+            .unwrap(),
+    );
     engine.set_power_threshold(power_threshold);
     let mut rows = Vec::new();
     let mut out = |v: &cvm_core::RowView| rows.push((v.summary, v.scores.to_vec()));
