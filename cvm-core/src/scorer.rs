@@ -25,7 +25,7 @@
 //! |---|---|---|
 //! | raw sample `a` | `u16` | counts |
 //! | folded count `v = a[l] ± a[J2-1-l]` | `i32` | counts, exact, `\|v\| <= 2 * 65535` |
-//! | input `y` | `i32` | `Q(f)`: normalised `y = round((v << k) * m / 2^32) ≈ v 2^f / S` (`S' = S << k` in `[2^30, 2^31)`, `m = floor(2^(32+f) / S')`, error below 1), raw `y = v 2^f` (error at most 1/2 for `f < -1`); `f = 28` normalised, `11` raw unless a bound below fails |
+//! | input `y` | `i32` | `Q(f)`: normalised `y = round((v << k) * m / 2^32) ≈ v 2^f / S` (`S' = S << k` in `[2^30, 2^31)`, `m = floor(2^(32+f) / S')`, error below 1), raw `y = v 2^f`, exact (`f >= 0` always); `f = 28` normalised, `11` raw unless a bound below fails |
 //! | factor blocks `R'` of axis `i` | `i32` | `Q(p_i)`, entries below `2^31 - 1` in magnitude, `p_i <= 62` |
 //! | row pass `T = y R2'ᵀ` | `i32` | `Q(f + p2 - 32)`: one `round(r y / 2^32)` per term (`SMMLAR`) |
 //! | `T` folded along axis 1 | `i32` | same, exact sums and differences |
@@ -201,9 +201,13 @@ impl Scorer {
             }
             Kind::Square { kmax } => {
                 // Largest input format whose sums provably stay in range.
+                // Not below 0, so that raw counts convert by a left shift:
+                // at f = 0 every bound below holds for any kmax < 16 and
+                // N <= 256 ((kmax + 1) N (2 N 65536)^2 <= 2^62 < 2^63), so
+                // the error is never returned.
                 let mut f: i32 = MAX_FRAC;
                 loop {
-                    if f < -16 {
+                    if f < 0 {
                         return Err(ConfigError::Range);
                     }
                     let scale = pow2(f);
@@ -312,7 +316,6 @@ impl Scorer {
             Conv::Zero => x.fill(0),
             Conv::Recip(r) => fill(x, frame, |a| recip_sample(a, r)),
             Conv::Shl(s) => fill(x, frame, |a| (a as i32) << s),
-            Conv::Shr(s) => fill(x, frame, |a| shr_sample(a, s)),
         }
         Ok((fl, sum))
     }
@@ -340,10 +343,9 @@ impl Scorer {
                 // One division per map, then a multiply per sample.
                 Conv::Recip((1u64 << (32 + self.frac as u32)) / sum as u64)
             }
-        } else if self.frac >= 0 {
-            Conv::Shl(self.frac as u32)
         } else {
-            Conv::Shr((-self.frac) as u32)
+            // `frac >= 0` (see `Scorer::new`).
+            Conv::Shl(self.frac as u32)
         };
         (fl, sum, conv)
     }
@@ -467,8 +469,7 @@ impl Scorer {
     /// Normalised (`y ≈ v 2^f / S`): `k` puts `S' = S << k` in
     /// `[2^30, 2^31)` (so `|v << k| <= S' < 2^31`) and
     /// `m = floor(2^(32+f) / S') <= 2^30`, so `|y - v 2^f / S| < 1`. A dark
-    /// map gets `m = 0`. Raw (`y = v 2^f`): `k = f + 2`, `m = 2^30`, exact;
-    /// for `f < -1`, `k = 0`, `m = 2^(32+f)`, rounded.
+    /// map gets `m = 0`. Raw (`y = v 2^f`): `k = f + 2`, `m = 2^30`, exact.
     fn scale(&self, sum: u32) -> (u32, i32) {
         let f = self.frac;
         if self.config.normalise {
@@ -478,10 +479,9 @@ impl Scorer {
             let k = sum.leading_zeros().saturating_sub(1);
             let s = sum << k;
             (k, reciprocal(self.scale_num, f, s))
-        } else if f >= -1 {
-            ((f + 2) as u32, 1 << 30)
         } else {
-            (0, 1i32 << (32 + f).clamp(0, 30))
+            // `f >= 0` (see `Scorer::new`), so `k = f + 2 <= 30`.
+            ((f + 2) as u32, 1 << 30)
         }
     }
 
@@ -617,7 +617,10 @@ const fn paper_formats(
     } else {
         MAX_FRAC_RAW
     };
-    while f >= -16 {
+    // Not below 0, so that raw counts convert exactly, by a left shift
+    // (every configuration finds a format at f >= 8 raw, far more
+    // normalised: `every_configuration_has_formats` in the tests).
+    while f >= 0 {
         let scale = pow2(f);
         // Bounds on Σ|y| over one block of a row, on Σ|y| over one block of
         // all rows, and on ‖F1 y‖_F, for the converted map y folded along
@@ -694,10 +697,8 @@ enum Conv {
     Zero,
     /// Normalised: `round(a * recip / 2^32)`, `recip = floor(2^(32+f) / Σa)`.
     Recip(u64),
-    /// Raw, `f >= 0`: `a << f`.
+    /// Raw (`f >= 0` always): `a << f`.
     Shl(u32),
-    /// Raw, `f < 0`: `round(a / 2^-f)`.
-    Shr(u32),
 }
 
 /// `round(a * 2^f / S)`: `a <= S`, so `a * recip + 2^31 <= 2^(32+f) + 2^31 < 2^57`.
@@ -706,11 +707,6 @@ enum Conv {
 #[inline(always)]
 fn recip_sample(a: u16, recip: u64) -> i32 {
     ((a as u64 * recip + (1 << 31)) >> 32) as i32
-}
-
-#[inline(always)]
-fn shr_sample(a: u16, s: u32) -> i32 {
-    (a as i32 + (1i32 << (s - 1))) >> s
 }
 
 #[inline(always)]

@@ -1,0 +1,103 @@
+//! The fixed-point input format `f` (docs/performance.md, fixed-point
+//! arithmetic) is chosen per configuration by `Scorer::new`, never below
+//! 0, so that raw counts convert exactly, by a left shift. Every
+//! configuration must find one: a geometry, kernel set or weighting that
+//! no longer does would make the scorer refuse it (`ConfigError::Range`).
+
+use cvm_core::{Config, Geometry, Kernels, MAX_J, Scorer, Weights};
+use cvm_core_tests::rng;
+use rand::RngExt;
+
+/// Every geometry, kernel size and built-in weighting, normalised and raw.
+fn all_configs() -> Vec<Config> {
+    let mut v = Vec::new();
+    for normalise in [false, true] {
+        for j1 in 1..=16u8 {
+            for j2 in 1..=16u8 {
+                let kernels = (0..=8u8)
+                    .map(|bmax| Kernels::Paper { bmax })
+                    .chain((0..16u8).map(|kmax| Kernels::Square { kmax }));
+                for kernels in kernels {
+                    for weights in [Weights::Uniform, Weights::Unit] {
+                        v.push(Config {
+                            geometry: Geometry::new(j1, j2).unwrap(),
+                            kernels,
+                            weights,
+                            normalise,
+                            full_scale: u16::MAX,
+                        });
+                    }
+                }
+            }
+        }
+    }
+    v
+}
+
+/// The input format of a raw scorer, read off its conversion of a flat map
+/// (`y = v 2^f`), checked to be exactly that for every cell.
+fn raw_format(scorer: &Scorer, v: u16) -> i32 {
+    let n = scorer.cells();
+    let mut x = vec![0i32; n];
+    scorer.normalise(&vec![v; n], &mut x).unwrap();
+    let f = (f64::from(x[0]) / f64::from(v)).log2().round() as i32;
+    assert!(f >= 0, "raw format {f} below 0");
+    assert!(
+        x.iter().all(|&y| i64::from(y) == i64::from(v) << f),
+        "not v 2^f: {x:?}"
+    );
+    f
+}
+
+#[test]
+fn every_configuration_has_formats() {
+    let configs = all_configs();
+    assert_eq!(configs.len(), 2 * 256 * 25 * 2);
+    let mut min_raw = i32::MAX;
+    for cfg in &configs {
+        let scorer = Scorer::new(cfg).unwrap_or_else(|e| panic!("{cfg:?}: {e:?}"));
+        if !cfg.normalise {
+            min_raw = min_raw.min(raw_format(&scorer, 1024));
+        }
+    }
+    // The square kernels' bound is tightest at 13x16 with kmax 14: f = 0,
+    // where the search ends.
+    assert_eq!(min_raw, 0);
+}
+
+/// Separable weights of widely different magnitudes (1e-8 to 1e8, some
+/// zero) do not push the paper kernels' raw format down: the factors are
+/// quantised relative to their largest entry.
+#[test]
+fn separable_weights_keep_raw_formats() {
+    let mut r = rng(1);
+    let mut built = 0;
+    for j1 in 1..=16u8 {
+        for j2 in 1..=16u8 {
+            for trial in 0..6 {
+                let mut w1 = [0f64; MAX_J];
+                let mut w2 = [1f64; MAX_J];
+                for (a, b) in w1.iter_mut().zip(w2.iter_mut()) {
+                    *a = 10f64.powf(r.random_range(-8.0..8.0));
+                    if trial % 2 == 0 {
+                        *b = 10f64.powf(r.random_range(-8.0..8.0));
+                    }
+                }
+                if trial == 3 {
+                    w1[1..].fill(0.0);
+                }
+                let cfg = Config {
+                    geometry: Geometry::new(j1, j2).unwrap(),
+                    kernels: Kernels::Paper { bmax: trial as u8 },
+                    weights: Weights::Separable { w1, w2 },
+                    normalise: false,
+                    full_scale: u16::MAX,
+                };
+                let scorer = Scorer::new(&cfg).unwrap_or_else(|e| panic!("{cfg:?}: {e:?}"));
+                assert!(raw_format(&scorer, 777) >= 8, "{cfg:?}");
+                built += 1;
+            }
+        }
+    }
+    assert_eq!(built, 256 * 6);
+}
