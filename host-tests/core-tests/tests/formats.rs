@@ -66,8 +66,9 @@ fn every_configuration_has_formats() {
 }
 
 /// Separable weights of widely different magnitudes (1e-8 to 1e8, some
-/// zero) do not push the paper kernels' raw format down: the factors are
-/// quantised relative to their largest entry.
+/// zero) still give formats (normalised and raw), and do not push the paper
+/// kernels' raw format down: the factors are quantised relative to their
+/// largest entry.
 #[test]
 fn separable_weights_keep_raw_formats() {
     let mut r = rng(1);
@@ -86,18 +87,22 @@ fn separable_weights_keep_raw_formats() {
                 if trial == 3 {
                     w1[1..].fill(0.0);
                 }
-                let cfg = Config {
-                    geometry: Geometry::new(j1, j2).unwrap(),
-                    kernels: Kernels::Paper { bmax: trial as u8 },
-                    weights: Weights::Separable { w1, w2 },
-                    normalise: false,
-                    full_scale: u16::MAX,
-                };
-                let scorer = Scorer::new(&cfg).unwrap_or_else(|e| panic!("{cfg:?}: {e:?}"));
-                assert!(raw_format(&scorer, 777) >= 8, "{cfg:?}");
-                built += 1;
+                for normalise in [false, true] {
+                    let cfg = Config {
+                        geometry: Geometry::new(j1, j2).unwrap(),
+                        kernels: Kernels::Paper { bmax: trial as u8 },
+                        weights: Weights::Separable { w1, w2 },
+                        normalise,
+                        full_scale: u16::MAX,
+                    };
+                    let scorer = Scorer::new(&cfg).unwrap_or_else(|e| panic!("{cfg:?}: {e:?}"));
+                    if !normalise {
+                        assert!(raw_format(&scorer, 777) >= 8, "{cfg:?}");
+                    }
+                    built += 1;
+                }
             }
         }
     }
-    assert_eq!(built, 256 * 6);
+    assert_eq!(built, 256 * 6 * 2);
 }
