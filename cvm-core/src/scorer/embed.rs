@@ -473,8 +473,8 @@ fn rows<const H: usize, const G: usize>(
 /// Column pass for an axis 1 of `H + G` cells: for every row `t[k]` (a
 /// folded column of the map), folds it along axis 1 (`t[l] ± t[H+G-1-l]`,
 /// exact), applies the even and the odd block and stores the embedding in
-/// the `k`-th chunk of `e` (even part first), and in `near` too when it
-/// has the length of `e` (empty: no second copy).
+/// the `k`-th chunk of `e` (even part first); with `NEAR` in `near`
+/// instead (as long as `e`), which `embed` then copies to `e`.
 ///
 /// With `DIFF`, returns `Σ (old - new)²` over the overwritten words: the
 /// squared distance to the map `e` held before, for the price of one load,
@@ -489,8 +489,9 @@ fn cols<const H: usize, const G: usize, const DIFF: bool, const NEAR: bool>(
 ) -> u64 {
     let j1 = H + G;
     let mut acc = 0u64;
-    // With `NEAR`, a second copy of the embedding (one more store per
-    // word); `near` is as long as `e` (else `embed` does not choose this).
+    // With `NEAR` the new map goes to `near` (as long as `e`; `embed`
+    // copies it to `e` after), while the distance still reads the old one
+    // in `e`: written from registers once, not spilled for a second store.
     let mut near = near.chunks_exact_mut(j1.max(1));
     for (tr, er) in t.iter().zip(e.chunks_exact_mut(j1.max(1))) {
         let (de, dodd) = er.split_at_mut(H.min(er.len()));
@@ -524,18 +525,68 @@ fn cols<const H: usize, const G: usize, const DIFF: bool, const NEAR: bool>(
                 acc = acc.wrapping_add(d.wrapping_mul(d) as u64);
             }
         }
-        *de = ne;
-        *dodd = no;
-        if NEAR && let Some(nr) = near.next() {
+        if NEAR {
+            let Some(nr) = near.next() else {
+                return acc;
+            };
             let (ve, vo) = nr.split_at_mut(H.min(nr.len()));
             if let (Ok(ve), Ok(vo)) = (<&mut [i32; H]>::try_from(ve), <&mut [i32; G]>::try_from(vo))
             {
                 *ve = ne;
                 *vo = no;
             }
+        } else {
+            *de = ne;
+            *dodd = no;
         }
     }
     acc
+}
+
+/// `dst[..] = src[..]` (as long as the shorter), for the maps `embed`
+/// copies from the near buffer to the row buffer: on the Cortex-M eight
+/// words per `LDM`/`STM` pair, about half an instruction per word, where
+/// a second store per word from the column pass cost two (its outputs are
+/// spilled to the stack by then).
+#[inline(never)]
+fn copy_words(src: &[i32], dst: &mut [i32]) {
+    #[cfg(target_arch = "arm")]
+    let (src, dst) = {
+        let blocks = src.len().min(dst.len()) / 8;
+        if blocks > 0 {
+            // SAFETY: reads `8 blocks` words of `src` and writes as many to
+            // `dst`, both at least that long; r0-r5, r12 and lr are
+            // declared clobbered.
+            unsafe {
+                core::arch::asm!(
+                    "2:",
+                    "ldm {src}!, {{r0, r1, r2, r3, r4, r5, r12, lr}}",
+                    "stm {dst}!, {{r0, r1, r2, r3, r4, r5, r12, lr}}",
+                    "subs {n}, {n}, #1",
+                    "bne 2b",
+                    src = inout(reg) src.as_ptr() => _,
+                    dst = inout(reg) dst.as_mut_ptr() => _,
+                    n = inout(reg) blocks => _,
+                    out("r0") _,
+                    out("r1") _,
+                    out("r2") _,
+                    out("r3") _,
+                    out("r4") _,
+                    out("r5") _,
+                    out("r12") _,
+                    out("lr") _,
+                    options(nostack)
+                );
+            }
+        }
+        (
+            src.get(blocks * 8..).unwrap_or(&[]),
+            dst.get_mut(blocks * 8..).unwrap_or(&mut []),
+        )
+    };
+    for (d, &v) in dst.iter_mut().zip(src) {
+        *d = v;
+    }
 }
 
 /// A row pass (see [`rows`]).
@@ -658,5 +709,8 @@ pub fn embed(
         None => (&mut [][..], 0),
     };
     let acc = (passes.cols[usize::from(diff) + with_near])(f1, t, e, near);
+    if with_near != 0 {
+        copy_words(near, e);
+    }
     if diff { acc } else { 0 }
 }

@@ -19,7 +19,7 @@ from .machine import Machine, cycles_of_ms
 STAGES = (
     ("sum and saturation flag", ("sum_and_saturation",)),
     ("embedding: row pass", ("embed::rows",)),
-    ("embedding: column pass and vertical distance", ("embed::cols",)),
+    ("embedding: column pass and vertical distance", ("embed::cols", "embed::copy_words")),
     ("distances", ("squared_difference", "square_distance", "sat_distance")),
     ("normalise, gradient, window", ("cvm_core::scorer", "cvm_core::stream", "magnitude")),
     ("defect objects", ("cvm_core::objects",)),
