@@ -580,11 +580,9 @@ impl Scorer {
         // `Scorer::new`), and `acc >> s` plus the rounding bit cannot wrap.
         let s = ((2 * self.e_frac - self.q) as u32).clamp(1, 63);
         let v = (acc >> s) + ((acc >> (s - 1)) & 1);
-        if v > u32::MAX as u64 {
-            u32::MAX
-        } else {
-            v as u32
-        }
+        // Below 2^31 for every pair of maps (`q` is chosen so), saturating
+        // all the same.
+        u32::try_from(v).unwrap_or(u32::MAX)
     }
 }
 
