@@ -433,7 +433,7 @@ impl Scorer {
                 let (flags, power) = self.normalise_power(frame, x)?;
                 let acc = self.box_sums(x, state, kmax as usize, diff);
                 if let Some(near) = near.get_mut(..state.len()) {
-                    near.copy_from_slice(state);
+                    embed::copy_words(state, near);
                 }
                 Ok(Prepared {
                     flags,

@@ -543,13 +543,13 @@ fn cols<const H: usize, const G: usize, const DIFF: bool, const NEAR: bool>(
     acc
 }
 
-/// `dst[..] = src[..]` (as long as the shorter), for the maps `embed`
-/// copies from the near buffer to the row buffer: on the Cortex-M eight
+/// `dst[..] = src[..]` (as long as the shorter), for the maps copied
+/// between the near buffer and the row buffer: on the Cortex-M eight
 /// words per `LDM`/`STM` pair, about half an instruction per word, where
 /// a second store per word from the column pass cost two (its outputs are
 /// spilled to the stack by then).
 #[inline(never)]
-fn copy_words(src: &[i32], dst: &mut [i32]) {
+pub(crate) fn copy_words(src: &[i32], dst: &mut [i32]) {
     #[cfg(target_arch = "arm")]
     let (src, dst) = {
         let blocks = src.len().min(dst.len()) / 8;
