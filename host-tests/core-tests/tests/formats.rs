@@ -49,6 +49,15 @@ fn raw_format(scorer: &Scorer, v: u16) -> i32 {
     f
 }
 
+/// The input format of a normalising scorer, read off its conversion of a
+/// flat map (`y ≈ 2^f / N` per cell).
+fn normalised_format(scorer: &Scorer) -> i32 {
+    let n = scorer.cells();
+    let mut x = vec![0i32; n];
+    scorer.normalise(&vec![500; n], &mut x).unwrap();
+    (f64::from(x[0]) * n as f64).log2().round() as i32
+}
+
 #[test]
 fn every_configuration_has_formats() {
     let configs = all_configs();
@@ -58,6 +67,11 @@ fn every_configuration_has_formats() {
         let scorer = Scorer::new(cfg).unwrap_or_else(|e| panic!("{cfg:?}: {e:?}"));
         if !cfg.normalise {
             min_raw = min_raw.min(raw_format(&scorer, 1024));
+        } else if let Kernels::Paper { .. } = cfg.kernels {
+            // The finest format, 28, always fits normalised maps (the
+            // reciprocal of the sum is exact for it; the scorer's
+            // `reciprocal` is only ever called with it).
+            assert_eq!(normalised_format(&scorer), 28, "{cfg:?}");
         }
     }
     // The square kernels' bound is tightest at 13x16 with kmax 14: f = 0,
@@ -96,7 +110,9 @@ fn separable_weights_keep_raw_formats() {
                         full_scale: u16::MAX,
                     };
                     let scorer = Scorer::new(&cfg).unwrap_or_else(|e| panic!("{cfg:?}: {e:?}"));
-                    if !normalise {
+                    if normalise {
+                        assert_eq!(normalised_format(&scorer), 28, "{cfg:?}");
+                    } else {
                         assert!(raw_format(&scorer, 777) >= 8, "{cfg:?}");
                     }
                     built += 1;
