@@ -656,32 +656,36 @@ const fn frobenius(r: &RealFactor) -> f64 {
     sqrt(fe * fe + fo * fo)
 }
 
-/// `floor(2^(32+f) / s)` for `s` in `[2^30, 2^31)` and `f <= 28`, without
-/// a 64-bit division (a library call on the Cortex-M4): a single-precision
-/// estimate (`num = 2^(32+f)` as `f32`), refined once through its exact
-/// remainder, then settled by at most a few unit steps. The result is the
-/// exact quotient, so the host and the target agree however `f32` rounds.
+/// `floor(2^(32+f) / s)` for `s` in `[2^30, 2^31)` and `f = 28` (the only
+/// format of normalised paper-kernel maps), without a 64-bit division (a
+/// library call on the Cortex-M4): a single-precision estimate
+/// (`num = 2^(32+f)` as `f32`), refined once through its exact remainder,
+/// then at most one step down. Exact for every `s`, checked exhaustively
+/// (`reciprocal_is_exact_for_every_sum` in core-tests, 2^30 cases), so the
+/// host and the target agree however `f32` rounds.
 #[inline(always)]
 fn reciprocal(num: f32, f: i32, s: u32) -> i32 {
     let n = 1i64 << (32 + f).clamp(0, 60);
     // Within 2^-22 of the quotient (at most 2^30): off by at most 2^9.
     let mut m = (num / s as f32) as i32 as i64;
-    let mut r = n - m * s as i64;
+    let r = n - m * s as i64;
     // |r| < 2^41: its top bits over those of s give the correction to
-    // within one (only `f32 <-> i32` conversions, single instructions).
+    // within one (only `f32 <-> i32` conversions, single instructions);
+    // truncation leaves the remainder at most one `s` below 0, never at or
+    // above `s` (the exhaustive check counts both).
     let c = ((r >> 20) as i32 as f32 / (s >> 20) as f32) as i32 as i64;
     m += c;
-    r -= c * s as i64;
-    for _ in 0..4 {
-        if r < 0 {
-            m -= 1;
-            r += s as i64;
-        } else if r >= s as i64 {
-            m += 1;
-            r -= s as i64;
-        }
+    if r - c * (s as i64) < 0 {
+        m -= 1;
     }
     m as i32
+}
+
+/// [`reciprocal`] as the scorer calls it for normalised paper-kernel maps
+/// (`f = 28`), for the exhaustive test.
+#[doc(hidden)]
+pub fn reciprocal_q60(s: u32) -> i32 {
+    reciprocal(pow2(60) as f32, 28, s)
 }
 
 /// How samples become `Q(f)` values for one frame.

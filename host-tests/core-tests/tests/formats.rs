@@ -122,3 +122,33 @@ fn separable_weights_keep_raw_formats() {
     }
     assert_eq!(built, 256 * 6 * 2);
 }
+
+/// The reciprocal of a normalised map's (shifted) sum, `floor(2^60 / s)`,
+/// is exact: both ends of its range, every power of two and its
+/// neighbours, and a million random sums. The exhaustive check over all
+/// 2^30 sums is `reciprocal_is_exact_for_every_sum` (ignored by default:
+/// about 15 s with `--release`, minutes without).
+#[test]
+fn reciprocal_is_exact() {
+    let check = |s: u32| {
+        let want = (1u64 << 60) / u64::from(s);
+        assert_eq!(cvm_core::scorer::reciprocal_q60(s) as u64, want, "s = {s}");
+    };
+    let (lo, hi) = (1u32 << 30, (1u32 << 31) - 1);
+    for s in (lo..lo + 100_000).chain(hi - 100_000..=hi) {
+        check(s);
+    }
+    let mut r = rng(60);
+    for _ in 0..1_000_000 {
+        check(r.random_range(lo..=hi));
+    }
+}
+
+#[test]
+#[ignore = "2^30 cases: run with --release --ignored"]
+fn reciprocal_is_exact_for_every_sum() {
+    for s in (1u32 << 30)..(1u32 << 31) {
+        let want = (1u64 << 60) / u64::from(s);
+        assert_eq!(cvm_core::scorer::reciprocal_q60(s) as u64, want, "s = {s}");
+    }
+}
