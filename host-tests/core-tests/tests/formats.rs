@@ -124,8 +124,9 @@ fn separable_weights_keep_raw_formats() {
 }
 
 /// The reciprocal of a normalised map's (shifted) sum, `floor(2^60 / s)`,
-/// is exact: both ends of its range, every power of two and its
-/// neighbours, and a million random sums. The exhaustive check over all
+/// is exact: 100 000 sums at each end of its range (2^30, the only power
+/// of two in it and the only exact quotient, included) and a million
+/// random ones. The exhaustive check over all
 /// 2^30 sums is `reciprocal_is_exact_for_every_sum` (ignored by default:
 /// about 15 s with `--release`, minutes without).
 #[test]
