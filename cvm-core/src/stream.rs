@@ -206,7 +206,7 @@ pub struct Engine<'a, const MAX_COLS: usize> {
     power_threshold: u32,
     bufs: [&'a mut [i32]; 2],
     /// Empty, or three maps: the current row's last three, column `c` in
-    /// map `c % 3`, written along with the row buffer. The horizontal
+    /// map `c % 3`, each also copied to its row buffer. The horizontal
     /// distances read them here instead of from the row buffers (see
     /// [`Engine::with_near`]).
     near: &'a mut [i32],
@@ -240,11 +240,12 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
     }
 
     /// [`Engine::new`] with a buffer for the current row's last three maps
-    /// ([`near_words`] long; empty: none). Every map is then written twice,
-    /// to its row buffer and to `near`, and the horizontal distance reads
+    /// ([`near_words`] long; empty: none). Every map is then written to
+    /// `near` and copied from there to its row buffer (eight words per
+    /// `LDM`/`STM` pair on the Cortex-M), and the horizontal distance reads
     /// its two maps from `near`: on a board whose row buffers are in slow
     /// memory (the H743's AXI SRAM and SRAM1-3) and `near` in fast memory
-    /// (DTCM), that trades one store per word for two slow loads. The
+    /// (DTCM), that trades a fast copy for two slow loads per word. The
     /// results are the same.
     pub fn with_near(
         scorer: &'a Scorer,
