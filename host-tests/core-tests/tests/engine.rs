@@ -351,6 +351,22 @@ fn engine_set_up_is_checked() {
         err(cvm_core::Engine::new(&scorer, 4, 1, &mut c, &mut short)),
         Some(EngineError::Buffer)
     );
+    // The near buffer: empty (none) or three 3x3 maps, 27 words.
+    assert_eq!(cvm_core::stream::near_words(scorer.config()), 27);
+    let mut near = vec![0i32; 27];
+    assert_eq!(
+        err(cvm_core::Engine::with_near(
+            &scorer,
+            4,
+            1,
+            &mut a,
+            &mut b,
+            &mut near[..26]
+        )),
+        Some(EngineError::Buffer)
+    );
+    assert!(cvm_core::Engine::<4>::with_near(&scorer, 4, 1, &mut a, &mut b, &mut near).is_ok());
+    assert!(cvm_core::Engine::<4>::with_near(&scorer, 4, 1, &mut a, &mut b, &mut []).is_ok());
     let e = cvm_core::Engine::<4>::new(&scorer, 4, 77, &mut a, &mut b).unwrap();
     assert_eq!((e.cols(), e.threshold()), (4, 77));
     assert_eq!(e.totals(), &cvm_core::Totals::default());
