@@ -6,7 +6,7 @@
 
 use cvm_core::pipeline::{Pipeline, Settings};
 use cvm_core::protocol::{Line, LineSink, Priority, ResetCause, decode_score, parse};
-use cvm_core::{Position, Scorer};
+use cvm_core::Position;
 use cvm_core_tests::{random_scan, rng, run_engine_with};
 
 #[derive(Default)]
