@@ -126,6 +126,9 @@ pub struct Scorer {
 mod embed;
 
 use embed::{Factor, MAX_H, Passes, TRI};
+/// The sum pass, exposed for the test that checks when it copies the frame.
+#[doc(hidden)]
+pub use embed::{FrameCopy, sum_and_saturation};
 use embed::{RealFactor, precision, quantise, real_factor};
 
 /// Finest input format tried for square kernels; `2^(32+f)` must fit the

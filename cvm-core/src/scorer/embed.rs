@@ -202,7 +202,8 @@ impl Default for FrameCopy {
 /// before the row pass. At most `256 * 65535 < 2^24`: the sum cannot
 /// overflow. Also returns the samples to embed: `copy`, filled on the way
 /// (one store per word read), or `frame` itself when the frame is not
-/// word-aligned or longer than a map can be (never in the firmware).
+/// word-aligned or longer than a map can be (never in the firmware), or
+/// when the full scale is 0.
 ///
 /// The frame is read as 32-bit words of two samples (sample order does not
 /// matter for either result): per word one `UXTAH` and one `ADD ..., LSR

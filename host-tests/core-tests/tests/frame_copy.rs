@@ -77,3 +77,41 @@ fn aligned_and_unaligned_frames_embed_the_same() {
     }
     assert!(lengths.iter().all(|&n| n > 100), "{lengths:?}");
 }
+
+/// The sum pass copies a frame that starts on a word (and returns the
+/// copy), and hands back any other frame itself, as it does every frame
+/// when the full scale is 0 (all saturated, scored from the frame); always
+/// with the frame's sum and saturation flag.
+#[test]
+fn the_sum_pass_copies_word_aligned_frames() {
+    use cvm_core::scorer::{FrameCopy, sum_and_saturation};
+    let mut r = rng(78);
+    for cells in [1usize, 2, 3, 4, 5, 8, 9, 81, 224, 225, 255, 256] {
+        let frame = random_map(&mut r, cells, 1);
+        let mut on = vec![0u32; cells.div_ceil(2) + 1];
+        let mut off = on.clone();
+        samples(&mut on)[..cells].copy_from_slice(&frame);
+        samples(&mut off)[1..=cells].copy_from_slice(&frame);
+        let on = &samples(&mut on)[..cells];
+        let off = &samples(&mut off)[1..=cells];
+        let sum: u32 = frame.iter().map(|&v| u32::from(v)).sum();
+        let fs = frame.iter().copied().max().unwrap();
+        for full_scale in [fs.max(1), fs.saturating_add(1), 0] {
+            let sat = frame.iter().any(|&v| v >= full_scale);
+            let mut copy = FrameCopy::new();
+            let (s, f, got) = sum_and_saturation(on, full_scale, &mut copy);
+            assert_eq!((s, f, got), (sum, sat, on), "{cells} cells, aligned");
+            // A full scale of 0 saturates every frame: nothing to copy for.
+            let copied = got.as_ptr() != on.as_ptr();
+            assert_eq!(
+                copied,
+                full_scale > 0,
+                "{cells} cells, full scale {full_scale}"
+            );
+            let mut copy = FrameCopy::new();
+            let (s, f, got) = sum_and_saturation(off, full_scale, &mut copy);
+            assert_eq!((s, f, got), (sum, sat, off), "{cells} cells, unaligned");
+            assert_eq!(got.as_ptr(), off.as_ptr(), "{cells} cells: copied");
+        }
+    }
+}

@@ -4,9 +4,9 @@
 //! protocol's own decoder and compared with the engine run alone over the
 //! same beams (`run_engine_with`), not with the pipeline itself.
 
+use cvm_core::Position;
 use cvm_core::pipeline::{Pipeline, Settings};
 use cvm_core::protocol::{Line, LineSink, Priority, ResetCause, decode_score, parse};
-use cvm_core::Position;
 use cvm_core_tests::{random_scan, rng, run_engine_with};
 
 #[derive(Default)]
