@@ -351,6 +351,15 @@ fn engine_set_up_is_checked() {
         err(cvm_core::Engine::new(&scorer, 4, 1, &mut c, &mut short)),
         Some(EngineError::Buffer)
     );
+    // What a board prints when it refuses its buffers.
+    assert_eq!(
+        EngineError::Columns.to_string(),
+        "no columns, or more than the engine holds"
+    );
+    assert_eq!(
+        EngineError::Buffer.to_string(),
+        "a row buffer is too short for the columns and maps"
+    );
     // The near buffer: empty (none) or three 3x3 maps, 27 words.
     assert_eq!(cvm_core::stream::near_words(scorer.config()), 27);
     let mut near = vec![0i32; 27];
