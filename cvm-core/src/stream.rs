@@ -141,7 +141,8 @@ pub struct Totals {
 pub enum EngineError {
     /// `cols` is 0 or above the engine's compile-time capacity.
     Columns,
-    /// A row buffer is shorter than [`row_words_for`].
+    /// A row buffer is shorter than [`row_words_for`], or the near buffer
+    /// is not empty but shorter than [`near_words`].
     Buffer,
 }
 
@@ -149,7 +150,7 @@ impl core::fmt::Display for EngineError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         f.write_str(match self {
             EngineError::Columns => "no columns, or more than the engine holds",
-            EngineError::Buffer => "a row buffer is too short for the columns and maps",
+            EngineError::Buffer => "a row buffer or the near buffer is too short for the maps",
         })
     }
 }

@@ -358,7 +358,7 @@ fn engine_set_up_is_checked() {
     );
     assert_eq!(
         EngineError::Buffer.to_string(),
-        "a row buffer is too short for the columns and maps"
+        "a row buffer or the near buffer is too short for the maps"
     );
     // The near buffer: empty (none) or three 3x3 maps, 27 words.
     assert_eq!(cvm_core::stream::near_words(scorer.config()), 27);
