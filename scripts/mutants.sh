@@ -36,6 +36,9 @@
 #   MUTANTS_OUT    where <pass>/mutants.out/ go (default target/mutants)
 #   MUTANTS_STAGE  the staging workspace (default $TMPDIR/cvm-mutants-stage;
 #                  its build cache is kept next to it, in .target)
+#   MUTANTS_RE     only the mutants of these functions (a regex over
+#                  names such as `Scorer::scale|reciprocal`), instead of
+#                  the pass's own selection within its files
 #   MUTANTS_TIMEOUT  test timeout in seconds (default 30 for the fw-app
 #                  pass, whose tests take a second, 240 for the others)
 #   MUTANTS_BUILD_TIMEOUT  seconds (default 600)
@@ -127,6 +130,14 @@ for pass in "${passes[@]}"; do
         exit 2
         ;;
     esac
+    if [ -n "${MUTANTS_RE:-}" ]; then
+        # Only the mutants of these functions (e.g. after a fix, those of
+        # the survivors): replaces the pass's own function filter.
+        for i in "${!args[@]}"; do
+            [ "${args[$i]}" = --re ] && args[i + 1]="$(fn_re "$MUTANTS_RE")"
+        done
+        printf '%s\n' "${args[@]}" | grep -qx -e --re || args+=(--re "$(fn_re "$MUTANTS_RE")")
+    fi
     [ "$pass" = fw-app ] || args=(--timeout "${MUTANTS_TIMEOUT:-240}" "${args[@]}")
     # The unmutated tree is tested once per test set and invocation.
     tests_of_pass=$(printf '%s\n' "${args[@]}" | grep -A1 -e '--test-' | tr '\n' ' ')
