@@ -332,3 +332,26 @@ fn cap_lists_the_strongest_defects_with_ties_by_column() {
         assert_eq!(cols, want, "cap {cap}");
     }
 }
+
+/// A line given more than fits is cut so that its trailer still does: the
+/// finished line is exactly `MAX_LINE` bytes, ends in `*XXXX\n` with the
+/// CRC of what was kept, and nothing of the overflow leaks past it.
+#[test]
+fn an_overlong_line_keeps_room_for_its_trailer() {
+    use cvm_core::protocol::LineBuf;
+    let mut l = LineBuf::new(b'R');
+    for i in 0..2 * MAX_LINE {
+        l.byte(b'0' + (i % 10) as u8);
+    }
+    let line = l.finish();
+    assert_eq!(line.len(), MAX_LINE);
+    let (body, tail) = line.split_at(MAX_LINE - 6);
+    assert_eq!(body[0], b'R');
+    assert!(
+        body[1..]
+            .iter()
+            .enumerate()
+            .all(|(i, &b)| b == b'0' + (i % 10) as u8)
+    );
+    assert_eq!(tail, format!("*{:04X}\n", crc16(body)).as_bytes());
+}
