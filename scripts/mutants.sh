@@ -99,7 +99,7 @@ rm -f "$stage/host-tests/dmap/tests/emulate.rs"
 # mutant's name, e.g. "cvm-core/src/scorer.rs:412:5: replace Scorer::scale
 # -> (u32, i32) with (0, 0)" or "replace + with - in rows").
 fn_re() { printf '(replace|in) (%s)( |$)' "$1"; }
-embed_fns='sum_and_saturation|saturation_offset|mul_hi_round|tri|rows|cols|embed'
+embed_fns='sum_and_saturation|words_sum|copy_words|mul_hi_round|tri|rows|cols|embed'
 scorer_fns='Scorer::(normalise|converter|prepare|prepare_with|prepare_replacing|prepare_into|scale|distance|square_distance|to_score)|recip_sample|shr_sample|fill|squared_difference|reciprocal|magnitude'
 protocol_fns='crc16|LineBuf::[a-z0-9_]+|encode_score|encode_header|encode_row|encode_end|end_fields|HeaderInfo<.*>::new'
 core_tests=(--test-package cvm-core-tests --test-package cvm-fw-app-tests)
