@@ -355,3 +355,32 @@ fn an_overlong_line_keeps_room_for_its_trailer() {
     );
     assert_eq!(tail, format!("*{:04X}\n", crc16(body)).as_bytes());
 }
+
+/// Numbers are written in decimal exactly as Rust formats them, on both
+/// sides of 2^32 (the encoder divides in 32 bits when the value fits) and
+/// at the ends of `u64` and `i64`.
+#[test]
+fn numbers_are_written_in_decimal() {
+    use cvm_core::protocol::LineBuf;
+    let mut r = cvm_core_tests::rng(64);
+    let mut values: Vec<u64> = vec![0, 1, 9, 10, 99, 100, u64::from(u32::MAX)];
+    values.extend([
+        1 << 32,
+        (1 << 32) + 1,
+        10_000_000_000,
+        10u64.pow(19),
+        u64::MAX,
+    ]);
+    values.extend((0..200).map(|_| rand::RngExt::random::<u64>(&mut r) >> (r.random_range(0..64))));
+    for v in values {
+        let mut l = LineBuf::new(b'X');
+        l.u64(v);
+        let line = l.finish();
+        assert_eq!(&line[1..line.len() - 6], v.to_string().as_bytes(), "{v}");
+        let s = v as i64;
+        let mut l = LineBuf::new(b'X');
+        l.i64(s);
+        let line = l.finish();
+        assert_eq!(&line[1..line.len() - 6], s.to_string().as_bytes(), "{s}");
+    }
+}
