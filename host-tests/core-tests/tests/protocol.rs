@@ -384,3 +384,17 @@ fn numbers_are_written_in_decimal() {
         assert_eq!(&line[1..line.len() - 6], s.to_string().as_bytes(), "{s}");
     }
 }
+
+/// A firmware name with characters that would break the header's syntax
+/// (field and checksum separators, spaces, non-ASCII) is sent with each of
+/// them replaced by `?`.
+#[test]
+fn firmware_name_cannot_break_the_header() {
+    let mut sink = Lines::default();
+    encode_header(&header("a,b*c d\u{e9}f", 20), &mut sink);
+    let line = &sink.0[0].0;
+    let Ok(Line::Header(h)) = protocol::parse(line) else {
+        panic!("{}", String::from_utf8_lossy(line));
+    };
+    assert_eq!(h.firmware, "a?b?c?d??f");
+}
