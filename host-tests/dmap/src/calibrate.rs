@@ -171,7 +171,6 @@ pub fn magnitudes(scorer: &Scorer, scan: &MappedScan) -> Result<Magnitudes> {
     // A row at a time: the f64 staging stays one row long.
     for (row, out) in data.chunks_mut(scan.cols * n).enumerate() {
         scan.maps_u16(row * scan.cols, out, &mut scratch)?;
-        scan.release(0..(row + 1) * scan.cols);
     }
     let mut m = Magnitudes::default();
     for s in crate::fixed::score_scan(scorer, scan.rows, scan.cols, &data) {

@@ -264,7 +264,8 @@ pub fn scan_from_bytes(path: &Path, bytes: &[u8]) -> Result<Scan> {
 
 /// A file's bytes: mapped (read only) when the file can be, else read.
 enum FileBytes {
-    Mapped(memmap2::Mmap),
+    /// The mapping and the file it maps.
+    Mapped(memmap2::Mmap, std::fs::File),
     Read(Vec<u8>),
 }
 
@@ -272,7 +273,7 @@ impl std::ops::Deref for FileBytes {
     type Target = [u8];
     fn deref(&self) -> &[u8] {
         match self {
-            FileBytes::Mapped(m) => m,
+            FileBytes::Mapped(m, _) => m,
             FileBytes::Read(v) => v,
         }
     }
@@ -286,11 +287,13 @@ fn map_file(path: &Path) -> Result<FileBytes> {
         .metadata()
         .map_err(|e| anyhow!("{p}: cannot read: {e}"))?;
     if meta.is_file() && meta.len() > 0 {
-        // SAFETY: the mapping is read only; the file must not be truncated
-        // while it is mapped (the process would fault on the lost pages).
+        // SAFETY: the mapping is read only, and it is read only while a
+        // header is checked or a whole file is decoded, right after it is
+        // made (a scan's samples are read with positioned reads, see
+        // `MappedScan`): only a file truncated in that instant would fault.
         if let Ok(map) = unsafe { memmap2::Mmap::map(&file) } {
             let _ = map.advise(memmap2::Advice::Sequential);
-            return Ok(FileBytes::Mapped(map));
+            return Ok(FileBytes::Mapped(map, file));
         }
     }
     read_bytes(path).map(FileBytes::Read)
@@ -317,16 +320,19 @@ fn scan_shape(path: &Path, npy: &NpyFile<&[u8]>) -> Result<(usize, usize, Geomet
     Ok((rows, cols, geometry))
 }
 
-/// A scan file mapped into memory (read only): samples are decoded map by
-/// map when asked, so that `score` and `stream` hold a few rows of a scan at
-/// a time and a scan larger than memory still goes through. Every header
-/// check of [`read_scan`] applies.
+/// A scan file whose samples are read and decoded a few maps at a time,
+/// when asked, so that `score` and `stream` hold a few rows of a scan and a
+/// scan larger than memory still goes through. Every header check of
+/// [`read_scan`] applies when it is opened.
 ///
-/// The mapping assumes nobody truncates the file during the run (the
-/// process would fault on the missing pages).
+/// A regular file is read with positioned reads (not through a memory
+/// mapping), so a file that shrinks during the run is an error naming the
+/// position whose samples are gone, not a fault of the process. A pipe is
+/// read whole.
 pub struct MappedScan {
     path: PathBuf,
-    map: FileBytes,
+    samples: Samples,
+    /// Where the samples start in the file.
     offset: usize,
     /// Positions along the slow axis.
     pub rows: usize,
@@ -339,9 +345,17 @@ pub struct MappedScan {
     big_endian: bool,
 }
 
+/// Where a scan's samples come from.
+enum Samples {
+    /// A regular file, read when maps are asked for.
+    File(std::fs::File),
+    /// What could not be mapped (a pipe, `/dev/stdin`), read at open.
+    Memory(Vec<u8>),
+}
+
 impl MappedScan {
-    /// Maps `path` and checks its header. What cannot be mapped (a pipe,
-    /// `/dev/stdin`) is read into memory instead.
+    /// Opens `path` and checks its header and its length. What cannot be
+    /// mapped (a pipe, `/dev/stdin`) is read into memory instead.
     pub fn open(path: &Path) -> Result<Self> {
         let p = path.display();
         let map = map_file(path)?;
@@ -365,9 +379,13 @@ impl MappedScan {
             DType::Plain(ts) if ts.endianness() == npyz::Endianness::Big
         );
         let offset = bytes.len() - npy.into_inner().len();
+        let samples = match map {
+            FileBytes::Mapped(_, file) => Samples::File(file),
+            FileBytes::Read(bytes) => Samples::Memory(bytes),
+        };
         Ok(MappedScan {
             path: path.to_path_buf(),
-            map,
+            samples,
             offset,
             rows,
             cols,
@@ -375,10 +393,6 @@ impl MappedScan {
             dtype: kind,
             big_endian,
         })
-    }
-
-    fn data(&self) -> &[u8] {
-        &self.map[self.offset..]
     }
 
     fn item(&self) -> usize {
@@ -400,7 +414,35 @@ impl MappedScan {
     pub fn maps_f64(&self, first: usize, out: &mut [f64]) -> Result<()> {
         let n = self.geometry.cells();
         let item = self.item();
-        let bytes = &self.data()[first * n * item..(first * n + out.len()) * item];
+        let p = self.path.display();
+        if first * n + out.len() > self.maps() * n {
+            bail!(
+                "{p}: maps from {first} on are outside the scan's {} positions",
+                self.maps()
+            );
+        }
+        let (start, len) = (self.offset + first * n * item, out.len() * item);
+        let read;
+        let bytes: &[u8] = match &self.samples {
+            Samples::Memory(v) => &v[start..start + len],
+            Samples::File(file) => {
+                use std::os::unix::fs::FileExt;
+                let mut buf = vec![0u8; len];
+                file.read_exact_at(&mut buf, start as u64).map_err(|e| {
+                    if e.kind() == std::io::ErrorKind::UnexpectedEof {
+                        anyhow!(
+                            "{p}: the file ends before the samples of positions {:?} to {:?}: it is shorter than when it was opened (truncated while being read?)",
+                            self.locate(first * n).0,
+                            self.locate((first * n + out.len()).max(1) - 1).0
+                        )
+                    } else {
+                        anyhow!("{p}: cannot read: {e}")
+                    }
+                })?;
+                read = buf;
+                &read
+            }
+        };
         let be = self.big_endian;
         macro_rules! decode {
             ($t:ty) => {
@@ -476,30 +518,8 @@ impl MappedScan {
             if let Some(e) = first_error {
                 return Err(e);
             }
-            self.release(0..r1 * self.cols);
         }
         Ok(())
-    }
-
-    /// Lets the kernel drop the pages of maps `maps` from memory (they are
-    /// read again from the file if needed): what has been scored need not
-    /// stay resident.
-    pub fn release(&self, maps: std::ops::Range<usize>) {
-        let FileBytes::Mapped(map) = &self.map else {
-            return;
-        };
-        let per_map = self.geometry.cells() * self.item();
-        let page = 4096;
-        let start = (self.offset + maps.start * per_map).div_ceil(page) * page;
-        let end = (self.offset + maps.end * per_map) / page * page;
-        if end > start {
-            // SAFETY: the mapping is a read-only shared file mapping: dropped
-            // pages are read again from the file on the next access, and no
-            // reference into them is kept.
-            let _ = unsafe {
-                map.unchecked_advise_range(memmap2::UncheckedAdvice::DontNeed, start, end - start)
-            };
-        }
     }
 
     fn locate(&self, i: usize) -> ((usize, usize), (usize, usize)) {

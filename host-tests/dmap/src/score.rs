@@ -258,7 +258,6 @@ fn banded<B: Banded>(scan: &MappedScan, b: &B, w: &mut GradientWriter) -> Result
         while first + window.len() <= hi {
             window.push_back(b.prepare_row(scan, first + window.len())?);
         }
-        scan.release(0..(hi + 1) * cols);
         let at = |r: usize, c: usize| &window[r - first][c];
         out.clear();
         out.resize((r1 - r0) * cols * 3, 0.0);

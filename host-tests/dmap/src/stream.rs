@@ -305,7 +305,6 @@ pub fn stream_mapped(
             };
             pipeline.push(pos, frame, &mut sink);
         }
-        scan.release(0..(row + 1) * cols);
         if sink.0.len() >= 1 << 16 {
             emit(&sink.0)?;
             sink.0.clear();

@@ -6,7 +6,7 @@ mod common;
 use common::raw_npy;
 use cvm_reference::Geometry;
 use dmap::npy::{
-    Mask, ScanDtype, read_gradient, read_mask, read_scan, write_gradient, write_mask,
+    MappedScan, Mask, ScanDtype, read_gradient, read_mask, read_scan, write_gradient, write_mask,
     write_scan_u16,
 };
 use std::path::{Path, PathBuf};
@@ -247,4 +247,52 @@ fn deeply_nested_header_is_refused_without_parsing_it() {
     std::fs::write(&p, &bytes).unwrap();
     let e = read_scan(&p).unwrap_err().to_string();
     assert!(e.contains("nested too deeply"), "{e}");
+}
+
+#[test]
+fn scan_truncated_while_open_is_an_error_naming_the_lost_positions() {
+    // 3 x 4 positions of 2 x 2 big-endian u16 samples, sample k of map m
+    // is 10 m + k.
+    let (rows, cols, cells) = (3usize, 4usize, 4usize);
+    let data: Vec<u8> = (0..rows * cols * cells)
+        .flat_map(|i| ((i / cells * 10 + i % cells) as u16).to_be_bytes())
+        .collect();
+    let bytes = raw_npy(">u2", false, &[rows, cols, 2, 2], &data);
+    let file = path("truncated_while_open.npy");
+    std::fs::write(&file, &bytes).unwrap();
+    let scan = MappedScan::open(&file).unwrap();
+    let mut scratch = Vec::new();
+    let mut row = vec![0u16; cols * cells];
+    scan.maps_u16(cols, &mut row, &mut scratch).unwrap();
+    let want: Vec<u16> = (cols * cells..2 * cols * cells)
+        .map(|i| (i / cells * 10 + i % cells) as u16)
+        .collect();
+    assert_eq!(row, want, "row 1 before the file shrinks");
+
+    // Cut the file in the middle of position (1, 2): row 0 is still there,
+    // row 1 is not whole any more.
+    let cut = bytes.len() - data.len() + (cols + 2) * cells * 2 + 3;
+    std::fs::OpenOptions::new()
+        .write(true)
+        .open(&file)
+        .unwrap()
+        .set_len(cut as u64)
+        .unwrap();
+    scan.maps_u16(0, &mut row, &mut scratch).unwrap();
+    assert_eq!(row[5], 10 + 1, "row 0 after the file shrinks");
+    let err = scan
+        .maps_u16(cols, &mut row, &mut scratch)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("shorter than when it was opened")
+            && err.contains("(1, 0) to (1, 3)")
+            && err.contains("truncated_while_open.npy"),
+        "{err}"
+    );
+    let err = scan
+        .maps_u16(rows * cols, &mut row, &mut scratch)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("outside the scan's 12 positions"), "{err}");
 }
