@@ -376,9 +376,16 @@ fn engine_set_up_is_checked() {
     );
     assert!(cvm_core::Engine::<4>::with_near(&scorer, 4, 1, &mut a, &mut b, &mut near).is_ok());
     assert!(cvm_core::Engine::<4>::with_near(&scorer, 4, 1, &mut a, &mut b, &mut []).is_ok());
-    let e = cvm_core::Engine::<4>::new(&scorer, 4, 77, &mut a, &mut b).unwrap();
+    let mut e = cvm_core::Engine::<4>::new(&scorer, 4, 77, &mut a, &mut b).unwrap();
     assert_eq!((e.cols(), e.threshold()), (4, 77));
     assert_eq!(e.totals(), &cvm_core::Totals::default());
+    assert_eq!(
+        e.power_threshold(),
+        cvm_core::power::POWER_OFF,
+        "off by default"
+    );
+    e.set_power_threshold(1234);
+    assert_eq!(e.power_threshold(), 1234);
 }
 
 /// A frame `MAX_ROW_JUMP` rows beyond the next expected row is placed,

@@ -1,7 +1,7 @@
 //! The firmware's acquisition and output logic against the core pipeline
 //! fed the clean scan directly.
 
-use cvm_core::protocol::Priority;
+use cvm_core::protocol::{Line, Priority, parse};
 use cvm_core::stream::Position;
 use cvm_fw_app::acquire::{Acquisition, BeamRecord, LostCause};
 use cvm_fw_app::decode::{FrameSizeError, decode_frame, frame_bytes};
@@ -501,6 +501,19 @@ fn assert_consistent<const CAP: usize>(board: &Board<'_, CAP>) {
     assert_eq!(c.scans_begun, c.scans_finished);
     assert_eq!(board.uart.queue.counts().dropped_keep, 0);
     assert!(board.uart.queue.is_empty());
+    // What the driver keeps of the last scan (the H743 logs it) is what
+    // that scan's end line says.
+    let end = board.uart.sent.iter().rev().find(|l| l.starts_with("E,"));
+    match (end, board.driver.last_scan()) {
+        (Some(line), Some((totals, dropped))) => {
+            let Ok(Line::End(e)) = parse(line.trim_end().as_bytes()) else {
+                panic!("end line {line:?} does not parse");
+            };
+            assert_eq!((e.totals, e.dropped), (totals, dropped), "{line}");
+        }
+        (None, None) => {}
+        (end, last) => panic!("end line {end:?} but last scan {last:?}"),
+    }
 }
 
 #[test]
@@ -829,4 +842,48 @@ proptest::proptest! {
         proptest::prop_assert_eq!(c.sync_extra as usize + unsettled, glitches);
         proptest::prop_assert_eq!((c.short_rows, c.misplaced), (0, 0));
     }
+}
+
+#[test]
+fn beam_log_reads_a_frame_only_while_a_spare_slot_remains() {
+    // A log of 5 records: a frame is read while its record and one spare
+    // slot fit (at most 3 records waiting), so a lost beam always has a
+    // slot or a lost record to extend.
+    let mut acq = Acquisition::<8, 5>::new();
+    for k in 0..4 {
+        assert_eq!(acq.pending(), k);
+        let buf = acq
+            .drdy(k == 0)
+            .unwrap_or_else(|| panic!("frame {k}: a buffer and two slots are free"));
+        assert_eq!(acq.pending(), k + 1, "the record of frame {k} waits");
+        acq.read_done(buf, true);
+    }
+    assert_eq!(acq.drdy(false), None, "one slot left: the beam is lost");
+    assert_eq!(acq.drdy(true), None, "log full: folded into the run");
+    assert_eq!(acq.pending(), 5);
+    let c = *acq.counts();
+    assert_eq!(
+        (c.drdy, c.frames_read, c.overruns, c.sync_folded),
+        (6, 4, 2, 1)
+    );
+    for k in 0..4 {
+        assert_eq!(
+            acq.take_next(),
+            Some(BeamRecord::Frame {
+                sync: k == 0,
+                buf: k
+            }),
+            "frame {k}"
+        );
+        assert_eq!(acq.pending(), 4 - k);
+    }
+    assert_eq!(
+        acq.take_next(),
+        Some(BeamRecord::Lost {
+            sync: false,
+            cause: LostCause::Overrun,
+            run: 2
+        })
+    );
+    assert_eq!((acq.pending(), acq.take_next()), (0, None));
 }
