@@ -15,6 +15,9 @@
 #
 # Passes (each its own cargo-mutants run and output directory):
 #   fw-app    fw-app/src/sequence.rs and queue.rs, against fw-app-tests
+#   acquire   fw-app/src/acquire.rs, decode.rs and driver.rs (frame
+#             acquisition, SPI frame decoding, the scan driver), against
+#             fw-app-tests
 #   stream    cvm-core/src/stream.rs (gradient, border rule, flags,
 #             decisions, row summaries), against core-tests and
 #             fw-app-tests
@@ -26,9 +29,16 @@
 #   pipeline  cvm-core/src/pipeline.rs
 #   decision  the power channel and the object labeller,
 #             cvm-core/src/power.rs and objects.rs
-#   rest      everything else in both crates (tables, configuration, the
-#             protocol parser, acquisition, driver, ...), against every
-#             host test crate that uses them
+#   tables    what is built once per configuration: factor tables,
+#             formats, score units (tables.rs, config.rs, flags.rs and the
+#             rest of scorer.rs and embed.rs), against core-tests and
+#             fw-app-tests
+#   parser    the line parser in cvm-core/src/protocol.rs (the rest of
+#             the file), against those and dmap's tests
+#   emufile   the emulated board's scan-file header, fw-app/src/emufile.rs,
+#             against fw-app-tests and dmap's tests
+#   rest      anything in both crates no pass above covers, against every
+#             host test crate
 #
 # Environment:
 #   MUTANTS_REV    commit to test (default HEAD: the committed tree, so a
@@ -59,7 +69,7 @@ while [ $# -gt 0 ] && [ "$1" != "--" ]; do
     shift
 done
 [ "${1-}" = "--" ] && shift
-[ ${#passes[@]} -gt 0 ] || passes=(fw-app stream embed scorer protocol pipeline decision rest)
+[ ${#passes[@]} -gt 0 ] || passes=(fw-app acquire stream embed scorer protocol pipeline decision tables parser emufile rest)
 
 if ! cargo mutants --version >/dev/null 2>&1; then
     cargo install --locked cargo-mutants
@@ -99,8 +109,8 @@ rm -f "$stage/host-tests/dmap/tests/emulate.rs"
 # mutant's name, e.g. "cvm-core/src/scorer.rs:412:5: replace Scorer::scale
 # -> (u32, i32) with (0, 0)" or "replace + with - in rows").
 fn_re() { printf '(replace|in) (%s)( |$)' "$1"; }
-embed_fns='sum_and_saturation|words_sum|copy_words|mul_hi_round|tri|rows|cols|embed'
-scorer_fns='Scorer::(normalise|converter|prepare|prepare_with|prepare_replacing|prepare_into|scale|distance|square_distance|to_score)|recip_sample|shr_sample|fill|squared_difference|reciprocal|magnitude'
+embed_fns='sum_and_saturation|words_sum|copy_words|mul_hi_round|tri|rows|cols|above2|sum_copy_blocks|embed'
+scorer_fns='Scorer::(normalise|normalise_power|converter|prepare|prepare_with|prepare_replacing|prepare_into|prepare_map|prepare_map_near|box_sums|scale|distance|square_distance|to_score)|recip_sample|shr_sample|fill|squared_difference|squared_difference_blocks|reciprocal|magnitude'
 protocol_fns='crc16|LineBuf::[a-z0-9_]+|encode_score|encode_header|encode_row|encode_end|end_fields|HeaderInfo<.*>::new'
 core_tests=(--test-package cvm-core-tests --test-package cvm-fw-app-tests)
 
@@ -110,6 +120,8 @@ for pass in "${passes[@]}"; do
     case $pass in
     fw-app) args=(--timeout "${MUTANTS_TIMEOUT:-30}" --package cvm-fw-app --test-package cvm-fw-app-tests
         --file fw-app/src/sequence.rs --file fw-app/src/queue.rs) ;;
+    acquire) args=(--timeout "${MUTANTS_TIMEOUT:-30}" --package cvm-fw-app --test-package cvm-fw-app-tests
+        --file fw-app/src/acquire.rs --file fw-app/src/decode.rs --file fw-app/src/driver.rs) ;;
     stream) args=(--package cvm-core "${core_tests[@]}" --file cvm-core/src/stream.rs) ;;
     embed) args=(--package cvm-core "${core_tests[@]}" --file cvm-core/src/scorer/embed.rs
         --re "$(fn_re "$embed_fns")") ;;
@@ -120,11 +132,20 @@ for pass in "${passes[@]}"; do
     pipeline) args=(--package cvm-core "${core_tests[@]}" --file cvm-core/src/pipeline.rs) ;;
     decision) args=(--package cvm-core "${core_tests[@]}" --file cvm-core/src/power.rs
         --file cvm-core/src/objects.rs) ;;
+    tables) args=(--package cvm-core "${core_tests[@]}" --file cvm-core/src/tables.rs
+        --file cvm-core/src/config.rs --file cvm-core/src/flags.rs --file cvm-core/src/scorer.rs
+        --file cvm-core/src/scorer/embed.rs --exclude-re "$(fn_re "$embed_fns|$scorer_fns")") ;;
+    parser) args=(--package cvm-core "${core_tests[@]}" --test-package dmap
+        --file cvm-core/src/protocol.rs --exclude-re "$(fn_re "$protocol_fns")") ;;
+    emufile) args=(--package cvm-fw-app --test-package cvm-fw-app-tests --test-package dmap
+        --file fw-app/src/emufile.rs) ;;
     rest) args=(--package cvm-core --package cvm-fw-app --test-workspace=true
-        --exclude fw-app/src/sequence.rs --exclude fw-app/src/queue.rs
-        --exclude cvm-core/src/stream.rs --exclude cvm-core/src/pipeline.rs
-        --exclude cvm-core/src/power.rs --exclude cvm-core/src/objects.rs
-        --exclude-re "$(fn_re "$embed_fns|$scorer_fns|$protocol_fns")") ;;
+        --exclude 'fw-app/src/[a-z]*.rs' --exclude cvm-core/src/stream.rs
+        --exclude cvm-core/src/pipeline.rs --exclude cvm-core/src/power.rs
+        --exclude cvm-core/src/objects.rs --exclude cvm-core/src/tables.rs
+        --exclude cvm-core/src/config.rs --exclude cvm-core/src/flags.rs
+        --exclude cvm-core/src/scorer.rs --exclude cvm-core/src/scorer/embed.rs
+        --exclude cvm-core/src/protocol.rs) ;;
     *)
         echo "unknown pass '$pass'" >&2
         exit 2
@@ -138,7 +159,7 @@ for pass in "${passes[@]}"; do
         done
         printf '%s\n' "${args[@]}" | grep -qx -e --re || args+=(--re "$(fn_re "$MUTANTS_RE")")
     fi
-    [ "$pass" = fw-app ] || args=(--timeout "${MUTANTS_TIMEOUT:-240}" "${args[@]}")
+    case $pass in fw-app | acquire) ;; *) args=(--timeout "${MUTANTS_TIMEOUT:-240}" "${args[@]}") ;; esac
     # The unmutated tree is tested once per test set and invocation.
     tests_of_pass=$(printf '%s\n' "${args[@]}" | grep -A1 -e '--test-' | tr '\n' ' ')
     case " $baselined " in
