@@ -224,6 +224,8 @@ pub struct Board<'a, const CAP: usize> {
     pub frames: BusFrames,
     pub driver: ScanDriver<'a, MAX_COLS>,
     pub uart: Uart<CAP>,
+    /// Scans the driver said it finished (the H743 logs each one then).
+    pub finished: u32,
 }
 
 impl<'a, const CAP: usize> Board<'a, CAP> {
@@ -249,6 +251,7 @@ impl<'a, const CAP: usize> Board<'a, CAP> {
                 queue: LineQueue::new(reserve),
                 sent: vec![],
             },
+            finished: 0,
         }
     }
 
@@ -289,7 +292,9 @@ impl<'a, const CAP: usize> Board<'a, CAP> {
             if rec.is_none() && !self.driver.busy() {
                 return;
             }
-            self.driver.step(rec, &mut self.frames, &mut self.uart);
+            if self.driver.step(rec, &mut self.frames, &mut self.uart) {
+                self.finished += 1;
+            }
             for b in self.frames.released.drain(..) {
                 self.acq.release(b);
             }
@@ -311,7 +316,8 @@ impl<'a, const CAP: usize> Board<'a, CAP> {
         }
         loop {
             self.uart.send(usize::MAX);
-            let (more, _) = self.driver.end_of_data(&mut self.frames, &mut self.uart);
+            let (more, finished) = self.driver.end_of_data(&mut self.frames, &mut self.uart);
+            self.finished += u32::from(finished);
             if !more {
                 break;
             }

@@ -499,6 +499,10 @@ fn assert_consistent<const CAP: usize>(board: &Board<'_, CAP>) {
     assert_eq!(c.beams, a.drdy, "every DRDY edge is one beam");
     assert_eq!(c.beams, c.placed + c.lost + c.extra, "{c:?}");
     assert_eq!(c.scans_begun, c.scans_finished);
+    assert_eq!(
+        board.finished, c.scans_finished,
+        "the driver reports each scan it ends"
+    );
     assert_eq!(board.uart.queue.counts().dropped_keep, 0);
     assert!(board.uart.queue.is_empty());
     // What the driver keeps of the last scan (the H743 logs it) is what
