@@ -641,7 +641,9 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
             s.pmag = power::magnitude(s.p0, s.p1);
             s.flags &= !flags::DEFECT;
             s.strength = 0;
-            if s.g0 == u32::MAX || s.g1 == u32::MAX || s.mag == u32::MAX {
+            // The magnitude is at least either score, so it is at the top
+            // of its range whenever one of them is.
+            if s.mag == u32::MAX {
                 s.flags |= flags::CLIPPED;
                 self.totals.clipped += 1;
             }

@@ -42,6 +42,9 @@ fn perfect_squares_and_their_neighbours() {
 fn saturates_at_the_top() {
     assert_eq!(magnitude(u32::MAX, 0), u32::MAX);
     assert_eq!(magnitude(u32::MAX, u32::MAX), u32::MAX);
+    for g in [0, 1, 1 << 31, u32::MAX - 1] {
+        assert_eq!(magnitude(g, u32::MAX), u32::MAX, "{g}");
+    }
     assert_eq!(
         magnitude(u32::MAX - 1, 1 << 16),
         reference(u32::MAX - 1, 1 << 16)
@@ -58,5 +61,7 @@ proptest! {
     fn any_pair(g0: u32, g1: u32, s0 in 0u32..32, s1 in 0u32..32) {
         let (a, b) = (g0 >> s0, g1 >> s1);
         prop_assert_eq!(magnitude(a, b), reference(a, b));
+        // The engine flags a clipped score by the magnitude alone.
+        prop_assert!(magnitude(a, b) >= a.max(b));
     }
 }
