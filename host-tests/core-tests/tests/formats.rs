@@ -153,3 +153,35 @@ fn reciprocal_is_exact_for_every_sum() {
         assert_eq!(cvm_core::scorer::reciprocal_q60(s) as u64, want, "s = {s}");
     }
 }
+
+/// Every refusal says why, in words of its own (the firmware and the tools
+/// print them).
+#[test]
+fn configuration_and_frame_errors_say_why() {
+    use cvm_core::{ConfigError, FrameError};
+    let messages = [
+        (
+            ConfigError::Geometry.to_string(),
+            "detector axis outside 1..=16",
+        ),
+        (
+            ConfigError::KernelSize.to_string(),
+            "square kernel size K above 15",
+        ),
+        (
+            ConfigError::Weights.to_string(),
+            "a weight is negative or not finite, or all weights are zero",
+        ),
+        (
+            ConfigError::Range.to_string(),
+            "no fixed-point scaling keeps every accumulator in range",
+        ),
+        (
+            FrameError::Length.to_string(),
+            "frame or state buffer of the wrong length",
+        ),
+    ];
+    for (got, want) in messages {
+        assert_eq!(got, want);
+    }
+}

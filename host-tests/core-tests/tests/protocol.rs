@@ -398,3 +398,45 @@ fn firmware_name_cannot_break_the_header() {
     };
     assert_eq!(h.firmware, "a?b?c?d??f");
 }
+
+/// The flag bits are the ones docs/protocol.md lists (its "Flags" table:
+/// bit, value, name), which is what a decoder written from the document
+/// reads.
+#[test]
+fn flags_are_the_documented_bits() {
+    use cvm_core::flags;
+    let doc = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../docs/protocol.md"
+    ))
+    .unwrap();
+    let table = doc.split("## Flags").nth(1).expect("a Flags section");
+    let rows: Vec<(u32, u32, String)> = table
+        .lines()
+        .skip_while(|l| !l.starts_with("| bit"))
+        .skip(2)
+        .take_while(|l| l.starts_with('|'))
+        .map(|l| {
+            let f: Vec<&str> = l.split('|').map(str::trim).collect();
+            (
+                f[1].parse().unwrap(),
+                f[2].parse().unwrap(),
+                f[3].trim_matches('`').to_string(),
+            )
+        })
+        .collect();
+    let ours = [
+        ("NO_DATA", flags::NO_DATA),
+        ("DARK", flags::DARK),
+        ("SATURATED", flags::SATURATED),
+        ("CLIPPED", flags::CLIPPED),
+        ("CVM_DEFECT", flags::CVM_DEFECT),
+        ("POWER_DEFECT", flags::POWER_DEFECT),
+    ];
+    assert_eq!(rows.len(), ours.len(), "{rows:?}");
+    for ((bit, value, name), (our_name, our_value)) in rows.iter().zip(ours) {
+        assert_eq!((name.as_str(), *value), (our_name, 1 << bit), "{rows:?}");
+        assert_eq!(u32::from(our_value), *value, "{name}");
+    }
+    assert_eq!(flags::DEFECT, flags::CVM_DEFECT | flags::POWER_DEFECT);
+}
