@@ -185,3 +185,43 @@ fn configuration_and_frame_errors_say_why() {
         assert_eq!(got, want);
     }
 }
+
+/// `threshold_from_units` is the smallest integer score whose real value
+/// reaches the threshold: checked against `score_to_units` on both sides,
+/// at exact multiples of a score unit, between them, and at the ends.
+#[test]
+fn threshold_from_units_is_the_smallest_score_reaching_it() {
+    for cfg in [
+        Config::paper(Geometry::new(9, 9).unwrap()),
+        Config {
+            normalise: false,
+            ..Config::paper(Geometry::new(15, 15).unwrap())
+        },
+    ] {
+        let scorer = Scorer::new(&cfg).unwrap();
+        let unit = scorer.score_to_units(1);
+        assert_eq!(unit, 2f64.powi(-scorer.score_frac_bits()));
+        let mut r = rng(7);
+        let mut cases: Vec<f64> = vec![unit, 2.0 * unit, 1000.0 * unit, 0.5 * unit, 1e-300];
+        cases.extend((0..2000).map(|_| r.random_range(0.0..1.0) * 1e4 * unit));
+        cases.extend((0..200).map(|_| r.random_range(1u32..1 << 30) as f64 * unit));
+        for t in cases {
+            let s = scorer.threshold_from_units(t);
+            assert!(s >= 1, "{t}");
+            assert!(scorer.score_to_units(s) >= t, "{t}: {s}");
+            assert!(scorer.score_to_units(s - 1) < t, "{t}: {s}");
+        }
+        assert_eq!(scorer.threshold_from_units(0.0), 0);
+        assert_eq!(scorer.threshold_from_units(-1.0), 0);
+        assert_eq!(scorer.threshold_from_units(f64::NAN), u32::MAX);
+        assert_eq!(scorer.threshold_from_units(f64::INFINITY), u32::MAX);
+        assert_eq!(
+            scorer.threshold_from_units(u32::MAX as f64 * unit),
+            u32::MAX
+        );
+        assert_eq!(
+            scorer.threshold_from_units((u32::MAX - 1) as f64 * unit),
+            u32::MAX - 1
+        );
+    }
+}
