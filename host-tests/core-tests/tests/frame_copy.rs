@@ -18,6 +18,37 @@ fn samples(words: &mut [u32]) -> &mut [u16] {
     unsafe { core::slice::from_raw_parts_mut(words.as_mut_ptr().cast::<u16>(), 2 * words.len()) }
 }
 
+/// One frame stored twice in word-aligned memory: starting on a word and
+/// starting two bytes past one.
+struct Placed {
+    on: Vec<u32>,
+    off: Vec<u32>,
+    cells: usize,
+}
+
+impl Placed {
+    fn new(frame: &[u16]) -> Self {
+        let cells = frame.len();
+        let mut on = vec![0u32; cells.div_ceil(2) + 1];
+        let mut off = on.clone();
+        samples(&mut on)[..cells].copy_from_slice(frame);
+        samples(&mut off)[1..=cells].copy_from_slice(frame);
+        Placed { on, off, cells }
+    }
+
+    /// The copy that starts on a word.
+    fn on(&self) -> &[u16] {
+        // SAFETY: as in `samples`; `cells < 2 * on.len()`.
+        unsafe { core::slice::from_raw_parts(self.on.as_ptr().cast::<u16>(), self.cells) }
+    }
+
+    /// The copy that starts two bytes past a word.
+    fn off(&self) -> &[u16] {
+        // SAFETY: as in `samples`; `1 + cells <= 2 * off.len()`.
+        unsafe { core::slice::from_raw_parts(self.off.as_ptr().cast::<u16>().add(1), self.cells) }
+    }
+}
+
 #[test]
 fn aligned_and_unaligned_frames_embed_the_same() {
     const FULL_SCALE: u16 = 60000;
@@ -44,12 +75,8 @@ fn aligned_and_unaligned_frames_embed_the_same() {
                     2 => frame[0] = FULL_SCALE,
                     _ => {}
                 }
-                let mut on = vec![0u32; cells.div_ceil(2) + 1];
-                let mut off = on.clone();
-                samples(&mut on)[..cells].copy_from_slice(&frame);
-                samples(&mut off)[1..=cells].copy_from_slice(&frame);
-                let on = &samples(&mut on)[..cells];
-                let off = &samples(&mut off)[1..=cells];
+                let placed = Placed::new(&frame);
+                let (on, off) = (placed.on(), placed.off());
                 assert_eq!(on.as_ptr() as usize % 4, 0);
                 assert_eq!(off.as_ptr() as usize % 4, 2);
                 let mut scratch = Scratch::new();
@@ -88,12 +115,8 @@ fn the_sum_pass_copies_word_aligned_frames() {
     let mut r = rng(78);
     for cells in [1usize, 2, 3, 4, 5, 8, 9, 81, 224, 225, 255, 256] {
         let frame = random_map(&mut r, cells, 1);
-        let mut on = vec![0u32; cells.div_ceil(2) + 1];
-        let mut off = on.clone();
-        samples(&mut on)[..cells].copy_from_slice(&frame);
-        samples(&mut off)[1..=cells].copy_from_slice(&frame);
-        let on = &samples(&mut on)[..cells];
-        let off = &samples(&mut off)[1..=cells];
+        let placed = Placed::new(&frame);
+        let (on, off) = (placed.on(), placed.off());
         let sum: u32 = frame.iter().map(|&v| u32::from(v)).sum();
         let fs = frame.iter().copied().max().unwrap();
         for full_scale in [fs.max(1), fs.saturating_add(1), 0] {
