@@ -41,7 +41,7 @@ use clap::Args;
 use cvm_core::{Config, Kernels, Scorer, Weights, flags, power};
 use serde_json::{Value, json};
 
-use crate::npy::MappedScan;
+use crate::npy::ScanFile;
 use crate::options::ScoringArgs;
 use crate::stream::fmt_num;
 
@@ -164,7 +164,7 @@ pub struct Magnitudes {
 
 /// Both channels' magnitudes of every position of a scan with data, in the
 /// firmware's arithmetic.
-pub fn magnitudes(scorer: &Scorer, scan: &MappedScan) -> Result<Magnitudes> {
+pub fn magnitudes(scorer: &Scorer, scan: &ScanFile) -> Result<Magnitudes> {
     let n = scan.geometry.cells();
     let mut data = vec![0u16; scan.maps() * n];
     let mut scratch = Vec::new();
@@ -516,7 +516,7 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
     let mut per_ref = Vec::new();
     let mut setup: Option<(Config, Scorer, (usize, usize))> = None;
     for path in &a.refs {
-        let scan = MappedScan::open(path)?;
+        let scan = ScanFile::open(path)?;
         scan.validate(true)
             .with_context(|| format!("{}", path.display()))?;
         let g = (scan.geometry.j1(), scan.geometry.j2());

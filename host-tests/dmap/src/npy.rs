@@ -290,7 +290,7 @@ fn map_file(path: &Path) -> Result<FileBytes> {
         // SAFETY: the mapping is read only, and it is read only while a
         // header is checked or a whole file is decoded, right after it is
         // made (a scan's samples are read with positioned reads, see
-        // `MappedScan`): only a file truncated in that instant would fault.
+        // `ScanFile`): only a file truncated in that instant would fault.
         if let Ok(map) = unsafe { memmap2::Mmap::map(&file) } {
             let _ = map.advise(memmap2::Advice::Sequential);
             return Ok(FileBytes::Mapped(map, file));
@@ -329,7 +329,7 @@ fn scan_shape(path: &Path, npy: &NpyFile<&[u8]>) -> Result<(usize, usize, Geomet
 /// mapping), so a file that shrinks during the run is an error naming the
 /// position whose samples are gone, not a fault of the process. A pipe is
 /// read whole.
-pub struct MappedScan {
+pub struct ScanFile {
     path: PathBuf,
     samples: Samples,
     /// Where the samples start in the file.
@@ -353,7 +353,7 @@ enum Samples {
     Memory(Vec<u8>),
 }
 
-impl MappedScan {
+impl ScanFile {
     /// Opens `path` and checks its header and its length. What cannot be
     /// mapped (a pipe, `/dev/stdin`) is read into memory instead.
     pub fn open(path: &Path) -> Result<Self> {
@@ -383,7 +383,7 @@ impl MappedScan {
             FileBytes::Mapped(_, file) => Samples::File(file),
             FileBytes::Read(bytes) => Samples::Memory(bytes),
         };
-        Ok(MappedScan {
+        Ok(ScanFile {
             path: path.to_path_buf(),
             samples,
             offset,

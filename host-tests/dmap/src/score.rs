@@ -1,7 +1,7 @@
 //! `dmap score`: the gradient image (Eq. 1) of a scan under one of the
 //! distances, exact in f64 (or the firmware's fixed point, `cvm-fixed`).
 
-use crate::npy::{GradientWriter, MappedScan, band_rows};
+use crate::npy::{GradientWriter, ScanFile, band_rows};
 use crate::options::ScoringArgs;
 use crate::out::Target;
 use anyhow::{Result, bail};
@@ -64,7 +64,7 @@ pub fn run(args: &ScoreArgs) -> Result<()> {
     if let Target::File(out) = &target {
         crate::out::refuse_inputs(out, &[&args.scan])?;
     }
-    let scan = MappedScan::open(&args.scan)?;
+    let scan = ScanFile::open(&args.scan)?;
     let g = scan.geometry;
     let (j1, j2) = (g.j1(), g.j2());
     // The configuration is checked before the samples are.
@@ -164,7 +164,7 @@ pub fn blind_axes(j1: usize, j2: usize, d: impl Fn(&[f64], &[f64]) -> f64) -> Ve
 /// gradient of a position from its four neighbours' prepared maps.
 trait Banded: Sync {
     type Prepared: Send + Sync;
-    fn prepare_row(&self, scan: &MappedScan, row: usize) -> Result<Vec<Self::Prepared>>;
+    fn prepare_row(&self, scan: &ScanFile, row: usize) -> Result<Vec<Self::Prepared>>;
     fn gradient(
         &self,
         left: &Self::Prepared,
@@ -183,7 +183,7 @@ where
     D::Prepared: Send + Sync,
 {
     type Prepared = D::Prepared;
-    fn prepare_row(&self, scan: &MappedScan, row: usize) -> Result<Vec<D::Prepared>> {
+    fn prepare_row(&self, scan: &ScanFile, row: usize) -> Result<Vec<D::Prepared>> {
         let n = scan.geometry.cells();
         let mut samples = vec![0.0; scan.cols * n];
         scan.maps_f64(row * scan.cols, &mut samples)?;
@@ -208,7 +208,7 @@ struct FixedPrepare<'a>(&'a cvm_core::Scorer);
 
 impl Banded for FixedPrepare<'_> {
     type Prepared = Vec<i32>;
-    fn prepare_row(&self, scan: &MappedScan, row: usize) -> Result<Vec<Vec<i32>>> {
+    fn prepare_row(&self, scan: &ScanFile, row: usize) -> Result<Vec<Vec<i32>>> {
         let n = scan.geometry.cells();
         let mut counts = vec![0u16; scan.cols * n];
         scan.maps_u16(row * scan.cols, &mut counts, &mut Vec::new())?;
@@ -242,7 +242,7 @@ impl Banded for FixedPrepare<'_> {
 /// Eq. 1 with the border rule (a missing neighbour is the map itself), a
 /// band of rows at a time: each map prepared once, held while a row next to
 /// it is scored, then dropped.
-fn banded<B: Banded>(scan: &MappedScan, b: &B, w: &mut GradientWriter) -> Result<()> {
+fn banded<B: Banded>(scan: &ScanFile, b: &B, w: &mut GradientWriter) -> Result<()> {
     let (rows, cols) = (scan.rows, scan.cols);
     let band = band_rows(cols, scan.geometry.cells());
     let mut window: VecDeque<Vec<B::Prepared>> = VecDeque::new();

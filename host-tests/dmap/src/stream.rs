@@ -2,7 +2,7 @@
 //! encoder, `cvm_core::Pipeline`) run on the host over a scan file, so that
 //! host and firmware output can be compared byte for byte.
 
-use crate::npy::MappedScan;
+use crate::npy::ScanFile;
 use crate::options::ScoringArgs;
 use anyhow::{Result, bail};
 use clap::Args;
@@ -273,7 +273,7 @@ pub fn stream_scan(
 pub fn stream_mapped(
     scorer: &Scorer,
     settings: Settings,
-    scan: &MappedScan,
+    scan: &ScanFile,
     emit: &mut dyn FnMut(&[u8]) -> Result<()>,
 ) -> Result<()> {
     let n = scorer.cells();
@@ -315,7 +315,7 @@ pub fn stream_mapped(
 }
 
 pub fn run(args: &StreamArgs) -> Result<()> {
-    let scan = MappedScan::open(&args.scan)?;
+    let scan = ScanFile::open(&args.scan)?;
     let (j1, j2) = (scan.geometry.j1(), scan.geometry.j2());
     let (scorer, settings, warnings) = configure(&args.scoring, &args.output, j1, j2, scan.cols)?;
     // Every sample is checked before the first line goes out.

@@ -6,7 +6,7 @@ mod common;
 use common::raw_npy;
 use cvm_reference::Geometry;
 use dmap::npy::{
-    MappedScan, Mask, ScanDtype, read_gradient, read_mask, read_scan, write_gradient, write_mask,
+    Mask, ScanDtype, ScanFile, read_gradient, read_mask, read_scan, write_gradient, write_mask,
     write_scan_u16,
 };
 use std::path::{Path, PathBuf};
@@ -260,7 +260,7 @@ fn scan_truncated_while_open_is_an_error_naming_the_lost_positions() {
     let bytes = raw_npy(">u2", false, &[rows, cols, 2, 2], &data);
     let file = path("truncated_while_open.npy");
     std::fs::write(&file, &bytes).unwrap();
-    let scan = MappedScan::open(&file).unwrap();
+    let scan = ScanFile::open(&file).unwrap();
     let mut scratch = Vec::new();
     let mut row = vec![0u16; cols * cells];
     scan.maps_u16(cols, &mut row, &mut scratch).unwrap();
