@@ -17,5 +17,5 @@ pub mod tables;
 pub use config::{Config, ConfigError, Geometry, Kernels, MAX_CELLS, MAX_J, Weights};
 pub use objects::{Object, Objects};
 pub use pipeline::{Pipeline, Settings};
-pub use scorer::{FrameError, Scorer, magnitude};
+pub use scorer::{Bounds, Formats, FrameError, Scorer, magnitude};
 pub use stream::{Engine, Position, PositionScore, RowSummary, RowView, Totals};

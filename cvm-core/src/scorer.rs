@@ -189,9 +189,8 @@ impl Scorer {
         };
         let (f, f1, f2, e_frac) = match kind {
             Kind::Paper => {
-                let rf1 = real_factor(&axis_kernel(j1, &w1, n1), j1);
-                let rf2 = real_factor(&axis_kernel(j2, &w2, n2), j2);
-                let (f, p1, p2) = match paper_formats(cfg, &rf1, &rf2) {
+                let (rf1, rf2) = paper_factors(j1, &w1, n1, j2, &w2, n2);
+                let (f, p1, p2, _) = match paper_formats(cfg, &rf1, &rf2) {
                     Ok(v) => v,
                     Err(e) => return Err(e),
                 };
@@ -280,6 +279,36 @@ impl Scorer {
     /// `i32` words of one prepared map ([`Config::state_words`]).
     pub const fn state_words(&self) -> usize {
         self.config.state_words()
+    }
+
+    /// The fixed-point formats of this configuration and, for the paper
+    /// kernels, the bounds of the overflow proof at those formats (module
+    /// docs, "Why nothing overflows"). Recomputed from the configuration,
+    /// as [`Scorer::new`] computes them: for diagnostics and for the tests
+    /// that pin the proof, not for the per-beam path.
+    pub fn formats(&self) -> Formats {
+        let (mut factors, mut bounds) = ([0, 0], None);
+        if let (Kind::Paper, Kernels::Paper { bmax }) = (self.kind, self.config.kernels) {
+            let g = self.config.geometry;
+            let (j1, j2) = (g.j1 as usize, g.j2 as usize);
+            // `new` accepted these weights, so neither axis fails here.
+            let a1 = axis_weights(&self.config.weights, 0, j1, bmax as usize);
+            let a2 = axis_weights(&self.config.weights, 1, j2, bmax as usize);
+            if let (Ok((w1, n1)), Ok((w2, n2))) = (a1, a2) {
+                let (rf1, rf2) = paper_factors(j1, &w1, n1, j2, &w2, n2);
+                if let Ok((_, p1, p2, b)) = paper_formats(&self.config, &rf1, &rf2) {
+                    factors = [p1, p2];
+                    bounds = Some(b);
+                }
+            }
+        }
+        Formats {
+            input: self.frac,
+            factors,
+            embedding: self.e_frac,
+            score: self.q,
+            bounds,
+        }
     }
 
     /// Integer scores are real distances times `2^q`.
@@ -596,7 +625,7 @@ const fn paper_formats(
     cfg: &Config,
     rf1: &RealFactor,
     rf2: &RealFactor,
-) -> Result<(i32, u32, u32), ConfigError> {
+) -> Result<(i32, u32, u32, Bounds), ConfigError> {
     let (j1, j2) = (rf1.h + rf1.g, rf2.h + rf2.g);
     let n = (j1 * j2) as f64;
     let (Some(p1max), Some(p2)) = (precision(rf1), precision(rf2)) else {
@@ -631,10 +660,10 @@ const fn paper_formats(
         // Every term of a pass is rounded on its own: a sum of at most
         // MAX_H terms is within MAX_H / 2 of the exact one.
         let err = MAX_H as f64 * 0.5;
-        let row_ok = yrow * r2max * pow2(-32) + err < I31;
+        let row = yrow * r2max * pow2(-32) + err;
         // Σ over a column block of |T| after the fold along axis 1.
         let tcol = yhalf * r2max * pow2(-32) + MAX_J as f64 * err;
-        let row_ok = row_ok && tcol < I31;
+        let row_ok = row < I31 && tcol < I31;
         let mut p1 = p1max as i32;
         while row_ok && p1 >= 0 {
             let r1max = rf1.max * pow2(p1) + 0.5;
@@ -642,14 +671,67 @@ const fn paper_formats(
             let e = r1fro * r2fro * yfro * pow2(-64)
                 + r1fro * sqrt(2.0 * n) * err * pow2(-32)
                 + sqrt(n) * err;
-            if tcol * r1max * pow2(-32) + err < I31 && e < LIMIT_E {
-                return Ok((f, p1 as u32, p2));
+            let column = tcol * r1max * pow2(-32) + err;
+            if column < I31 && e < LIMIT_E {
+                let bounds = Bounds {
+                    row,
+                    fold: tcol,
+                    column,
+                    embedding: e,
+                };
+                return Ok((f, p1 as u32, p2, bounds));
             }
             p1 -= 1;
         }
         f -= 1;
     }
     Err(ConfigError::Range)
+}
+
+/// The fixed-point formats of a configuration ([`Scorer::formats`]; the
+/// table in the module docs).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Formats {
+    /// `f`: the input `y` is in `Q(f)`.
+    pub input: i32,
+    /// `p1`, `p2`: the factor blocks of axis 1 and 2 are in `Q(p)` (paper
+    /// kernels; 0 for square kernels, which have none).
+    pub factors: [u32; 2],
+    /// `e`: the embedding is in `Q(e)` (square kernels: the box sums, `f`).
+    pub embedding: i32,
+    /// `q`: scores are in `Q(q)`.
+    pub score: i32,
+    /// The proof's bounds at these formats (paper kernels).
+    pub bounds: Option<Bounds>,
+}
+
+/// The bounds of the paper kernels' overflow proof at the chosen formats
+/// (module docs, "Why nothing overflows"), each below its limit.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Bounds {
+    /// Every partial sum of the row pass: `Yrow r2max / 2^32 + ε < 2^31`.
+    pub row: f64,
+    /// Every value of `T` folded along axis 1: `Tcol < 2^31`.
+    pub fold: f64,
+    /// Every partial sum of the column pass: `Tcol r1max / 2^32 + ε < 2^31`.
+    pub column: f64,
+    /// `‖E‖_F < 2^30`.
+    pub embedding: f64,
+}
+
+/// The real folded factors of both axes' paper kernels.
+const fn paper_factors(
+    j1: usize,
+    w1: &[f64; MAX_J],
+    n1: usize,
+    j2: usize,
+    w2: &[f64; MAX_J],
+    n2: usize,
+) -> (RealFactor, RealFactor) {
+    (
+        real_factor(&axis_kernel(j1, w1, n1), j1),
+        real_factor(&axis_kernel(j2, w2, n2), j2),
+    )
 }
 
 /// Frobenius norm of both blocks of a real factor.
