@@ -399,7 +399,7 @@ impl Scorer {
     }
 
     /// [`Scorer::prepare`] with caller-owned scratch space, so that the
-    /// per-beam path does not clear 2 KiB of stack for every map.
+    /// per-beam path does not clear 4.5 KiB of stack for every map.
     pub fn prepare_with(
         &self,
         frame: &[u16],
@@ -463,7 +463,7 @@ impl Scorer {
             Kind::Square { kmax } => {
                 let x = scratch.v.as_flattened_mut().get_mut(..n).unwrap_or(&mut []);
                 let (flags, power) = self.normalise_power(frame, x)?;
-                let acc = self.box_sums(x, state, kmax as usize, diff);
+                let acc = self.box_sums(x, &mut scratch.sat, state, kmax as usize, diff);
                 if let Some(near) = near.get_mut(..state.len()) {
                     embed::copy_words(state, near);
                 }
@@ -551,56 +551,64 @@ impl Scorer {
     /// With `diff`, also returns `Σ (old - new)²` against the embedding
     /// `state` held (the streaming engine's vertical component), computed
     /// word by word as each word is overwritten.
-    fn box_sums(&self, x: &[i32], state: &mut [i32], kmax: usize, diff: bool) -> u64 {
-        // Rows of 32 words, every column index masked to 0..32 (the largest
-        // is 16): no bounds checks in the inner loops, no panics. Row 0 is
-        // the zero row; row i + 1 is written from row i in place.
-        const W: usize = 32;
+    // Out of line: inlined into the engine, its loops ran out of registers
+    // and kept the accumulator on the stack.
+    #[inline(never)]
+    fn box_sums(
+        &self,
+        x: &[i32],
+        sat: &mut Table,
+        state: &mut [i32],
+        kmax: usize,
+        diff: bool,
+    ) -> u64 {
         let j1 = self.config.geometry.j1 as usize;
         let j2 = self.config.geometry.j2 as usize;
-        // sat[i+1][k+1] = Σ_{i'<=i, k'<=k} x[i'][k'].
-        let mut sat = [[0i32; W]; MAX_J + 1];
+        let kmax = kmax.min(MAX_J - 1);
+        // sat[i+1][PAD + c] = Σ_{i'<=i, c'<c} x[i'][c'] for c in 0..=J2,
+        // and the value at c = J2 repeated over the next kmax words. Row 0
+        // and the left pad (c <= 0) are the zero border, which nothing ever
+        // writes, so the caller's table needs no clearing per map. Then the
+        // box of half-width h at column k, clipped at the border, spans
+        // sat columns PAD + k - h to PAD + k + h + 1 for every k: four
+        // streams, no index tables, no clamping in the loop.
         for (i, xrow) in x.chunks_exact(j2.max(1)).take(j1).enumerate() {
-            let (done, rest) = sat.split_at_mut((i + 1).min(MAX_J));
+            let (done, rest) = sat.split_at_mut(i + 1);
             let (Some(above), Some(row)) = (done.last(), rest.first_mut()) else {
                 break;
             };
             let mut run = 0i32;
-            for (k, &v) in xrow.iter().enumerate() {
-                run = run.wrapping_add(v);
-                row[(k + 1) & (W - 1)] = above[(k + 1) & (W - 1)].wrapping_add(run);
+            let cells = row.iter_mut().zip(above).skip(PAD + 1);
+            for ((out, a), v) in cells.zip(xrow) {
+                run = run.wrapping_add(*v);
+                *out = a.wrapping_add(run);
             }
+            let Some((body, pad)) = row.split_at_mut_checked(PAD + j2 + 1) else {
+                break;
+            };
+            let total = body.last().copied().unwrap_or(0);
+            pad.iter_mut().take(kmax).for_each(|p| *p = total);
         }
         let mut acc: i64 = 0;
-        let mut words = state.iter_mut();
+        let mut rows = state.chunks_exact_mut(j2.max(1));
         for h in 0..=kmax {
-            // Column bounds of every cell's box along axis 2, as table indices.
-            let mut klo = [0usize; MAX_J];
-            let mut khi = [0usize; MAX_J];
-            for k in 0..j2 {
-                let (lo, hi) = crate::tables::box_range(k, h, j2);
-                klo[k & (MAX_J - 1)] = lo;
-                khi[k & (MAX_J - 1)] = hi + 1;
-            }
+            let (lo, hi) = (PAD - h, PAD + h + 1);
             for i in 0..j1 {
                 let (ilo, ihi) = crate::tables::box_range(i, h, j1);
-                let (Some(top), Some(bot)) = (sat.get(ilo), sat.get(ihi + 1)) else {
-                    continue;
+                let (Some(top), Some(bot), Some(out)) =
+                    (sat.get(ilo), sat.get(ihi + 1), rows.next())
+                else {
+                    break;
                 };
-                for (&lo, &hi) in klo.iter().zip(&khi).take(j2) {
-                    let (lo, hi) = (lo & (W - 1), hi & (W - 1));
-                    let e = bot[hi]
-                        .wrapping_sub(top[hi])
-                        .wrapping_sub(bot[lo])
-                        .wrapping_add(top[lo]);
-                    if let Some(word) = words.next() {
-                        if diff {
-                            let d = word.wrapping_sub(e) as i64;
-                            acc = acc.wrapping_add(d * d);
-                        }
-                        *word = e;
-                    }
-                }
+                let (Some(bh), Some(th), Some(bl), Some(tl)) = (
+                    bot.get(hi..hi + j2),
+                    top.get(hi..hi + j2),
+                    bot.get(lo..lo + j2),
+                    top.get(lo..lo + j2),
+                ) else {
+                    break;
+                };
+                acc = acc.wrapping_add(box_row(out, [bh, th, bl, tl], diff));
             }
         }
         acc as u64
@@ -799,6 +807,31 @@ fn fill(x: &mut [i32], frame: &[u16], f: impl Fn(u16) -> i32) {
     }
 }
 
+/// One row of box sums `bh - th - bl + tl` (the corners of each box in the
+/// summed-area table) written to `out`; with `diff`, returns `Σ (old -
+/// new)²` over the words it overwrote (the square kernels' vertical
+/// component), else 0. Out of line and on slices of one length, so that
+/// the loops keep their pointers and accumulator in registers.
+#[inline(never)]
+fn box_row(out: &mut [i32], [bh, th, bl, tl]: [&[i32]; 4], diff: bool) -> i64 {
+    let corners = bh.iter().zip(th).zip(bl.iter().zip(tl));
+    let sums = corners
+        .map(|((bh, th), (bl, tl))| bh.wrapping_sub(*th).wrapping_sub(*bl).wrapping_add(*tl));
+    let mut acc: i64 = 0;
+    if diff {
+        for (word, e) in out.iter_mut().zip(sums) {
+            let d = word.wrapping_sub(e) as i64;
+            acc = acc.wrapping_add(d * d);
+            *word = e;
+        }
+    } else {
+        for (word, e) in out.iter_mut().zip(sums) {
+            *word = e;
+        }
+    }
+    acc
+}
+
 /// `Σ (a - b)²` of two embeddings: `|a|, |b| < 2^30`, so each difference
 /// fits `i32` and the sum (below `2^62`) fits `i64`: one `SUB` and one
 /// `SMLAL` per word. Kept out of line so that its registers are not shared
@@ -859,18 +892,29 @@ fn squared_difference_blocks(_a: &[i32], _b: &[i32]) -> (i64, usize) {
     (0, 0)
 }
 
-/// Scratch space of the square kernels (the new map while the old one is
-/// still needed), in a fixed `MAX_J` stride. (The paper kernels' row pass
-/// keeps its output on the stack: see `embed::embed`.)
+/// Scratch space of the square kernels: the normalised map, in a fixed
+/// `MAX_J` stride, and its summed-area table, whose zero border stays
+/// zero from one map to the next. (The paper kernels' row pass keeps its
+/// output on the stack: see `embed::embed`.)
 #[derive(Clone)]
 pub struct Scratch {
     v: [[i32; MAX_J]; MAX_J],
+    /// The summed-area table of the square kernels' box sums.
+    sat: Table,
 }
+
+/// A summed-area table with its zero border and its padding
+/// ([`Scorer::box_sums`]): `J + 1` rows of `PAD` zeros, `J + 1` sums and
+/// up to `MAX_J - 1` copies of the last.
+type Table = [[i32; 2 * PAD + MAX_J + 1]; MAX_J + 1];
+/// Columns of a [`Table`] row left of column 0.
+const PAD: usize = MAX_J;
 
 impl Scratch {
     pub const fn new() -> Self {
         Scratch {
             v: [[0; MAX_J]; MAX_J],
+            sat: [[0; 2 * PAD + MAX_J + 1]; MAX_J + 1],
         }
     }
 }

@@ -244,3 +244,48 @@ fn normalised_distance_is_scale_invariant() {
         }
     }
 }
+
+/// One scratch space serves every scorer, map after map, in any order: the
+/// square kernels keep their summed-area table's zero border in it from
+/// one map to the next instead of clearing it, so a map must embed the same
+/// whatever the scratch held before, and replacing a map must score the
+/// distance between the old and the new one.
+#[test]
+fn one_scratch_serves_every_scorer_in_any_order() {
+    use cvm_core::scorer::Scratch;
+    use rand::seq::SliceRandom;
+    let mut r = rng(77);
+    let mut jobs = Vec::new();
+    for &(j1, j2) in GEOMETRIES {
+        for args in variants(j1, j2) {
+            for _ in 0..3 {
+                jobs.push((j1, j2, args.clone()));
+            }
+        }
+    }
+    jobs.shuffle(&mut r);
+    let mut shared = Scratch::new();
+    for (j1, j2, args) in jobs {
+        let scorer = args.scorer(j1, j2).unwrap();
+        let w = scorer.state_words();
+        let (a, b) = (
+            random_map(&mut r, j1 * j2, j2),
+            random_map(&mut r, j1 * j2, j2),
+        );
+        let (mut fresh_a, mut fresh_b) = (vec![0i32; w], vec![0i32; w]);
+        scorer.prepare(&a, &mut fresh_a).unwrap();
+        scorer.prepare(&b, &mut fresh_b).unwrap();
+        let mut state = vec![i32::MIN; w];
+        scorer.prepare_with(&a, &mut state, &mut shared).unwrap();
+        assert_eq!(state, fresh_a, "{j1}x{j2} {args:?}");
+        let (_, score) = scorer
+            .prepare_replacing(&b, &mut state, &mut shared)
+            .unwrap();
+        assert_eq!(state, fresh_b, "{j1}x{j2} {args:?}");
+        assert_eq!(
+            score,
+            scorer.distance(&fresh_a, &fresh_b),
+            "{j1}x{j2} {args:?}"
+        );
+    }
+}

@@ -23,13 +23,14 @@ pub fn score_scan(scorer: &Scorer, rows: usize, cols: usize, data: &[u16]) -> Ve
     let w = scorer.state_words();
     let mut states = vec![0i32; rows * cols * w];
     let mut fl = vec![0u8; rows * cols];
+    let mut scratch = cvm_core::scorer::Scratch::new();
     for (i, (frame, state)) in data
         .chunks_exact(n)
         .zip(states.chunks_exact_mut(w))
         .enumerate()
     {
         fl[i] = scorer
-            .prepare(frame, state)
+            .prepare_with(frame, state, &mut scratch)
             .expect("frame length checked above");
     }
     let state = |r: usize, c: usize| &states[(r * cols + c) * w..(r * cols + c + 1) * w];

@@ -214,10 +214,10 @@ impl Banded for FixedPrepare<'_> {
         scan.maps_u16(row * scan.cols, &mut counts, &mut Vec::new())?;
         Ok(counts
             .par_chunks(n)
-            .map(|frame| {
+            .map_init(cvm_core::scorer::Scratch::new, |scratch, frame| {
                 let mut state = vec![0i32; self.0.state_words()];
                 // The length is the scorer's: the scan's geometry made it.
-                let _ = self.0.prepare(frame, &mut state);
+                let _ = self.0.prepare_with(frame, &mut state, scratch);
                 state
             })
             .collect())
