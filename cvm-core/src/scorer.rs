@@ -69,7 +69,7 @@
 
 use crate::config::{Config, ConfigError, Geometry, Kernels, MAX_J};
 use crate::flags;
-use crate::tables::{axis_kernel, axis_weights, norms, pow2, sqrt, weight_sum};
+use crate::tables::{axis_kernel, axis_weights, pow2, sqrt, weight_sum};
 
 /// Why a frame could not be scored.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -744,8 +744,8 @@ const fn paper_factors(
 
 /// Frobenius norm of both blocks of a real factor.
 const fn frobenius(r: &RealFactor) -> f64 {
-    let (_, fe, _) = norms(&r.even, r.h);
-    let (_, fo, _) = norms(&r.odd, r.g);
+    let fe = crate::tables::frobenius(&r.even, r.h);
+    let fo = crate::tables::frobenius(&r.odd, r.g);
     sqrt(fe * fe + fo * fo)
 }
 

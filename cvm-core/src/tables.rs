@@ -169,51 +169,19 @@ pub const fn pow2(e: i32) -> f64 {
     v
 }
 
-/// Largest entry magnitude, Frobenius norm and largest row 1-norm of the
-/// leading `n x n` block.
-pub const fn norms(r: &Mat, n: usize) -> (f64, f64, f64) {
-    let (mut max, mut fro, mut row1) = (0.0, 0.0, 0.0);
-    let mut i = 0;
-    while i < n {
-        let mut s = 0.0;
-        let mut l = 0;
-        while l < n {
-            let a = abs(r[i][l]);
-            if a > max {
-                max = a;
-            }
-            fro += a * a;
-            s += a;
-            l += 1;
-        }
-        if s > row1 {
-            row1 = s;
-        }
-        i += 1;
-    }
-    (max, sqrt(fro), row1)
-}
-
-/// Quantise `R` to integers `round(R * 2^p)` with the largest `p` (at most
-/// 40) that keeps every entry below 2^30 in magnitude.
-pub const fn quantise(r: &Mat, n: usize) -> ([[i32; MAX_J]; MAX_J], u32) {
-    let (max, _, _) = norms(r, n);
-    let mut p: u32 = 0;
-    while p < 40 && max * pow2(p as i32 + 1) < 1_073_741_823.0 {
-        p += 1;
-    }
-    let scale = pow2(p as i32);
-    let mut q = [[0i32; MAX_J]; MAX_J];
+/// Frobenius norm of the leading `n x n` block.
+pub const fn frobenius(r: &Mat, n: usize) -> f64 {
+    let mut sum = 0.0;
     let mut i = 0;
     while i < n {
         let mut l = 0;
         while l < n {
-            q[i][l] = round(r[i][l] * scale) as i32;
+            sum += r[i][l] * r[i][l];
             l += 1;
         }
         i += 1;
     }
-    (q, p)
+    sqrt(sum)
 }
 
 /// Sum of the kernel weights, `Σ_b w(b)`, for the score range.
