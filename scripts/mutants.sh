@@ -23,8 +23,9 @@
 #             fw-app-tests
 #   embed     the per-map passes of cvm-core/src/scorer/embed.rs (sum and
 #             saturation, conversion, row and column passes)
-#   scorer    normalisation, flags, score conversion, distances and the
-#             gradient magnitude in cvm-core/src/scorer.rs
+#   scorer    normalisation, flags, score conversion, distances, the
+#             square kernels' box sums and the gradient magnitude in
+#             cvm-core/src/scorer.rs
 #   protocol  the line encoder and CRC in cvm-core/src/protocol.rs
 #   pipeline  cvm-core/src/pipeline.rs
 #   decision  the power channel and the object labeller,
@@ -53,6 +54,11 @@
 #                  pass, whose tests take a second, 240 for the others)
 #   MUTANTS_BUILD_TIMEOUT  seconds (default 600)
 #   CARGO_BUILD_JOBS  cargo's parallelism per build (default 1)
+#   MUTANTS_NEXTEST  1 (default when cargo-nextest is installed) runs each
+#                  mutant's tests with nextest: in parallel, stopping at the
+#                  first failure, so a caught mutant costs its first failing
+#                  test instead of every test binary before it; 0 uses
+#                  cargo test
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 cd "$root"
@@ -73,6 +79,12 @@ done
 
 if ! cargo mutants --version >/dev/null 2>&1; then
     cargo install --locked cargo-mutants
+fi
+runner=()
+if [ "${MUTANTS_NEXTEST:-$(cargo nextest --version >/dev/null 2>&1 && echo 1 || echo 0)}" = 1 ]; then
+    # cargo-mutants tests the unmutated tree with the mutated package's own
+    # tests, which cvm-core and fw-app do not have: not an error.
+    runner=(--test-tool=nextest --cargo-test-arg=--no-tests=pass)
 fi
 
 # cargo-mutants mutates packages of one cargo workspace and runs that
@@ -113,7 +125,7 @@ rm -f "$stage/host-tests/dmap/tests/emulate.rs" "$stage/host-tests/dmap/tests/tw
 # -> (u32, i32) with (0, 0)" or "replace + with - in rows").
 fn_re() { printf '(replace|in) (%s)( |$)' "$1"; }
 embed_fns='sum_and_saturation|words_sum|copy_words|mul_hi_round|tri|rows|cols|above2|sum_copy_blocks|embed'
-scorer_fns='Scorer::(normalise|normalise_power|converter|prepare|prepare_with|prepare_replacing|prepare_into|prepare_map|prepare_map_near|box_sums|scale|distance|square_distance|to_score)|recip_sample|shr_sample|fill|squared_difference|squared_difference_blocks|reciprocal|magnitude'
+scorer_fns='Scorer::(normalise|normalise_power|converter|prepare|prepare_with|prepare_replacing|prepare_into|prepare_map|prepare_map_near|box_sums|scale|distance|square_distance|to_score)|recip_sample|shr_sample|fill|squared_difference|squared_difference_blocks|box_row|reciprocal|magnitude'
 protocol_fns='crc16|LineBuf::[a-z0-9_]+|encode_score|encode_header|encode_row|encode_end|end_fields|HeaderInfo<.*>::new'
 core_tests=(--test-package cvm-core-tests --test-package cvm-fw-app-tests)
 
@@ -178,6 +190,7 @@ for pass in "${passes[@]}"; do
         --dir "$stage" \
         --in-place \
         "${args[@]}" \
+        "${runner[@]}" \
         --build-timeout "${MUTANTS_BUILD_TIMEOUT:-600}" \
         --output "$out/$pass" \
         "$@" || s=$?
