@@ -225,3 +225,30 @@ fn threshold_from_units_is_the_smallest_score_reaching_it() {
         );
     }
 }
+
+/// Separable weights must be finite and non-negative: one bad entry among
+/// good ones, on either axis, refuses the configuration, whatever the sum
+/// of the weights would be.
+#[test]
+fn a_negative_or_infinite_weight_is_refused() {
+    for bad in [-0.25, -1e-300, f64::INFINITY, f64::NEG_INFINITY, f64::NAN] {
+        for axis in 0..2 {
+            for at in [0, 3] {
+                let mut w = [[1.0; MAX_J]; 2];
+                w[axis][at] = bad;
+                let cfg = Config {
+                    geometry: Geometry::new(5, 6).unwrap(),
+                    kernels: Kernels::Paper { bmax: 0 },
+                    weights: Weights::Separable { w1: w[0], w2: w[1] },
+                    normalise: true,
+                    full_scale: u16::MAX,
+                };
+                assert_eq!(
+                    Scorer::new(&cfg).err(),
+                    Some(cvm_core::ConfigError::Weights),
+                    "weight {bad} at {at} of axis {axis}"
+                );
+            }
+        }
+    }
+}
