@@ -15,19 +15,9 @@ dmap="$root/host-tests/target/x86_64-unknown-linux-gnu/release/dmap"
 work="$(mktemp -d)"
 trap 'rm -rf "$work"' EXIT
 
-# A 40 x 30 scan of random counts (uint16 .npy) for a J x J detector.
+# A 40 x 30 scan of random counts for a J x J detector.
 make_scan() {
-    python3 - "$1" "$2" <<'PY'
-import random, struct, sys
-path, j = sys.argv[1], int(sys.argv[2])
-rows, cols = 30, 40
-random.seed(j)
-hdr = "{'descr': '<u2', 'fortran_order': False, 'shape': (%d, %d, %d, %d), }" % (rows, cols, j, j)
-hdr += " " * (64 - (10 + len(hdr) + 1) % 64) + "\n"
-with open(path, "wb") as f:
-    f.write(b"\x93NUMPY\x01\x00" + struct.pack("<H", len(hdr)) + hdr.encode())
-    f.write(struct.pack("<%dH" % (rows * cols * j * j), *[random.randint(200, 4000) for _ in range(rows * cols * j * j)]))
-PY
+    python3 "$root/scripts/random_scan.py" "$1" "$2" 30 40
 }
 
 echo "| map | kernels | instructions per beam | beams |"

@@ -39,18 +39,9 @@ work="$(mktemp -d)"
 trap 'rm -rf "$work"' EXIT
 
 cols=12
-# A random scan (uint16 .npy) of `rows` x 12 maps of J x J.
+# A random scan of `rows` x 12 maps of J x J.
 scan() {
-    python3 - "$work/scan$1.npy" "$j" "$1" "$cols" <<'PY'
-import random, struct, sys
-path, j, rows, cols = sys.argv[1], *map(int, sys.argv[2:])
-random.seed(j)
-hdr = "{'descr': '<u2', 'fortran_order': False, 'shape': (%d, %d, %d, %d), }" % (rows, cols, j, j)
-hdr += " " * (64 - (10 + len(hdr) + 1) % 64) + "\n"
-with open(path, "wb") as f:
-    f.write(b"\x93NUMPY\x01\x00" + struct.pack("<H", len(hdr)) + hdr.encode())
-    f.write(struct.pack("<%dH" % (rows * cols * j * j), *[random.randint(200, 4000) for _ in range(rows * cols * j * j)]))
-PY
+    python3 "$root/scripts/random_scan.py" "$work/scan$1.npy" "$j" "$1" "$cols"
 }
 
 # dmap starts qemu-system-arm from PATH: this one logs the blocks to
