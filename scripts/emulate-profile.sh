@@ -28,10 +28,7 @@ case $j in [1-9] | 1[0-6]) ;; *)
     exit 2
     ;;
 esac
-rustup target add thumbv7em-none-eabihf >/dev/null
-if ! command -v qemu-system-arm >/dev/null; then
-    apt-get update -qq && apt-get install -y -qq qemu-system-arm >/dev/null
-fi
+bash "$root/scripts/emulate-setup.sh"
 (cd "$root/host-tests" && cargo build -q --release -p dmap)
 dmap="$root/host-tests/target/x86_64-unknown-linux-gnu/release/dmap"
 [ -x "$dmap" ] || dmap="$root/host-tests/target/release/dmap"
