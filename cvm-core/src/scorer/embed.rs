@@ -27,7 +27,8 @@ type Rows = [[MaybeUninit<i32>; MAX_J]; MAX_J];
 
 /// The quantised factor of one folded axis: the even block (`h` cells, the
 /// middle one included) and the odd block (`g` cells), each upper
-/// triangular and packed row by row (`r[k][k..n]`), in `Q(p)`.
+/// triangular and packed column by column (`r[0..=l][l]`, the order
+/// in which the passes stream them), in `Q(p)`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Factor {
     pub h: usize,
@@ -398,6 +399,7 @@ fn above2(w: u32, below2: u32) -> u32 {
 }
 
 /// `round(a * b / 2^32)`: one `SMMULR`.
+#[cfg(not(target_arch = "arm"))]
 #[inline(always)]
 fn mul_hi_round(a: i32, b: i32) -> i32 {
     ((a as i64 * b as i64 + (1 << 31)) >> 32) as i32
@@ -409,6 +411,7 @@ fn mul_hi_round(a: i32, b: i32) -> i32 {
 /// input and the streamed coefficients fit the Cortex-M4's registers.
 /// Each term is rounded (error at most 1/2), and the bounds of the
 /// module docs keep every partial sum inside `i32`.
+#[cfg(not(target_arch = "arm"))]
 #[inline(always)]
 fn tri<const N: usize>(r: &[i32; TRI], u: &[i32; N]) -> [i32; N] {
     let mut acc = [0i32; N];
@@ -436,8 +439,41 @@ fn rows<const H: usize, const G: usize>(
     conv: (u32, i32),
     t: &mut Rows,
 ) {
-    let j2 = H + G;
     let (sh, m) = (conv.0 & 31, conv.1);
+    #[cfg(target_arch = "arm")]
+    {
+        let j2 = H + G;
+        let n = n_rows.min(MAX_J).min(frame.len() / j2.max(1));
+        if n > 0 {
+            let ctx = [
+                f2.even.as_ptr() as u32,
+                f2.odd.as_ptr() as u32,
+                m as u32,
+                sh,
+            ];
+            // SAFETY: the generated pass for `j2` reads `n * j2` samples
+            // of `frame` and the factor's `TRI`-word blocks, and writes
+            // `t[k][i]` for `k < j2 <= MAX_J`, `i < n <= MAX_J`; it
+            // preserves the callee-saved registers (AAPCS).
+            unsafe { (arm::rows(j2))(frame.as_ptr(), t.as_mut_ptr().cast(), n, &ctx) };
+        }
+    }
+    #[cfg(not(target_arch = "arm"))]
+    rows_model::<H, G>(f2, frame, n_rows, (sh, m), t);
+}
+
+/// The row pass in Rust: what the generated Cortex-M pass computes
+/// (`passes_arm.s`), run on every other target.
+#[cfg(not(target_arch = "arm"))]
+#[inline(always)]
+fn rows_model<const H: usize, const G: usize>(
+    f2: &Factor,
+    frame: &[u16],
+    n_rows: usize,
+    (sh, m): (u32, i32),
+    t: &mut Rows,
+) {
+    let j2 = H + G;
     let (te, to) = t.split_at_mut(H);
     let (Some(Ok(te)), Some(Ok(to))) = (
         te.get_mut(..H)
@@ -483,6 +519,87 @@ fn rows<const H: usize, const G: usize>(
 /// that held no map cannot make it panic; for two maps it cannot wrap).
 #[inline(never)]
 fn cols<const H: usize, const G: usize, const DIFF: bool, const NEAR: bool>(
+    f1: &Factor,
+    t: &[[MaybeUninit<i32>; MAX_J]],
+    e: &mut [i32],
+    near: &mut [i32],
+) -> u64 {
+    #[cfg(target_arch = "arm")]
+    return cols_arm::<DIFF, NEAR>(H + G, f1, t, e, near);
+    #[cfg(not(target_arch = "arm"))]
+    return cols_model::<H, G, DIFF, NEAR>(f1, t, e, near);
+}
+
+/// The column pass through the generated Cortex-M pass for `j1`
+/// (`passes_arm.s`): the new map goes to `near` (`NEAR`), to `e`
+/// (neither), or through a buffer on the stack (`DIFF` alone), and the
+/// distance is one [`squared_difference`] over the words overwritten.
+#[cfg(target_arch = "arm")]
+#[inline(always)]
+fn cols_arm<const DIFF: bool, const NEAR: bool>(
+    j1: usize,
+    f1: &Factor,
+    t: &[[MaybeUninit<i32>; MAX_J]],
+    e: &mut [i32],
+    near: &mut [i32],
+) -> u64 {
+    let ctx = [f1.even.as_ptr() as u32, f1.odd.as_ptr() as u32];
+    let pass = arm::cols(j1);
+    let j1 = j1.max(1);
+    let mut n = t.len().min(MAX_J).min(e.len() / j1);
+    if NEAR {
+        n = n.min(near.len() / j1);
+    }
+    let words = n * j1;
+    let (Some(e), Some(near)) = (
+        e.get_mut(..words),
+        near.get_mut(..if NEAR { words } else { 0 }),
+    ) else {
+        return 0;
+    };
+    if n == 0 {
+        return 0;
+    }
+    if NEAR || !DIFF {
+        let dst = if NEAR {
+            near.as_mut_ptr()
+        } else {
+            e.as_mut_ptr()
+        };
+        // SAFETY: the pass reads `j1` initialised words (written by the row
+        // pass) of each of the first `n` rows of `t` and the factor's
+        // blocks, and writes `n * j1` words at `dst`, which holds as many;
+        // it preserves the callee-saved registers (AAPCS).
+        unsafe { pass(t.as_ptr().cast(), dst, n, &ctx) };
+        return if DIFF {
+            super::squared_difference(e, near)
+        } else {
+            0
+        };
+    }
+    // The map is overwritten in place: the new one goes to a buffer on the
+    // stack first (DTCM on the H743), then the distance, then the copy.
+    // Not cleared: the pass writes the `words` words read after it.
+    let mut buf = [MaybeUninit::<i32>::uninit(); MAX_CELLS];
+    let Some(new) = buf.get_mut(..words) else {
+        return 0;
+    };
+    // SAFETY: as above, with `new` as `dst`; after the pass its `words`
+    // words are initialised.
+    let new = unsafe {
+        pass(t.as_ptr().cast(), new.as_mut_ptr().cast(), n, &ctx);
+        &*(new as *const [MaybeUninit<i32>] as *const [i32])
+    };
+    let acc = super::squared_difference(e, new);
+    copy_words(new, e);
+    acc
+}
+
+/// The column pass in Rust: what the generated Cortex-M pass computes,
+/// run on every other target.
+#[cfg(not(target_arch = "arm"))]
+#[inline(always)]
+fn cols_model<const H: usize, const G: usize, const DIFF: bool, const NEAR: bool>(
     f1: &Factor,
     t: &[[MaybeUninit<i32>; MAX_J]],
     e: &mut [i32],
@@ -542,6 +659,65 @@ fn cols<const H: usize, const G: usize, const DIFF: bool, const NEAR: bool>(
         }
     }
     acc
+}
+
+/// The generated Cortex-M passes (`passes_arm.s`, written by the host test
+/// `passes_asm`, which also runs them on a model of the instructions
+/// against the arithmetic of [`rows_model`] and [`cols_model`]).
+#[cfg(target_arch = "arm")]
+mod arm {
+    core::arch::global_asm!(include_str!("passes_arm.s"), options(raw));
+
+    /// `(frame, t, rows, [even, odd, m, sh])`.
+    pub type RowsPass = unsafe extern "C" fn(*const u16, *mut i32, usize, *const [u32; 4]);
+    /// `(t, out, rows, [even, odd])`.
+    pub type ColsPass = unsafe extern "C" fn(*const i32, *mut i32, usize, *const [u32; 2]);
+
+    macro_rules! passes {
+        ($($j:literal => $rows:ident, $cols:ident;)*) => {
+            unsafe extern "C" {
+                $(
+                    fn $rows(frame: *const u16, t: *mut i32, n: usize, ctx: *const [u32; 4]);
+                    fn $cols(t: *const i32, out: *mut i32, n: usize, ctx: *const [u32; 2]);
+                )*
+            }
+            /// The row pass of an axis of `j` cells (`j` is a constant
+            /// where it is called: one direct call, one symbol linked).
+            #[inline(always)]
+            pub fn rows(j: usize) -> RowsPass {
+                match j {
+                    $($j => $rows,)*
+                    _ => cvm_rows_1,
+                }
+            }
+            /// The column pass of an axis of `j` cells.
+            #[inline(always)]
+            pub fn cols(j: usize) -> ColsPass {
+                match j {
+                    $($j => $cols,)*
+                    _ => cvm_cols_1,
+                }
+            }
+        };
+    }
+    passes! {
+        1 => cvm_rows_1, cvm_cols_1;
+        2 => cvm_rows_2, cvm_cols_2;
+        3 => cvm_rows_3, cvm_cols_3;
+        4 => cvm_rows_4, cvm_cols_4;
+        5 => cvm_rows_5, cvm_cols_5;
+        6 => cvm_rows_6, cvm_cols_6;
+        7 => cvm_rows_7, cvm_cols_7;
+        8 => cvm_rows_8, cvm_cols_8;
+        9 => cvm_rows_9, cvm_cols_9;
+        10 => cvm_rows_10, cvm_cols_10;
+        11 => cvm_rows_11, cvm_cols_11;
+        12 => cvm_rows_12, cvm_cols_12;
+        13 => cvm_rows_13, cvm_cols_13;
+        14 => cvm_rows_14, cvm_cols_14;
+        15 => cvm_rows_15, cvm_cols_15;
+        16 => cvm_rows_16, cvm_cols_16;
+    }
 }
 
 /// `dst[..] = src[..]` (as long as the shorter), for the maps copied

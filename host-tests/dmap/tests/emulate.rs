@@ -109,6 +109,42 @@ fn emulated_firmware_matches_host_pipeline_non_square_unit_weights() {
     );
 }
 
+/// The Cortex-M row and column passes are generated per axis length
+/// (`cvm-core/src/scorer/passes_arm.s`): `j1 x (17 - j1)` runs each of the
+/// 16 row passes and the 16 column passes once, on the board's code.
+#[test]
+fn emulated_firmware_matches_host_pipeline_every_axis_length() {
+    for j1 in 1..=16 {
+        let j2 = 17 - j1;
+        let dir =
+            std::env::temp_dir().join(format!("dmap-emulate-axes-{}-{j1}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let scan = dir.join("scan.npy");
+        write_scan(&scan, j1, j2, 7, 4, j1 as u64);
+        let scan = scan.to_str().unwrap();
+        let args = [scan, "--scores", "--threshold", "0.05"];
+        let host = dmap(&[&["stream"], &args[..]].concat());
+        let target = dmap(&[&["emulate"], &args[..]].concat());
+        let _ = std::fs::remove_dir_all(&dir);
+        let text = String::from_utf8(host.clone()).unwrap();
+        // The rows' score lines (encoded scores), not all the same.
+        let scores: std::collections::BTreeSet<&str> = text
+            .lines()
+            .filter(|l| l.starts_with("S,"))
+            .filter_map(|l| l.split(',').nth(3))
+            .collect();
+        assert!(
+            scores.len() >= 2,
+            "{j1}x{j2}: the score lines do not vary:\n{text}"
+        );
+        assert!(
+            host == target,
+            "{j1}x{j2}: emulated firmware and host pipeline differ:\n--- stream\n{text}\n--- emulate\n{}",
+            String::from_utf8_lossy(&target)
+        );
+    }
+}
+
 /// Running `qemu-system-arm` processes whose command line mentions `needle`.
 fn qemu_processes(needle: &str) -> Vec<u32> {
     let mut out = Vec::new();

@@ -18,8 +18,8 @@ from .machine import Machine, cycles_of_ms
 # (stage, substrings of function paths), first match wins.
 STAGES = (
     ("sum and saturation flag", ("sum_and_saturation",)),
-    ("embedding: row pass", ("embed::rows",)),
-    ("embedding: column pass and vertical distance", ("embed::cols", "embed::copy_words")),
+    ("embedding: row pass", ("embed::rows", "cvm_rows_")),
+    ("embedding: column pass", ("embed::cols", "embed::copy_words", "cvm_cols_")),
     ("distances", ("squared_difference", "square_distance", "sat_distance")),
     ("normalise, gradient, window", ("cvm_core::scorer", "cvm_core::stream", "magnitude")),
     ("defect objects", ("cvm_core::objects",)),
@@ -36,7 +36,7 @@ STAGES = (
     ("memcpy/memset, division", ("compiler_builtins", "__aeabi", "__udivmoddi4")),
 )
 SCORING = {"sum and saturation flag", "embedding: row pass",
-           "embedding: column pass and vertical distance", "distances",
+           "embedding: column pass", "distances",
            "normalise, gradient, window", "defect objects", "sequencing", "line encoding and queue"}
 
 
