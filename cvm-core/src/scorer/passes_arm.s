@@ -5,8 +5,9 @@
 @ Cortex-M4/M7 (see embed.rs): for each axis length J, the accumulators of
 @ the even block (H = ceil(J/2)) and then the odd block (G = floor(J/2))
 @ stay in r0-r7, one SMMLAR per coefficient, the coefficients streamed
-@ column by column (three per LDM in the column pass, where r11, r12 and
-@ lr are free; the row pass keeps its conversion (m, sh) in r11 and r12).
+@ column by column, as many per LDM as registers are free (r11, r12 and
+@ lr in the column pass, lr in the row pass, which keeps its conversion
+@ (m, sh) in r11 and r12; and the accumulators a smaller block leaves).
 @ Each function in its own section, so that the linker keeps only the
 @ geometry the firmware uses.
 
@@ -28,8 +29,8 @@ cvm_rows_1:
     ldrh r10, [r8, #0]
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmulr r0, lr, r10
+    ldr r1, [r9], #4
+    smmulr r0, r1, r10
     ldr r10, [sp, #4]
     str r0, [r10, #0]
     add r10, r10, #4
@@ -56,8 +57,8 @@ cvm_cols_1:
 1:
     ldr r9, [sp, #16]
     ldr r10, [r8, #0]
-    ldr r11, [r9], #4
-    smmulr r0, r11, r10
+    ldr r1, [r9], #4
+    smmulr r0, r1, r10
     ldr r10, [sp, #4]
     str r0, [r10], #4
     str r10, [sp, #4]
@@ -87,8 +88,8 @@ cvm_rows_2:
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmulr r0, lr, r10
+    ldr r1, [r9], #4
+    smmulr r0, r1, r10
     ldr r10, [sp, #4]
     str r0, [r10, #0]
     ldr r9, [sp, #20]
@@ -97,8 +98,8 @@ cvm_rows_2:
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmulr r0, lr, r10
+    ldr r1, [r9], #4
+    smmulr r0, r1, r10
     ldr r10, [sp, #4]
     str r0, [r10, #64]
     add r10, r10, #4
@@ -127,8 +128,8 @@ cvm_cols_2:
     ldr r10, [r8, #0]
     ldr r11, [r8, #4]
     add r10, r10, r11
-    ldr r11, [r9], #4
-    smmulr r0, r11, r10
+    ldr r1, [r9], #4
+    smmulr r0, r1, r10
     ldr r10, [sp, #4]
     str r0, [r10], #4
     str r10, [sp, #4]
@@ -136,8 +137,8 @@ cvm_cols_2:
     ldr r10, [r8, #0]
     ldr r11, [r8, #4]
     sub r10, r10, r11
-    ldr r11, [r9], #4
-    smmulr r0, r11, r10
+    ldr r1, [r9], #4
+    smmulr r0, r1, r10
     ldr r10, [sp, #4]
     str r0, [r10], #4
     str r10, [sp, #4]
@@ -167,15 +168,14 @@ cvm_rows_3:
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmulr r0, lr, r10
+    ldr r2, [r9], #4
+    smmulr r0, r2, r10
     ldrh r10, [r8, #2]
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmulr r1, lr, r10
+    ldmia r9!, {r2, r3}
+    smmlar r0, r2, r10, r0
+    smmulr r1, r3, r10
     ldr r10, [sp, #4]
     str r0, [r10, #0]
     str r1, [r10, #64]
@@ -185,8 +185,8 @@ cvm_rows_3:
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmulr r0, lr, r10
+    ldr r1, [r9], #4
+    smmulr r0, r1, r10
     ldr r10, [sp, #4]
     str r0, [r10, #128]
     add r10, r10, #4
@@ -215,12 +215,12 @@ cvm_cols_3:
     ldr r10, [r8, #0]
     ldr r11, [r8, #8]
     add r10, r10, r11
-    ldr r11, [r9], #4
-    smmulr r0, r11, r10
+    ldr r2, [r9], #4
+    smmulr r0, r2, r10
     ldr r10, [r8, #4]
-    ldmia r9!, {r11, r12}
-    smmlar r0, r11, r10, r0
-    smmulr r1, r12, r10
+    ldmia r9!, {r2, r3}
+    smmlar r0, r2, r10, r0
+    smmulr r1, r3, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1}
     str r10, [sp, #4]
@@ -228,8 +228,8 @@ cvm_cols_3:
     ldr r10, [r8, #0]
     ldr r11, [r8, #8]
     sub r10, r10, r11
-    ldr r11, [r9], #4
-    smmulr r0, r11, r10
+    ldr r1, [r9], #4
+    smmulr r0, r1, r10
     ldr r10, [sp, #4]
     str r0, [r10], #4
     str r10, [sp, #4]
@@ -259,17 +259,16 @@ cvm_rows_4:
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmulr r0, lr, r10
+    ldr r2, [r9], #4
+    smmulr r0, r2, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #4]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmulr r1, lr, r10
+    ldmia r9!, {r2, r3}
+    smmlar r0, r2, r10, r0
+    smmulr r1, r3, r10
     ldr r10, [sp, #4]
     str r0, [r10, #0]
     str r1, [r10, #64]
@@ -279,17 +278,16 @@ cvm_rows_4:
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmulr r0, lr, r10
+    ldr r2, [r9], #4
+    smmulr r0, r2, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #4]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmulr r1, lr, r10
+    ldmia r9!, {r2, r3}
+    smmlar r0, r2, r10, r0
+    smmulr r1, r3, r10
     ldr r10, [sp, #4]
     str r0, [r10, #128]
     str r1, [r10, #192]
@@ -319,14 +317,14 @@ cvm_cols_4:
     ldr r10, [r8, #0]
     ldr r11, [r8, #12]
     add r10, r10, r11
-    ldr r11, [r9], #4
-    smmulr r0, r11, r10
+    ldr r2, [r9], #4
+    smmulr r0, r2, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #8]
     add r10, r10, r11
-    ldmia r9!, {r11, r12}
-    smmlar r0, r11, r10, r0
-    smmulr r1, r12, r10
+    ldmia r9!, {r2, r3}
+    smmlar r0, r2, r10, r0
+    smmulr r1, r3, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1}
     str r10, [sp, #4]
@@ -334,14 +332,14 @@ cvm_cols_4:
     ldr r10, [r8, #0]
     ldr r11, [r8, #12]
     sub r10, r10, r11
-    ldr r11, [r9], #4
-    smmulr r0, r11, r10
+    ldr r2, [r9], #4
+    smmulr r0, r2, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #8]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12}
-    smmlar r0, r11, r10, r0
-    smmulr r1, r12, r10
+    ldmia r9!, {r2, r3}
+    smmlar r0, r2, r10, r0
+    smmulr r1, r3, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1}
     str r10, [sp, #4]
@@ -371,26 +369,23 @@ cvm_rows_5:
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmulr r0, lr, r10
+    ldr r3, [r9], #4
+    smmulr r0, r3, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #6]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmulr r1, lr, r10
+    ldmia r9!, {r3, r4}
+    smmlar r0, r3, r10, r0
+    smmulr r1, r4, r10
     ldrh r10, [r8, #4]
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmulr r2, lr, r10
+    ldmia r9!, {r3, r4, r5}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmulr r2, r5, r10
     ldr r10, [sp, #4]
     str r0, [r10, #0]
     str r1, [r10, #64]
@@ -401,17 +396,16 @@ cvm_rows_5:
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmulr r0, lr, r10
+    ldr r2, [r9], #4
+    smmulr r0, r2, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #6]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmulr r1, lr, r10
+    ldmia r9!, {r2, r3}
+    smmlar r0, r2, r10, r0
+    smmulr r1, r3, r10
     ldr r10, [sp, #4]
     str r0, [r10, #192]
     str r1, [r10, #256]
@@ -441,19 +435,19 @@ cvm_cols_5:
     ldr r10, [r8, #0]
     ldr r11, [r8, #16]
     add r10, r10, r11
-    ldr r11, [r9], #4
-    smmulr r0, r11, r10
+    ldr r3, [r9], #4
+    smmulr r0, r3, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #12]
     add r10, r10, r11
-    ldmia r9!, {r11, r12}
-    smmlar r0, r11, r10, r0
-    smmulr r1, r12, r10
+    ldmia r9!, {r3, r4}
+    smmlar r0, r3, r10, r0
+    smmulr r1, r4, r10
     ldr r10, [r8, #8]
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmulr r2, lr, r10
+    ldmia r9!, {r3, r4, r5}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmulr r2, r5, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1, r2}
     str r10, [sp, #4]
@@ -461,14 +455,14 @@ cvm_cols_5:
     ldr r10, [r8, #0]
     ldr r11, [r8, #16]
     sub r10, r10, r11
-    ldr r11, [r9], #4
-    smmulr r0, r11, r10
+    ldr r2, [r9], #4
+    smmulr r0, r2, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #12]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12}
-    smmlar r0, r11, r10, r0
-    smmulr r1, r12, r10
+    ldmia r9!, {r2, r3}
+    smmlar r0, r2, r10, r0
+    smmulr r1, r3, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1}
     str r10, [sp, #4]
@@ -498,28 +492,25 @@ cvm_rows_6:
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmulr r0, lr, r10
+    ldr r3, [r9], #4
+    smmulr r0, r3, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #8]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmulr r1, lr, r10
+    ldmia r9!, {r3, r4}
+    smmlar r0, r3, r10, r0
+    smmulr r1, r4, r10
     ldrh r10, [r8, #4]
     ldrh lr, [r8, #6]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmulr r2, lr, r10
+    ldmia r9!, {r3, r4, r5}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmulr r2, r5, r10
     ldr r10, [sp, #4]
     str r0, [r10, #0]
     str r1, [r10, #64]
@@ -530,28 +521,25 @@ cvm_rows_6:
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmulr r0, lr, r10
+    ldr r3, [r9], #4
+    smmulr r0, r3, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #8]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmulr r1, lr, r10
+    ldmia r9!, {r3, r4}
+    smmlar r0, r3, r10, r0
+    smmulr r1, r4, r10
     ldrh r10, [r8, #4]
     ldrh lr, [r8, #6]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmulr r2, lr, r10
+    ldmia r9!, {r3, r4, r5}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmulr r2, r5, r10
     ldr r10, [sp, #4]
     str r0, [r10, #192]
     str r1, [r10, #256]
@@ -582,21 +570,21 @@ cvm_cols_6:
     ldr r10, [r8, #0]
     ldr r11, [r8, #20]
     add r10, r10, r11
-    ldr r11, [r9], #4
-    smmulr r0, r11, r10
+    ldr r3, [r9], #4
+    smmulr r0, r3, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #16]
     add r10, r10, r11
-    ldmia r9!, {r11, r12}
-    smmlar r0, r11, r10, r0
-    smmulr r1, r12, r10
+    ldmia r9!, {r3, r4}
+    smmlar r0, r3, r10, r0
+    smmulr r1, r4, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #12]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmulr r2, lr, r10
+    ldmia r9!, {r3, r4, r5}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmulr r2, r5, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1, r2}
     str r10, [sp, #4]
@@ -604,21 +592,21 @@ cvm_cols_6:
     ldr r10, [r8, #0]
     ldr r11, [r8, #20]
     sub r10, r10, r11
-    ldr r11, [r9], #4
-    smmulr r0, r11, r10
+    ldr r3, [r9], #4
+    smmulr r0, r3, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #16]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12}
-    smmlar r0, r11, r10, r0
-    smmulr r1, r12, r10
+    ldmia r9!, {r3, r4}
+    smmlar r0, r3, r10, r0
+    smmulr r1, r4, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #12]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmulr r2, lr, r10
+    ldmia r9!, {r3, r4, r5}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmulr r2, r5, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1, r2}
     str r10, [sp, #4]
@@ -648,39 +636,33 @@ cvm_rows_7:
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmulr r0, lr, r10
+    ldr r4, [r9], #4
+    smmulr r0, r4, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #10]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmulr r1, lr, r10
+    ldmia r9!, {r4, r5}
+    smmlar r0, r4, r10, r0
+    smmulr r1, r5, r10
     ldrh r10, [r8, #4]
     ldrh lr, [r8, #8]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmulr r2, lr, r10
+    ldmia r9!, {r4, r5, r6}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmulr r2, r6, r10
     ldrh r10, [r8, #6]
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
-    smmulr r3, lr, r10
+    ldmia r9!, {r4, r5, r6, r7}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmulr r3, r7, r10
     ldr r10, [sp, #4]
     str r0, [r10, #0]
     str r1, [r10, #64]
@@ -692,28 +674,25 @@ cvm_rows_7:
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmulr r0, lr, r10
+    ldr r3, [r9], #4
+    smmulr r0, r3, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #10]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmulr r1, lr, r10
+    ldmia r9!, {r3, r4}
+    smmlar r0, r3, r10, r0
+    smmulr r1, r4, r10
     ldrh r10, [r8, #4]
     ldrh lr, [r8, #8]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmulr r2, lr, r10
+    ldmia r9!, {r3, r4, r5}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmulr r2, r5, r10
     ldr r10, [sp, #4]
     str r0, [r10, #256]
     str r1, [r10, #320]
@@ -744,28 +723,27 @@ cvm_cols_7:
     ldr r10, [r8, #0]
     ldr r11, [r8, #24]
     add r10, r10, r11
-    ldr r11, [r9], #4
-    smmulr r0, r11, r10
+    ldr r4, [r9], #4
+    smmulr r0, r4, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #20]
     add r10, r10, r11
-    ldmia r9!, {r11, r12}
-    smmlar r0, r11, r10, r0
-    smmulr r1, r12, r10
+    ldmia r9!, {r4, r5}
+    smmlar r0, r4, r10, r0
+    smmulr r1, r5, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #16]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmulr r2, lr, r10
+    ldmia r9!, {r4, r5, r6}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmulr r2, r6, r10
     ldr r10, [r8, #12]
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldr r11, [r9], #4
-    smmulr r3, r11, r10
+    ldmia r9!, {r4, r5, r6, r7}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmulr r3, r7, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1, r2, r3}
     str r10, [sp, #4]
@@ -773,21 +751,21 @@ cvm_cols_7:
     ldr r10, [r8, #0]
     ldr r11, [r8, #24]
     sub r10, r10, r11
-    ldr r11, [r9], #4
-    smmulr r0, r11, r10
+    ldr r3, [r9], #4
+    smmulr r0, r3, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #20]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12}
-    smmlar r0, r11, r10, r0
-    smmulr r1, r12, r10
+    ldmia r9!, {r3, r4}
+    smmlar r0, r3, r10, r0
+    smmulr r1, r4, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #16]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmulr r2, lr, r10
+    ldmia r9!, {r3, r4, r5}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmulr r2, r5, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1, r2}
     str r10, [sp, #4]
@@ -817,41 +795,35 @@ cvm_rows_8:
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmulr r0, lr, r10
+    ldr r4, [r9], #4
+    smmulr r0, r4, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #12]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmulr r1, lr, r10
+    ldmia r9!, {r4, r5}
+    smmlar r0, r4, r10, r0
+    smmulr r1, r5, r10
     ldrh r10, [r8, #4]
     ldrh lr, [r8, #10]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmulr r2, lr, r10
+    ldmia r9!, {r4, r5, r6}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmulr r2, r6, r10
     ldrh r10, [r8, #6]
     ldrh lr, [r8, #8]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
-    smmulr r3, lr, r10
+    ldmia r9!, {r4, r5, r6, r7}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmulr r3, r7, r10
     ldr r10, [sp, #4]
     str r0, [r10, #0]
     str r1, [r10, #64]
@@ -863,41 +835,35 @@ cvm_rows_8:
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmulr r0, lr, r10
+    ldr r4, [r9], #4
+    smmulr r0, r4, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #12]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmulr r1, lr, r10
+    ldmia r9!, {r4, r5}
+    smmlar r0, r4, r10, r0
+    smmulr r1, r5, r10
     ldrh r10, [r8, #4]
     ldrh lr, [r8, #10]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmulr r2, lr, r10
+    ldmia r9!, {r4, r5, r6}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmulr r2, r6, r10
     ldrh r10, [r8, #6]
     ldrh lr, [r8, #8]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
-    smmulr r3, lr, r10
+    ldmia r9!, {r4, r5, r6, r7}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmulr r3, r7, r10
     ldr r10, [sp, #4]
     str r0, [r10, #256]
     str r1, [r10, #320]
@@ -929,30 +895,29 @@ cvm_cols_8:
     ldr r10, [r8, #0]
     ldr r11, [r8, #28]
     add r10, r10, r11
-    ldr r11, [r9], #4
-    smmulr r0, r11, r10
+    ldr r4, [r9], #4
+    smmulr r0, r4, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #24]
     add r10, r10, r11
-    ldmia r9!, {r11, r12}
-    smmlar r0, r11, r10, r0
-    smmulr r1, r12, r10
+    ldmia r9!, {r4, r5}
+    smmlar r0, r4, r10, r0
+    smmulr r1, r5, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #20]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmulr r2, lr, r10
+    ldmia r9!, {r4, r5, r6}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmulr r2, r6, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #16]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldr r11, [r9], #4
-    smmulr r3, r11, r10
+    ldmia r9!, {r4, r5, r6, r7}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmulr r3, r7, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1, r2, r3}
     str r10, [sp, #4]
@@ -960,30 +925,29 @@ cvm_cols_8:
     ldr r10, [r8, #0]
     ldr r11, [r8, #28]
     sub r10, r10, r11
-    ldr r11, [r9], #4
-    smmulr r0, r11, r10
+    ldr r4, [r9], #4
+    smmulr r0, r4, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #24]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12}
-    smmlar r0, r11, r10, r0
-    smmulr r1, r12, r10
+    ldmia r9!, {r4, r5}
+    smmlar r0, r4, r10, r0
+    smmulr r1, r5, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #20]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmulr r2, lr, r10
+    ldmia r9!, {r4, r5, r6}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmulr r2, r6, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #16]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldr r11, [r9], #4
-    smmulr r3, r11, r10
+    ldmia r9!, {r4, r5, r6, r7}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmulr r3, r7, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1, r2, r3}
     str r10, [sp, #4]
@@ -1013,54 +977,45 @@ cvm_rows_9:
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmulr r0, lr, r10
+    ldr r5, [r9], #4
+    smmulr r0, r5, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #14]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmulr r1, lr, r10
+    ldmia r9!, {r5, r6}
+    smmlar r0, r5, r10, r0
+    smmulr r1, r6, r10
     ldrh r10, [r8, #4]
     ldrh lr, [r8, #12]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmulr r2, lr, r10
+    ldmia r9!, {r5, r6, r7}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmulr r2, r7, r10
     ldrh r10, [r8, #6]
     ldrh lr, [r8, #10]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
+    ldmia r9!, {r5, r6, r7, lr}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
     smmulr r3, lr, r10
     ldrh r10, [r8, #8]
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
+    ldmia r9!, {r5, r6, r7, lr}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
     smmlar r3, lr, r10, r3
-    ldr lr, [r9], #4
-    smmulr r4, lr, r10
+    ldr r5, [r9], #4
+    smmulr r4, r5, r10
     ldr r10, [sp, #4]
     str r0, [r10, #0]
     str r1, [r10, #64]
@@ -1073,41 +1028,35 @@ cvm_rows_9:
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmulr r0, lr, r10
+    ldr r4, [r9], #4
+    smmulr r0, r4, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #14]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmulr r1, lr, r10
+    ldmia r9!, {r4, r5}
+    smmlar r0, r4, r10, r0
+    smmulr r1, r5, r10
     ldrh r10, [r8, #4]
     ldrh lr, [r8, #12]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmulr r2, lr, r10
+    ldmia r9!, {r4, r5, r6}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmulr r2, r6, r10
     ldrh r10, [r8, #6]
     ldrh lr, [r8, #10]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
-    smmulr r3, lr, r10
+    ldmia r9!, {r4, r5, r6, r7}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmulr r3, r7, r10
     ldr r10, [sp, #4]
     str r0, [r10, #320]
     str r1, [r10, #384]
@@ -1139,36 +1088,34 @@ cvm_cols_9:
     ldr r10, [r8, #0]
     ldr r11, [r8, #32]
     add r10, r10, r11
-    ldr r11, [r9], #4
-    smmulr r0, r11, r10
+    ldr r5, [r9], #4
+    smmulr r0, r5, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #28]
     add r10, r10, r11
-    ldmia r9!, {r11, r12}
-    smmlar r0, r11, r10, r0
-    smmulr r1, r12, r10
+    ldmia r9!, {r5, r6}
+    smmlar r0, r5, r10, r0
+    smmulr r1, r6, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #24]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmulr r2, lr, r10
+    ldmia r9!, {r5, r6, r7}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmulr r2, r7, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #20]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldr r11, [r9], #4
+    ldmia r9!, {r5, r6, r7, r11}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
     smmulr r3, r11, r10
     ldr r10, [r8, #16]
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12}
+    ldmia r9!, {r5, r6, r7, r11, r12}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
     smmlar r3, r11, r10, r3
     smmulr r4, r12, r10
     ldr r10, [sp, #4]
@@ -1178,30 +1125,29 @@ cvm_cols_9:
     ldr r10, [r8, #0]
     ldr r11, [r8, #32]
     sub r10, r10, r11
-    ldr r11, [r9], #4
-    smmulr r0, r11, r10
+    ldr r4, [r9], #4
+    smmulr r0, r4, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #28]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12}
-    smmlar r0, r11, r10, r0
-    smmulr r1, r12, r10
+    ldmia r9!, {r4, r5}
+    smmlar r0, r4, r10, r0
+    smmulr r1, r5, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #24]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmulr r2, lr, r10
+    ldmia r9!, {r4, r5, r6}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmulr r2, r6, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #20]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldr r11, [r9], #4
-    smmulr r3, r11, r10
+    ldmia r9!, {r4, r5, r6, r7}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmulr r3, r7, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1, r2, r3}
     str r10, [sp, #4]
@@ -1231,56 +1177,47 @@ cvm_rows_10:
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmulr r0, lr, r10
+    ldr r5, [r9], #4
+    smmulr r0, r5, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #16]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmulr r1, lr, r10
+    ldmia r9!, {r5, r6}
+    smmlar r0, r5, r10, r0
+    smmulr r1, r6, r10
     ldrh r10, [r8, #4]
     ldrh lr, [r8, #14]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmulr r2, lr, r10
+    ldmia r9!, {r5, r6, r7}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmulr r2, r7, r10
     ldrh r10, [r8, #6]
     ldrh lr, [r8, #12]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
+    ldmia r9!, {r5, r6, r7, lr}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
     smmulr r3, lr, r10
     ldrh r10, [r8, #8]
     ldrh lr, [r8, #10]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
+    ldmia r9!, {r5, r6, r7, lr}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
     smmlar r3, lr, r10, r3
-    ldr lr, [r9], #4
-    smmulr r4, lr, r10
+    ldr r5, [r9], #4
+    smmulr r4, r5, r10
     ldr r10, [sp, #4]
     str r0, [r10, #0]
     str r1, [r10, #64]
@@ -1293,56 +1230,47 @@ cvm_rows_10:
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmulr r0, lr, r10
+    ldr r5, [r9], #4
+    smmulr r0, r5, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #16]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmulr r1, lr, r10
+    ldmia r9!, {r5, r6}
+    smmlar r0, r5, r10, r0
+    smmulr r1, r6, r10
     ldrh r10, [r8, #4]
     ldrh lr, [r8, #14]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmulr r2, lr, r10
+    ldmia r9!, {r5, r6, r7}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmulr r2, r7, r10
     ldrh r10, [r8, #6]
     ldrh lr, [r8, #12]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
+    ldmia r9!, {r5, r6, r7, lr}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
     smmulr r3, lr, r10
     ldrh r10, [r8, #8]
     ldrh lr, [r8, #10]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
+    ldmia r9!, {r5, r6, r7, lr}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
     smmlar r3, lr, r10, r3
-    ldr lr, [r9], #4
-    smmulr r4, lr, r10
+    ldr r5, [r9], #4
+    smmulr r4, r5, r10
     ldr r10, [sp, #4]
     str r0, [r10, #320]
     str r1, [r10, #384]
@@ -1375,38 +1303,36 @@ cvm_cols_10:
     ldr r10, [r8, #0]
     ldr r11, [r8, #36]
     add r10, r10, r11
-    ldr r11, [r9], #4
-    smmulr r0, r11, r10
+    ldr r5, [r9], #4
+    smmulr r0, r5, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #32]
     add r10, r10, r11
-    ldmia r9!, {r11, r12}
-    smmlar r0, r11, r10, r0
-    smmulr r1, r12, r10
+    ldmia r9!, {r5, r6}
+    smmlar r0, r5, r10, r0
+    smmulr r1, r6, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #28]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmulr r2, lr, r10
+    ldmia r9!, {r5, r6, r7}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmulr r2, r7, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #24]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldr r11, [r9], #4
+    ldmia r9!, {r5, r6, r7, r11}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
     smmulr r3, r11, r10
     ldr r10, [r8, #16]
     ldr r11, [r8, #20]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12}
+    ldmia r9!, {r5, r6, r7, r11, r12}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
     smmlar r3, r11, r10, r3
     smmulr r4, r12, r10
     ldr r10, [sp, #4]
@@ -1416,38 +1342,36 @@ cvm_cols_10:
     ldr r10, [r8, #0]
     ldr r11, [r8, #36]
     sub r10, r10, r11
-    ldr r11, [r9], #4
-    smmulr r0, r11, r10
+    ldr r5, [r9], #4
+    smmulr r0, r5, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #32]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12}
-    smmlar r0, r11, r10, r0
-    smmulr r1, r12, r10
+    ldmia r9!, {r5, r6}
+    smmlar r0, r5, r10, r0
+    smmulr r1, r6, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #28]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmulr r2, lr, r10
+    ldmia r9!, {r5, r6, r7}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmulr r2, r7, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #24]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldr r11, [r9], #4
+    ldmia r9!, {r5, r6, r7, r11}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
     smmulr r3, r11, r10
     ldr r10, [r8, #16]
     ldr r11, [r8, #20]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12}
+    ldmia r9!, {r5, r6, r7, r11, r12}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
     smmlar r3, r11, r10, r3
     smmulr r4, r12, r10
     ldr r10, [sp, #4]
@@ -1479,70 +1403,58 @@ cvm_rows_11:
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmulr r0, lr, r10
+    ldr r6, [r9], #4
+    smmulr r0, r6, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #18]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmulr r1, lr, r10
+    ldmia r9!, {r6, r7}
+    smmlar r0, r6, r10, r0
+    smmulr r1, r7, r10
     ldrh r10, [r8, #4]
     ldrh lr, [r8, #16]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
+    ldmia r9!, {r6, r7, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
     smmulr r2, lr, r10
     ldrh r10, [r8, #6]
     ldrh lr, [r8, #14]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
+    ldmia r9!, {r6, r7, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
     smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
-    smmulr r3, lr, r10
+    ldr r6, [r9], #4
+    smmulr r3, r6, r10
     ldrh r10, [r8, #8]
     ldrh lr, [r8, #12]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
+    ldmia r9!, {r6, r7, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
     smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
-    smmlar r3, lr, r10, r3
-    ldr lr, [r9], #4
-    smmulr r4, lr, r10
+    ldmia r9!, {r6, r7}
+    smmlar r3, r6, r10, r3
+    smmulr r4, r7, r10
     ldrh r10, [r8, #10]
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
+    ldmia r9!, {r6, r7, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
     smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
-    smmlar r3, lr, r10, r3
-    ldr lr, [r9], #4
-    smmlar r4, lr, r10, r4
-    ldr lr, [r9], #4
+    ldmia r9!, {r6, r7, lr}
+    smmlar r3, r6, r10, r3
+    smmlar r4, r7, r10, r4
     smmulr r5, lr, r10
     ldr r10, [sp, #4]
     str r0, [r10, #0]
@@ -1557,56 +1469,47 @@ cvm_rows_11:
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmulr r0, lr, r10
+    ldr r5, [r9], #4
+    smmulr r0, r5, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #18]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmulr r1, lr, r10
+    ldmia r9!, {r5, r6}
+    smmlar r0, r5, r10, r0
+    smmulr r1, r6, r10
     ldrh r10, [r8, #4]
     ldrh lr, [r8, #16]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmulr r2, lr, r10
+    ldmia r9!, {r5, r6, r7}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmulr r2, r7, r10
     ldrh r10, [r8, #6]
     ldrh lr, [r8, #14]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
+    ldmia r9!, {r5, r6, r7, lr}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
     smmulr r3, lr, r10
     ldrh r10, [r8, #8]
     ldrh lr, [r8, #12]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
+    ldmia r9!, {r5, r6, r7, lr}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
     smmlar r3, lr, r10, r3
-    ldr lr, [r9], #4
-    smmulr r4, lr, r10
+    ldr r5, [r9], #4
+    smmulr r4, r5, r10
     ldr r10, [sp, #4]
     str r0, [r10, #384]
     str r1, [r10, #448]
@@ -1639,49 +1542,47 @@ cvm_cols_11:
     ldr r10, [r8, #0]
     ldr r11, [r8, #40]
     add r10, r10, r11
-    ldr r11, [r9], #4
-    smmulr r0, r11, r10
+    ldr r6, [r9], #4
+    smmulr r0, r6, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #36]
     add r10, r10, r11
-    ldmia r9!, {r11, r12}
-    smmlar r0, r11, r10, r0
-    smmulr r1, r12, r10
+    ldmia r9!, {r6, r7}
+    smmlar r0, r6, r10, r0
+    smmulr r1, r7, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #32]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmulr r2, lr, r10
+    ldmia r9!, {r6, r7, r11}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmulr r2, r11, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #28]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldr r11, [r9], #4
-    smmulr r3, r11, r10
+    ldmia r9!, {r6, r7, r11, r12}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmlar r2, r11, r10, r2
+    smmulr r3, r12, r10
     ldr r10, [r8, #16]
     ldr r11, [r8, #24]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12}
-    smmlar r3, r11, r10, r3
-    smmulr r4, r12, r10
+    ldmia r9!, {r6, r7, r11, r12, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmlar r2, r11, r10, r2
+    smmlar r3, r12, r10, r3
+    smmulr r4, lr, r10
     ldr r10, [r8, #20]
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12, lr}
-    smmlar r3, r11, r10, r3
-    smmlar r4, r12, r10, r4
-    smmulr r5, lr, r10
+    ldmia r9!, {r6, r7, r11, r12, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmlar r2, r11, r10, r2
+    smmlar r3, r12, r10, r3
+    smmlar r4, lr, r10, r4
+    ldr r6, [r9], #4
+    smmulr r5, r6, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1, r2, r3, r4, r5}
     str r10, [sp, #4]
@@ -1689,38 +1590,36 @@ cvm_cols_11:
     ldr r10, [r8, #0]
     ldr r11, [r8, #40]
     sub r10, r10, r11
-    ldr r11, [r9], #4
-    smmulr r0, r11, r10
+    ldr r5, [r9], #4
+    smmulr r0, r5, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #36]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12}
-    smmlar r0, r11, r10, r0
-    smmulr r1, r12, r10
+    ldmia r9!, {r5, r6}
+    smmlar r0, r5, r10, r0
+    smmulr r1, r6, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #32]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmulr r2, lr, r10
+    ldmia r9!, {r5, r6, r7}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmulr r2, r7, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #28]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldr r11, [r9], #4
+    ldmia r9!, {r5, r6, r7, r11}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
     smmulr r3, r11, r10
     ldr r10, [r8, #16]
     ldr r11, [r8, #24]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12}
+    ldmia r9!, {r5, r6, r7, r11, r12}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
     smmlar r3, r11, r10, r3
     smmulr r4, r12, r10
     ldr r10, [sp, #4]
@@ -1752,72 +1651,60 @@ cvm_rows_12:
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmulr r0, lr, r10
+    ldr r6, [r9], #4
+    smmulr r0, r6, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #20]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmulr r1, lr, r10
+    ldmia r9!, {r6, r7}
+    smmlar r0, r6, r10, r0
+    smmulr r1, r7, r10
     ldrh r10, [r8, #4]
     ldrh lr, [r8, #18]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
+    ldmia r9!, {r6, r7, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
     smmulr r2, lr, r10
     ldrh r10, [r8, #6]
     ldrh lr, [r8, #16]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
+    ldmia r9!, {r6, r7, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
     smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
-    smmulr r3, lr, r10
+    ldr r6, [r9], #4
+    smmulr r3, r6, r10
     ldrh r10, [r8, #8]
     ldrh lr, [r8, #14]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
+    ldmia r9!, {r6, r7, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
     smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
-    smmlar r3, lr, r10, r3
-    ldr lr, [r9], #4
-    smmulr r4, lr, r10
+    ldmia r9!, {r6, r7}
+    smmlar r3, r6, r10, r3
+    smmulr r4, r7, r10
     ldrh r10, [r8, #10]
     ldrh lr, [r8, #12]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
+    ldmia r9!, {r6, r7, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
     smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
-    smmlar r3, lr, r10, r3
-    ldr lr, [r9], #4
-    smmlar r4, lr, r10, r4
-    ldr lr, [r9], #4
+    ldmia r9!, {r6, r7, lr}
+    smmlar r3, r6, r10, r3
+    smmlar r4, r7, r10, r4
     smmulr r5, lr, r10
     ldr r10, [sp, #4]
     str r0, [r10, #0]
@@ -1832,72 +1719,60 @@ cvm_rows_12:
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmulr r0, lr, r10
+    ldr r6, [r9], #4
+    smmulr r0, r6, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #20]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmulr r1, lr, r10
+    ldmia r9!, {r6, r7}
+    smmlar r0, r6, r10, r0
+    smmulr r1, r7, r10
     ldrh r10, [r8, #4]
     ldrh lr, [r8, #18]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
+    ldmia r9!, {r6, r7, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
     smmulr r2, lr, r10
     ldrh r10, [r8, #6]
     ldrh lr, [r8, #16]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
+    ldmia r9!, {r6, r7, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
     smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
-    smmulr r3, lr, r10
+    ldr r6, [r9], #4
+    smmulr r3, r6, r10
     ldrh r10, [r8, #8]
     ldrh lr, [r8, #14]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
+    ldmia r9!, {r6, r7, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
     smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
-    smmlar r3, lr, r10, r3
-    ldr lr, [r9], #4
-    smmulr r4, lr, r10
+    ldmia r9!, {r6, r7}
+    smmlar r3, r6, r10, r3
+    smmulr r4, r7, r10
     ldrh r10, [r8, #10]
     ldrh lr, [r8, #12]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
+    ldmia r9!, {r6, r7, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
     smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
-    smmlar r3, lr, r10, r3
-    ldr lr, [r9], #4
-    smmlar r4, lr, r10, r4
-    ldr lr, [r9], #4
+    ldmia r9!, {r6, r7, lr}
+    smmlar r3, r6, r10, r3
+    smmlar r4, r7, r10, r4
     smmulr r5, lr, r10
     ldr r10, [sp, #4]
     str r0, [r10, #384]
@@ -1932,51 +1807,49 @@ cvm_cols_12:
     ldr r10, [r8, #0]
     ldr r11, [r8, #44]
     add r10, r10, r11
-    ldr r11, [r9], #4
-    smmulr r0, r11, r10
+    ldr r6, [r9], #4
+    smmulr r0, r6, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #40]
     add r10, r10, r11
-    ldmia r9!, {r11, r12}
-    smmlar r0, r11, r10, r0
-    smmulr r1, r12, r10
+    ldmia r9!, {r6, r7}
+    smmlar r0, r6, r10, r0
+    smmulr r1, r7, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #36]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmulr r2, lr, r10
+    ldmia r9!, {r6, r7, r11}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmulr r2, r11, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #32]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldr r11, [r9], #4
-    smmulr r3, r11, r10
+    ldmia r9!, {r6, r7, r11, r12}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmlar r2, r11, r10, r2
+    smmulr r3, r12, r10
     ldr r10, [r8, #16]
     ldr r11, [r8, #28]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12}
-    smmlar r3, r11, r10, r3
-    smmulr r4, r12, r10
+    ldmia r9!, {r6, r7, r11, r12, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmlar r2, r11, r10, r2
+    smmlar r3, r12, r10, r3
+    smmulr r4, lr, r10
     ldr r10, [r8, #20]
     ldr r11, [r8, #24]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12, lr}
-    smmlar r3, r11, r10, r3
-    smmlar r4, r12, r10, r4
-    smmulr r5, lr, r10
+    ldmia r9!, {r6, r7, r11, r12, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmlar r2, r11, r10, r2
+    smmlar r3, r12, r10, r3
+    smmlar r4, lr, r10, r4
+    ldr r6, [r9], #4
+    smmulr r5, r6, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1, r2, r3, r4, r5}
     str r10, [sp, #4]
@@ -1984,51 +1857,49 @@ cvm_cols_12:
     ldr r10, [r8, #0]
     ldr r11, [r8, #44]
     sub r10, r10, r11
-    ldr r11, [r9], #4
-    smmulr r0, r11, r10
+    ldr r6, [r9], #4
+    smmulr r0, r6, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #40]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12}
-    smmlar r0, r11, r10, r0
-    smmulr r1, r12, r10
+    ldmia r9!, {r6, r7}
+    smmlar r0, r6, r10, r0
+    smmulr r1, r7, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #36]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmulr r2, lr, r10
+    ldmia r9!, {r6, r7, r11}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmulr r2, r11, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #32]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldr r11, [r9], #4
-    smmulr r3, r11, r10
+    ldmia r9!, {r6, r7, r11, r12}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmlar r2, r11, r10, r2
+    smmulr r3, r12, r10
     ldr r10, [r8, #16]
     ldr r11, [r8, #28]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12}
-    smmlar r3, r11, r10, r3
-    smmulr r4, r12, r10
+    ldmia r9!, {r6, r7, r11, r12, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmlar r2, r11, r10, r2
+    smmlar r3, r12, r10, r3
+    smmulr r4, lr, r10
     ldr r10, [r8, #20]
     ldr r11, [r8, #24]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12, lr}
-    smmlar r3, r11, r10, r3
-    smmlar r4, r12, r10, r4
-    smmulr r5, lr, r10
+    ldmia r9!, {r6, r7, r11, r12, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmlar r2, r11, r10, r2
+    smmlar r3, r12, r10, r3
+    smmlar r4, lr, r10, r4
+    ldr r6, [r9], #4
+    smmulr r5, r6, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1, r2, r3, r4, r5}
     str r10, [sp, #4]
@@ -2058,90 +1929,78 @@ cvm_rows_13:
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmulr r0, lr, r10
+    ldr r7, [r9], #4
+    smmulr r0, r7, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #22]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r0, r7, r10, r0
     smmulr r1, lr, r10
     ldrh r10, [r8, #4]
     ldrh lr, [r8, #20]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r0, r7, r10, r0
     smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmulr r2, lr, r10
+    ldr r7, [r9], #4
+    smmulr r2, r7, r10
     ldrh r10, [r8, #6]
     ldrh lr, [r8, #18]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r0, r7, r10, r0
     smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r2, r7, r10, r2
     smmulr r3, lr, r10
     ldrh r10, [r8, #8]
     ldrh lr, [r8, #16]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r0, r7, r10, r0
     smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r2, r7, r10, r2
     smmlar r3, lr, r10, r3
-    ldr lr, [r9], #4
-    smmulr r4, lr, r10
+    ldr r7, [r9], #4
+    smmulr r4, r7, r10
     ldrh r10, [r8, #10]
     ldrh lr, [r8, #14]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r0, r7, r10, r0
     smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r2, r7, r10, r2
     smmlar r3, lr, r10, r3
-    ldr lr, [r9], #4
-    smmlar r4, lr, r10, r4
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r4, r7, r10, r4
     smmulr r5, lr, r10
     ldrh r10, [r8, #12]
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r0, r7, r10, r0
     smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r2, r7, r10, r2
     smmlar r3, lr, r10, r3
-    ldr lr, [r9], #4
-    smmlar r4, lr, r10, r4
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r4, r7, r10, r4
     smmlar r5, lr, r10, r5
-    ldr lr, [r9], #4
-    smmulr r6, lr, r10
+    ldr r7, [r9], #4
+    smmulr r6, r7, r10
     ldr r10, [sp, #4]
     str r0, [r10, #0]
     str r1, [r10, #64]
@@ -2156,72 +2015,60 @@ cvm_rows_13:
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmulr r0, lr, r10
+    ldr r6, [r9], #4
+    smmulr r0, r6, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #22]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmulr r1, lr, r10
+    ldmia r9!, {r6, r7}
+    smmlar r0, r6, r10, r0
+    smmulr r1, r7, r10
     ldrh r10, [r8, #4]
     ldrh lr, [r8, #20]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
+    ldmia r9!, {r6, r7, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
     smmulr r2, lr, r10
     ldrh r10, [r8, #6]
     ldrh lr, [r8, #18]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
+    ldmia r9!, {r6, r7, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
     smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
-    smmulr r3, lr, r10
+    ldr r6, [r9], #4
+    smmulr r3, r6, r10
     ldrh r10, [r8, #8]
     ldrh lr, [r8, #16]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
+    ldmia r9!, {r6, r7, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
     smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
-    smmlar r3, lr, r10, r3
-    ldr lr, [r9], #4
-    smmulr r4, lr, r10
+    ldmia r9!, {r6, r7}
+    smmlar r3, r6, r10, r3
+    smmulr r4, r7, r10
     ldrh r10, [r8, #10]
     ldrh lr, [r8, #14]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
+    ldmia r9!, {r6, r7, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
     smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
-    smmlar r3, lr, r10, r3
-    ldr lr, [r9], #4
-    smmlar r4, lr, r10, r4
-    ldr lr, [r9], #4
+    ldmia r9!, {r6, r7, lr}
+    smmlar r3, r6, r10, r3
+    smmlar r4, r7, r10, r4
     smmulr r5, lr, r10
     ldr r10, [sp, #4]
     str r0, [r10, #448]
@@ -2256,62 +2103,60 @@ cvm_cols_13:
     ldr r10, [r8, #0]
     ldr r11, [r8, #48]
     add r10, r10, r11
-    ldr r11, [r9], #4
-    smmulr r0, r11, r10
+    ldr r7, [r9], #4
+    smmulr r0, r7, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #44]
     add r10, r10, r11
-    ldmia r9!, {r11, r12}
-    smmlar r0, r11, r10, r0
-    smmulr r1, r12, r10
+    ldmia r9!, {r7, r11}
+    smmlar r0, r7, r10, r0
+    smmulr r1, r11, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #40]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmulr r2, lr, r10
+    ldmia r9!, {r7, r11, r12}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmulr r2, r12, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #36]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldr r11, [r9], #4
-    smmulr r3, r11, r10
+    ldmia r9!, {r7, r11, r12, lr}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmlar r2, r12, r10, r2
+    smmulr r3, lr, r10
     ldr r10, [r8, #16]
     ldr r11, [r8, #32]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12}
-    smmlar r3, r11, r10, r3
-    smmulr r4, r12, r10
+    ldmia r9!, {r7, r11, r12, lr}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmlar r2, r12, r10, r2
+    smmlar r3, lr, r10, r3
+    ldr r7, [r9], #4
+    smmulr r4, r7, r10
     ldr r10, [r8, #20]
     ldr r11, [r8, #28]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12, lr}
-    smmlar r3, r11, r10, r3
-    smmlar r4, r12, r10, r4
-    smmulr r5, lr, r10
+    ldmia r9!, {r7, r11, r12, lr}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmlar r2, r12, r10, r2
+    smmlar r3, lr, r10, r3
+    ldmia r9!, {r7, r11}
+    smmlar r4, r7, r10, r4
+    smmulr r5, r11, r10
     ldr r10, [r8, #24]
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12, lr}
-    smmlar r3, r11, r10, r3
-    smmlar r4, r12, r10, r4
-    smmlar r5, lr, r10, r5
-    ldr r11, [r9], #4
-    smmulr r6, r11, r10
+    ldmia r9!, {r7, r11, r12, lr}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmlar r2, r12, r10, r2
+    smmlar r3, lr, r10, r3
+    ldmia r9!, {r7, r11, r12}
+    smmlar r4, r7, r10, r4
+    smmlar r5, r11, r10, r5
+    smmulr r6, r12, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1, r2, r3, r4, r5, r6}
     str r10, [sp, #4]
@@ -2319,51 +2164,49 @@ cvm_cols_13:
     ldr r10, [r8, #0]
     ldr r11, [r8, #48]
     sub r10, r10, r11
-    ldr r11, [r9], #4
-    smmulr r0, r11, r10
+    ldr r6, [r9], #4
+    smmulr r0, r6, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #44]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12}
-    smmlar r0, r11, r10, r0
-    smmulr r1, r12, r10
+    ldmia r9!, {r6, r7}
+    smmlar r0, r6, r10, r0
+    smmulr r1, r7, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #40]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmulr r2, lr, r10
+    ldmia r9!, {r6, r7, r11}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmulr r2, r11, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #36]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldr r11, [r9], #4
-    smmulr r3, r11, r10
+    ldmia r9!, {r6, r7, r11, r12}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmlar r2, r11, r10, r2
+    smmulr r3, r12, r10
     ldr r10, [r8, #16]
     ldr r11, [r8, #32]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12}
-    smmlar r3, r11, r10, r3
-    smmulr r4, r12, r10
+    ldmia r9!, {r6, r7, r11, r12, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmlar r2, r11, r10, r2
+    smmlar r3, r12, r10, r3
+    smmulr r4, lr, r10
     ldr r10, [r8, #20]
     ldr r11, [r8, #28]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12, lr}
-    smmlar r3, r11, r10, r3
-    smmlar r4, r12, r10, r4
-    smmulr r5, lr, r10
+    ldmia r9!, {r6, r7, r11, r12, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmlar r2, r11, r10, r2
+    smmlar r3, r12, r10, r3
+    smmlar r4, lr, r10, r4
+    ldr r6, [r9], #4
+    smmulr r5, r6, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1, r2, r3, r4, r5}
     str r10, [sp, #4]
@@ -2393,92 +2236,80 @@ cvm_rows_14:
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmulr r0, lr, r10
+    ldr r7, [r9], #4
+    smmulr r0, r7, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #24]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r0, r7, r10, r0
     smmulr r1, lr, r10
     ldrh r10, [r8, #4]
     ldrh lr, [r8, #22]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r0, r7, r10, r0
     smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmulr r2, lr, r10
+    ldr r7, [r9], #4
+    smmulr r2, r7, r10
     ldrh r10, [r8, #6]
     ldrh lr, [r8, #20]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r0, r7, r10, r0
     smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r2, r7, r10, r2
     smmulr r3, lr, r10
     ldrh r10, [r8, #8]
     ldrh lr, [r8, #18]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r0, r7, r10, r0
     smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r2, r7, r10, r2
     smmlar r3, lr, r10, r3
-    ldr lr, [r9], #4
-    smmulr r4, lr, r10
+    ldr r7, [r9], #4
+    smmulr r4, r7, r10
     ldrh r10, [r8, #10]
     ldrh lr, [r8, #16]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r0, r7, r10, r0
     smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r2, r7, r10, r2
     smmlar r3, lr, r10, r3
-    ldr lr, [r9], #4
-    smmlar r4, lr, r10, r4
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r4, r7, r10, r4
     smmulr r5, lr, r10
     ldrh r10, [r8, #12]
     ldrh lr, [r8, #14]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r0, r7, r10, r0
     smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r2, r7, r10, r2
     smmlar r3, lr, r10, r3
-    ldr lr, [r9], #4
-    smmlar r4, lr, r10, r4
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r4, r7, r10, r4
     smmlar r5, lr, r10, r5
-    ldr lr, [r9], #4
-    smmulr r6, lr, r10
+    ldr r7, [r9], #4
+    smmulr r6, r7, r10
     ldr r10, [sp, #4]
     str r0, [r10, #0]
     str r1, [r10, #64]
@@ -2493,92 +2324,80 @@ cvm_rows_14:
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmulr r0, lr, r10
+    ldr r7, [r9], #4
+    smmulr r0, r7, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #24]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r0, r7, r10, r0
     smmulr r1, lr, r10
     ldrh r10, [r8, #4]
     ldrh lr, [r8, #22]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r0, r7, r10, r0
     smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmulr r2, lr, r10
+    ldr r7, [r9], #4
+    smmulr r2, r7, r10
     ldrh r10, [r8, #6]
     ldrh lr, [r8, #20]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r0, r7, r10, r0
     smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r2, r7, r10, r2
     smmulr r3, lr, r10
     ldrh r10, [r8, #8]
     ldrh lr, [r8, #18]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r0, r7, r10, r0
     smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r2, r7, r10, r2
     smmlar r3, lr, r10, r3
-    ldr lr, [r9], #4
-    smmulr r4, lr, r10
+    ldr r7, [r9], #4
+    smmulr r4, r7, r10
     ldrh r10, [r8, #10]
     ldrh lr, [r8, #16]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r0, r7, r10, r0
     smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r2, r7, r10, r2
     smmlar r3, lr, r10, r3
-    ldr lr, [r9], #4
-    smmlar r4, lr, r10, r4
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r4, r7, r10, r4
     smmulr r5, lr, r10
     ldrh r10, [r8, #12]
     ldrh lr, [r8, #14]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r0, r7, r10, r0
     smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r2, r7, r10, r2
     smmlar r3, lr, r10, r3
-    ldr lr, [r9], #4
-    smmlar r4, lr, r10, r4
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r4, r7, r10, r4
     smmlar r5, lr, r10, r5
-    ldr lr, [r9], #4
-    smmulr r6, lr, r10
+    ldr r7, [r9], #4
+    smmulr r6, r7, r10
     ldr r10, [sp, #4]
     str r0, [r10, #448]
     str r1, [r10, #512]
@@ -2613,64 +2432,62 @@ cvm_cols_14:
     ldr r10, [r8, #0]
     ldr r11, [r8, #52]
     add r10, r10, r11
-    ldr r11, [r9], #4
-    smmulr r0, r11, r10
+    ldr r7, [r9], #4
+    smmulr r0, r7, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #48]
     add r10, r10, r11
-    ldmia r9!, {r11, r12}
-    smmlar r0, r11, r10, r0
-    smmulr r1, r12, r10
+    ldmia r9!, {r7, r11}
+    smmlar r0, r7, r10, r0
+    smmulr r1, r11, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #44]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmulr r2, lr, r10
+    ldmia r9!, {r7, r11, r12}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmulr r2, r12, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #40]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldr r11, [r9], #4
-    smmulr r3, r11, r10
+    ldmia r9!, {r7, r11, r12, lr}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmlar r2, r12, r10, r2
+    smmulr r3, lr, r10
     ldr r10, [r8, #16]
     ldr r11, [r8, #36]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12}
-    smmlar r3, r11, r10, r3
-    smmulr r4, r12, r10
+    ldmia r9!, {r7, r11, r12, lr}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmlar r2, r12, r10, r2
+    smmlar r3, lr, r10, r3
+    ldr r7, [r9], #4
+    smmulr r4, r7, r10
     ldr r10, [r8, #20]
     ldr r11, [r8, #32]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12, lr}
-    smmlar r3, r11, r10, r3
-    smmlar r4, r12, r10, r4
-    smmulr r5, lr, r10
+    ldmia r9!, {r7, r11, r12, lr}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmlar r2, r12, r10, r2
+    smmlar r3, lr, r10, r3
+    ldmia r9!, {r7, r11}
+    smmlar r4, r7, r10, r4
+    smmulr r5, r11, r10
     ldr r10, [r8, #24]
     ldr r11, [r8, #28]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12, lr}
-    smmlar r3, r11, r10, r3
-    smmlar r4, r12, r10, r4
-    smmlar r5, lr, r10, r5
-    ldr r11, [r9], #4
-    smmulr r6, r11, r10
+    ldmia r9!, {r7, r11, r12, lr}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmlar r2, r12, r10, r2
+    smmlar r3, lr, r10, r3
+    ldmia r9!, {r7, r11, r12}
+    smmlar r4, r7, r10, r4
+    smmlar r5, r11, r10, r5
+    smmulr r6, r12, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1, r2, r3, r4, r5, r6}
     str r10, [sp, #4]
@@ -2678,64 +2495,62 @@ cvm_cols_14:
     ldr r10, [r8, #0]
     ldr r11, [r8, #52]
     sub r10, r10, r11
-    ldr r11, [r9], #4
-    smmulr r0, r11, r10
+    ldr r7, [r9], #4
+    smmulr r0, r7, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #48]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12}
-    smmlar r0, r11, r10, r0
-    smmulr r1, r12, r10
+    ldmia r9!, {r7, r11}
+    smmlar r0, r7, r10, r0
+    smmulr r1, r11, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #44]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmulr r2, lr, r10
+    ldmia r9!, {r7, r11, r12}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmulr r2, r12, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #40]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldr r11, [r9], #4
-    smmulr r3, r11, r10
+    ldmia r9!, {r7, r11, r12, lr}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmlar r2, r12, r10, r2
+    smmulr r3, lr, r10
     ldr r10, [r8, #16]
     ldr r11, [r8, #36]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12}
-    smmlar r3, r11, r10, r3
-    smmulr r4, r12, r10
+    ldmia r9!, {r7, r11, r12, lr}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmlar r2, r12, r10, r2
+    smmlar r3, lr, r10, r3
+    ldr r7, [r9], #4
+    smmulr r4, r7, r10
     ldr r10, [r8, #20]
     ldr r11, [r8, #32]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12, lr}
-    smmlar r3, r11, r10, r3
-    smmlar r4, r12, r10, r4
-    smmulr r5, lr, r10
+    ldmia r9!, {r7, r11, r12, lr}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmlar r2, r12, r10, r2
+    smmlar r3, lr, r10, r3
+    ldmia r9!, {r7, r11}
+    smmlar r4, r7, r10, r4
+    smmulr r5, r11, r10
     ldr r10, [r8, #24]
     ldr r11, [r8, #28]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12, lr}
-    smmlar r3, r11, r10, r3
-    smmlar r4, r12, r10, r4
-    smmlar r5, lr, r10, r5
-    ldr r11, [r9], #4
-    smmulr r6, r11, r10
+    ldmia r9!, {r7, r11, r12, lr}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmlar r2, r12, r10, r2
+    smmlar r3, lr, r10, r3
+    ldmia r9!, {r7, r11, r12}
+    smmlar r4, r7, r10, r4
+    smmlar r5, r11, r10, r5
+    smmulr r6, r12, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1, r2, r3, r4, r5, r6}
     str r10, [sp, #4]
@@ -2885,92 +2700,80 @@ cvm_rows_15:
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmulr r0, lr, r10
+    ldr r7, [r9], #4
+    smmulr r0, r7, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #26]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r0, r7, r10, r0
     smmulr r1, lr, r10
     ldrh r10, [r8, #4]
     ldrh lr, [r8, #24]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r0, r7, r10, r0
     smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmulr r2, lr, r10
+    ldr r7, [r9], #4
+    smmulr r2, r7, r10
     ldrh r10, [r8, #6]
     ldrh lr, [r8, #22]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r0, r7, r10, r0
     smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r2, r7, r10, r2
     smmulr r3, lr, r10
     ldrh r10, [r8, #8]
     ldrh lr, [r8, #20]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r0, r7, r10, r0
     smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r2, r7, r10, r2
     smmlar r3, lr, r10, r3
-    ldr lr, [r9], #4
-    smmulr r4, lr, r10
+    ldr r7, [r9], #4
+    smmulr r4, r7, r10
     ldrh r10, [r8, #10]
     ldrh lr, [r8, #18]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r0, r7, r10, r0
     smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r2, r7, r10, r2
     smmlar r3, lr, r10, r3
-    ldr lr, [r9], #4
-    smmlar r4, lr, r10, r4
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r4, r7, r10, r4
     smmulr r5, lr, r10
     ldrh r10, [r8, #12]
     ldrh lr, [r8, #16]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r0, r7, r10, r0
     smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r2, r7, r10, r2
     smmlar r3, lr, r10, r3
-    ldr lr, [r9], #4
-    smmlar r4, lr, r10, r4
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r4, r7, r10, r4
     smmlar r5, lr, r10, r5
-    ldr lr, [r9], #4
-    smmulr r6, lr, r10
+    ldr r7, [r9], #4
+    smmulr r6, r7, r10
     ldr r10, [sp, #4]
     str r0, [r10, #512]
     str r1, [r10, #576]
@@ -3082,64 +2885,62 @@ cvm_cols_15:
     ldr r10, [r8, #0]
     ldr r11, [r8, #56]
     sub r10, r10, r11
-    ldr r11, [r9], #4
-    smmulr r0, r11, r10
+    ldr r7, [r9], #4
+    smmulr r0, r7, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #52]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12}
-    smmlar r0, r11, r10, r0
-    smmulr r1, r12, r10
+    ldmia r9!, {r7, r11}
+    smmlar r0, r7, r10, r0
+    smmulr r1, r11, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #48]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmulr r2, lr, r10
+    ldmia r9!, {r7, r11, r12}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmulr r2, r12, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #44]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldr r11, [r9], #4
-    smmulr r3, r11, r10
+    ldmia r9!, {r7, r11, r12, lr}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmlar r2, r12, r10, r2
+    smmulr r3, lr, r10
     ldr r10, [r8, #16]
     ldr r11, [r8, #40]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12}
-    smmlar r3, r11, r10, r3
-    smmulr r4, r12, r10
+    ldmia r9!, {r7, r11, r12, lr}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmlar r2, r12, r10, r2
+    smmlar r3, lr, r10, r3
+    ldr r7, [r9], #4
+    smmulr r4, r7, r10
     ldr r10, [r8, #20]
     ldr r11, [r8, #36]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12, lr}
-    smmlar r3, r11, r10, r3
-    smmlar r4, r12, r10, r4
-    smmulr r5, lr, r10
+    ldmia r9!, {r7, r11, r12, lr}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmlar r2, r12, r10, r2
+    smmlar r3, lr, r10, r3
+    ldmia r9!, {r7, r11}
+    smmlar r4, r7, r10, r4
+    smmulr r5, r11, r10
     ldr r10, [r8, #24]
     ldr r11, [r8, #32]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12, lr}
-    smmlar r3, r11, r10, r3
-    smmlar r4, r12, r10, r4
-    smmlar r5, lr, r10, r5
-    ldr r11, [r9], #4
-    smmulr r6, r11, r10
+    ldmia r9!, {r7, r11, r12, lr}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmlar r2, r12, r10, r2
+    smmlar r3, lr, r10, r3
+    ldmia r9!, {r7, r11, r12}
+    smmlar r4, r7, r10, r4
+    smmlar r5, r11, r10, r5
+    smmulr r6, r12, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1, r2, r3, r4, r5, r6}
     str r10, [sp, #4]

@@ -252,3 +252,48 @@ fn a_negative_or_infinite_weight_is_refused() {
         }
     }
 }
+
+/// Scorers built from the same configuration are equal (their unrolled
+/// passes too), scorers of two geometries are not, and a scorer's debug
+/// form names its passes.
+#[test]
+fn scorers_compare_by_configuration_and_passes() {
+    let cfg = |j1, j2| Config {
+        geometry: Geometry::new(j1, j2).unwrap(),
+        kernels: Kernels::Paper { bmax: 0 },
+        weights: Weights::Uniform,
+        normalise: true,
+        full_scale: u16::MAX,
+    };
+    let a = Scorer::new(&cfg(9, 9)).unwrap();
+    assert!(a == Scorer::new(&cfg(9, 9)).unwrap());
+    assert!(a != Scorer::new(&cfg(9, 8)).unwrap());
+    assert!(a != Scorer::new(&cfg(8, 9)).unwrap());
+    assert!(format!("{a:?}").contains("passes: Passes"), "{a:?}");
+}
+
+/// The configuration-time square root: 0 for what has none (zero,
+/// negative, NaN), and within one rounding of the correctly rounded root
+/// elsewhere, from below 1 to far above.
+#[test]
+fn table_square_root() {
+    use cvm_core::tables::sqrt;
+    for x in [0.0, -0.0, -1.0, -1e-300, f64::NAN, f64::NEG_INFINITY] {
+        assert_eq!(sqrt(x), 0.0, "sqrt({x})");
+    }
+    let mut r = rng(0x7371_7274);
+    for _ in 0..2000 {
+        let x = 10f64.powf(r.random_range(-12.0..12.0));
+        let (got, want) = (sqrt(x), x.sqrt());
+        assert!(
+            (got - want).abs() <= 2.0 * f64::EPSILON * want,
+            "sqrt({x}) = {got}, not {want}"
+        );
+    }
+    for x in [1.0, 4.0, 2.0, 0.25, 1e10] {
+        assert!(
+            (sqrt(x) - x.sqrt()).abs() <= f64::EPSILON * x.sqrt(),
+            "sqrt({x})"
+        );
+    }
+}

@@ -31,8 +31,15 @@ fn halves(j: usize) -> (usize, usize) {
 /// Applies the packed upper-triangular block (column by column, `r[0..=l][l]`)
 /// at `cptr` to the inputs that `input(l, out)` leaves in `r10`, into the
 /// accumulators `r0..r{n-1}`. `temps` are the registers free for streamed
-/// coefficients (ascending, so that `LDM` fills them in memory order).
+/// coefficients besides the accumulators a block of fewer than 8 leaves
+/// (all ascending, so that `LDM` fills them in memory order).
 fn block(s: &mut String, n: usize, temps: &[&str], input: &dyn Fn(usize, &mut String)) {
+    let spare: Vec<String> = (n..8).map(|k| format!("r{k}")).collect();
+    let temps: Vec<&str> = spare
+        .iter()
+        .map(String::as_str)
+        .chain(temps.iter().copied())
+        .collect();
     for l in 0..n {
         input(l, s);
         let mut k = 0;
@@ -201,8 +208,9 @@ fn generate() -> String {
          @ Cortex-M4/M7 (see embed.rs): for each axis length J, the accumulators of\n\
          @ the even block (H = ceil(J/2)) and then the odd block (G = floor(J/2))\n\
          @ stay in r0-r7, one SMMLAR per coefficient, the coefficients streamed\n\
-         @ column by column (three per LDM in the column pass, where r11, r12 and\n\
-         @ lr are free; the row pass keeps its conversion (m, sh) in r11 and r12).\n\
+         @ column by column, as many per LDM as registers are free (r11, r12 and\n\
+         @ lr in the column pass, lr in the row pass, which keeps its conversion\n\
+         @ (m, sh) in r11 and r12; and the accumulators a smaller block leaves).\n\
          @ Each function in its own section, so that the linker keeps only the\n\
          @ geometry the firmware uses.\n\
          \n\
