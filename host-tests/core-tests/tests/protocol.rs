@@ -161,6 +161,29 @@ proptest! {
         }
     }
 
+    /// A line with one field more than its type has, under a valid
+    /// checksum, is refused; sealed again as it was, it parses.
+    #[test]
+    fn an_extra_field_is_refused(row in any::<u32>(), scores in prop::collection::vec(arb_score(), 1..40), extra in "[0-9a-z=]{0,6}") {
+        let summary = RowSummary { row, max: 1, argmax: Some(0), pmax: 7, pargmax: None, defects: 0, no_data: 0, dark: 0, saturated: 0 };
+        let view = RowView { summary, scores: &scores, threshold: u32::MAX, power_threshold: u32::MAX };
+        let mut s = Lines::default();
+        encode_row(&view, 0, true, &mut s);
+        let seal = |body: &[u8]| {
+            let mut l = body.to_vec();
+            l.extend_from_slice(format!("*{:04X}\n", protocol::crc16(body)).as_bytes());
+            l
+        };
+        for (line, _) in &s.0 {
+            let body = &line[..line.iter().position(|&b| b == b'*').unwrap()];
+            let again = seal(body);
+            prop_assert!(protocol::parse(line).is_ok());
+            prop_assert_eq!(protocol::parse(&again), protocol::parse(line));
+            let longer = seal(&[body, b",", extra.as_bytes()].concat());
+            prop_assert_eq!(protocol::parse(&longer).err(), Some(ParseError::Format), "{}", String::from_utf8_lossy(&longer));
+        }
+    }
+
     /// Truncated lines never parse.
     #[test]
     fn truncation_is_detected(scores in prop::collection::vec(arb_score(), 1..40), cut in any::<prop::sample::Index>()) {
