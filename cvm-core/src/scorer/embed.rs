@@ -9,7 +9,10 @@
 //! is odd). Folding the map on both axes (integer additions, exact) and
 //! embedding each quarter with the Cholesky factors of the two half-size
 //! blocks needs half the multiply-adds of `R1 x R2ᵀ`, and every block is at
-//! most 8 x 8, so each block size gets its own fully unrolled code.
+//! most 8 x 8, so each axis length gets its own straight-line passes: on
+//! the Cortex-M generated Thumb-2 (`passes_arm.s`, whose accumulators stay
+//! in registers for a whole row), elsewhere the same arithmetic in Rust
+//! (`rows_model`, `cols_model`).
 
 use core::mem::MaybeUninit;
 

@@ -122,6 +122,13 @@ fn twin_matches_stream_paper_9x9_scores() {
     compare(9, 9, &FAULT_OPTS);
 }
 
+/// The release firmware's default geometry, whose row and column passes
+/// (generated assembly for 15 cells) no other twin test runs.
+#[test]
+fn twin_matches_stream_paper_15x15_scores() {
+    compare(15, 15, &FAULT_OPTS);
+}
+
 #[test]
 fn twin_matches_stream_square_raw_5x7() {
     compare(
