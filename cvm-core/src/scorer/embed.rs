@@ -513,8 +513,8 @@ fn rows_model<const H: usize, const G: usize>(
 /// Column pass for an axis 1 of `H + G` cells: for every row `t[k]` (a
 /// folded column of the map), folds it along axis 1 (`t[l] ± t[H+G-1-l]`,
 /// exact), applies the even and the odd block and stores the embedding in
-/// the `k`-th chunk of `e` (even part first); with `NEAR` in `near`
-/// instead (as long as `e`), which `embed` then copies to `e`.
+/// the `k`-th chunk of `e` (even part first), and with `NEAR` in `near`
+/// too (as long as `e`).
 ///
 /// With `DIFF`, returns `Σ (old - new)²` over the overwritten words: the
 /// squared distance to the map `e` held before, for the price of one load,
@@ -530,13 +530,22 @@ fn cols<const H: usize, const G: usize, const DIFF: bool, const NEAR: bool>(
     #[cfg(target_arch = "arm")]
     return cols_arm::<DIFF, NEAR>(H + G, f1, t, e, near);
     #[cfg(not(target_arch = "arm"))]
-    return cols_model::<H, G, DIFF, NEAR>(f1, t, e, near);
+    {
+        let acc = cols_model::<H, G, DIFF, NEAR>(f1, t, e, near);
+        if NEAR {
+            copy_words(near, e);
+        }
+        acc
+    }
 }
 
-/// The column pass through the generated Cortex-M pass for `j1`
-/// (`passes_arm.s`): the new map goes to `near` (`NEAR`), to `e`
-/// (neither), or through a buffer on the stack (`DIFF` alone), and the
-/// distance is one [`squared_difference`] over the words overwritten.
+/// The column pass through the generated Cortex-M passes for `j1`
+/// (`passes_arm.s`). With `NEAR` the new map goes to `near` (DTCM on the
+/// H743), the distance reads the old one in `e` three words per `LDM`,
+/// and the new map is then copied to `e`, eight words per `LDM`/`STM`:
+/// the fewest accesses to the row buffers, which are on the bus. Without,
+/// the pass writes `e` itself, with `DIFF` summing the distance to the
+/// map it overwrites on the way (fewer instructions, more loads).
 #[cfg(target_arch = "arm")]
 #[inline(always)]
 fn cols_arm<const DIFF: bool, const NEAR: bool>(
@@ -547,7 +556,7 @@ fn cols_arm<const DIFF: bool, const NEAR: bool>(
     near: &mut [i32],
 ) -> u64 {
     let ctx = [f1.even.as_ptr() as u32, f1.odd.as_ptr() as u32];
-    let pass = arm::cols(j1);
+    let (plain, diff) = (arm::cols(j1), arm::cols_diff(j1));
     let j1 = j1.max(1);
     let mut n = t.len().min(MAX_J).min(e.len() / j1);
     if NEAR {
@@ -563,39 +572,26 @@ fn cols_arm<const DIFF: bool, const NEAR: bool>(
     if n == 0 {
         return 0;
     }
-    if NEAR || !DIFF {
-        let dst = if NEAR {
-            near.as_mut_ptr()
-        } else {
-            e.as_mut_ptr()
-        };
-        // SAFETY: the pass reads `j1` initialised words (written by the row
-        // pass) of each of the first `n` rows of `t` and the factor's
-        // blocks, and writes `n * j1` words at `dst`, which holds as many;
-        // it preserves the callee-saved registers (AAPCS).
-        unsafe { pass(t.as_ptr().cast(), dst, n, &ctx) };
-        return if DIFF {
+    // SAFETY (every call): the pass reads `j1` initialised words (written
+    // by the row pass) of each of the first `n` rows of `t` and the
+    // factor's blocks, writes `n * j1` words at its second argument (and
+    // reads them first, `diff`), which holds as many, and preserves the
+    // callee-saved registers (AAPCS).
+    if NEAR {
+        unsafe { plain(t.as_ptr().cast(), near.as_mut_ptr(), n, &ctx) };
+        let acc = if DIFF {
             super::squared_difference(e, near)
         } else {
             0
         };
+        copy_words(near, e);
+        acc
+    } else if DIFF {
+        unsafe { diff(t.as_ptr().cast(), e.as_mut_ptr(), n, &ctx) }
+    } else {
+        unsafe { plain(t.as_ptr().cast(), e.as_mut_ptr(), n, &ctx) };
+        0
     }
-    // The map is overwritten in place: the new one goes to a buffer on the
-    // stack first (DTCM on the H743), then the distance, then the copy.
-    // Not cleared: the pass writes the `words` words read after it.
-    let mut buf = [MaybeUninit::<i32>::uninit(); MAX_CELLS];
-    let Some(new) = buf.get_mut(..words) else {
-        return 0;
-    };
-    // SAFETY: as above, with `new` as `dst`; after the pass its `words`
-    // words are initialised.
-    let new = unsafe {
-        pass(t.as_ptr().cast(), new.as_mut_ptr().cast(), n, &ctx);
-        &*(new as *const [MaybeUninit<i32>] as *const [i32])
-    };
-    let acc = super::squared_difference(e, new);
-    copy_words(new, e);
-    acc
 }
 
 /// The column pass in Rust: what the generated Cortex-M pass computes,
@@ -610,9 +606,9 @@ fn cols_model<const H: usize, const G: usize, const DIFF: bool, const NEAR: bool
 ) -> u64 {
     let j1 = H + G;
     let mut acc = 0u64;
-    // With `NEAR` the new map goes to `near` (as long as `e`; `embed`
+    // With `NEAR` the new map goes to `near` (as long as `e`; `cols`
     // copies it to `e` after), while the distance still reads the old one
-    // in `e`: written from registers once, not spilled for a second store.
+    // in `e`.
     let mut near = near.chunks_exact_mut(j1.max(1));
     for (tr, er) in t.iter().zip(e.chunks_exact_mut(j1.max(1))) {
         let (de, dodd) = er.split_at_mut(H.min(er.len()));
@@ -675,13 +671,17 @@ mod arm {
     pub type RowsPass = unsafe extern "C" fn(*const u16, *mut i32, usize, *const [u32; 4]);
     /// `(t, out, rows, [even, odd])`.
     pub type ColsPass = unsafe extern "C" fn(*const i32, *mut i32, usize, *const [u32; 2]);
+    /// `(t, e, rows, [even, odd]) -> distance`.
+    pub type ColsDiffPass =
+        unsafe extern "C" fn(*const i32, *mut i32, usize, *const [u32; 2]) -> u64;
 
     macro_rules! passes {
-        ($($j:literal => $rows:ident, $cols:ident;)*) => {
+        ($($j:literal => $rows:ident, $cols:ident, $diff:ident;)*) => {
             unsafe extern "C" {
                 $(
                     fn $rows(frame: *const u16, t: *mut i32, n: usize, ctx: *const [u32; 4]);
                     fn $cols(t: *const i32, out: *mut i32, n: usize, ctx: *const [u32; 2]);
+                    fn $diff(t: *const i32, e: *mut i32, n: usize, ctx: *const [u32; 2]) -> u64;
                 )*
             }
             /// The row pass of an axis of `j` cells (`j` is a constant
@@ -701,25 +701,33 @@ mod arm {
                     _ => cvm_cols_1,
                 }
             }
+            /// The column pass with the distance to the map it overwrites.
+            #[inline(always)]
+            pub fn cols_diff(j: usize) -> ColsDiffPass {
+                match j {
+                    $($j => $diff,)*
+                    _ => cvm_cols_diff_1,
+                }
+            }
         };
     }
     passes! {
-        1 => cvm_rows_1, cvm_cols_1;
-        2 => cvm_rows_2, cvm_cols_2;
-        3 => cvm_rows_3, cvm_cols_3;
-        4 => cvm_rows_4, cvm_cols_4;
-        5 => cvm_rows_5, cvm_cols_5;
-        6 => cvm_rows_6, cvm_cols_6;
-        7 => cvm_rows_7, cvm_cols_7;
-        8 => cvm_rows_8, cvm_cols_8;
-        9 => cvm_rows_9, cvm_cols_9;
-        10 => cvm_rows_10, cvm_cols_10;
-        11 => cvm_rows_11, cvm_cols_11;
-        12 => cvm_rows_12, cvm_cols_12;
-        13 => cvm_rows_13, cvm_cols_13;
-        14 => cvm_rows_14, cvm_cols_14;
-        15 => cvm_rows_15, cvm_cols_15;
-        16 => cvm_rows_16, cvm_cols_16;
+        1 => cvm_rows_1, cvm_cols_1, cvm_cols_diff_1;
+        2 => cvm_rows_2, cvm_cols_2, cvm_cols_diff_2;
+        3 => cvm_rows_3, cvm_cols_3, cvm_cols_diff_3;
+        4 => cvm_rows_4, cvm_cols_4, cvm_cols_diff_4;
+        5 => cvm_rows_5, cvm_cols_5, cvm_cols_diff_5;
+        6 => cvm_rows_6, cvm_cols_6, cvm_cols_diff_6;
+        7 => cvm_rows_7, cvm_cols_7, cvm_cols_diff_7;
+        8 => cvm_rows_8, cvm_cols_8, cvm_cols_diff_8;
+        9 => cvm_rows_9, cvm_cols_9, cvm_cols_diff_9;
+        10 => cvm_rows_10, cvm_cols_10, cvm_cols_diff_10;
+        11 => cvm_rows_11, cvm_cols_11, cvm_cols_diff_11;
+        12 => cvm_rows_12, cvm_cols_12, cvm_cols_diff_12;
+        13 => cvm_rows_13, cvm_cols_13, cvm_cols_diff_13;
+        14 => cvm_rows_14, cvm_cols_14, cvm_cols_diff_14;
+        15 => cvm_rows_15, cvm_cols_15, cvm_cols_diff_15;
+        16 => cvm_rows_16, cvm_cols_16, cvm_cols_diff_16;
     }
 }
 
@@ -888,9 +896,7 @@ pub fn embed(
         Some(n) => (n, 2),
         None => (&mut [][..], 0),
     };
+    // The column pass leaves the new map in `e` and, `with_near`, in `near`.
     let acc = (passes.cols[usize::from(diff) + with_near])(f1, t, e, near);
-    if with_near != 0 {
-        copy_words(near, e);
-    }
     if diff { acc } else { 0 }
 }

@@ -71,6 +71,41 @@ cvm_cols_1:
     pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
     .size cvm_cols_1, . - cvm_cols_1
 
+    .section .text.cvm_cols_diff_1,"ax",%progbits
+    .global cvm_cols_diff_1
+    .type cvm_cols_diff_1,%function
+    .p2align 2
+    .thumb_func
+cvm_cols_diff_1:
+    push {r4, r5, r6, r7, r8, r9, r10, r11, lr}
+    ldm r3, {r4, r5}
+    movs r6, #0
+    movs r7, #0
+    push {r0, r1, r2, r3, r4, r5, r6, r7}
+    mov r8, r0
+1:
+    ldr r9, [sp, #16]
+    ldr r10, [r8, #0]
+    ldr r1, [r9], #4
+    smmulr r0, r1, r10
+    ldr r9, [sp, #4]
+    ldrd r11, r12, [sp, #24]
+    ldr r10, [r9, #0]
+    sub r10, r10, r0
+    smlal r11, r12, r10, r10
+    strd r11, r12, [sp, #24]
+    str r0, [r9], #4
+    str r9, [sp, #4]
+    add r8, r8, #64
+    ldr r10, [sp, #8]
+    subs r10, r10, #1
+    str r10, [sp, #8]
+    bne 1b
+    ldrd r0, r1, [sp, #24]
+    add sp, sp, #32
+    pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
+    .size cvm_cols_diff_1, . - cvm_cols_diff_1
+
     .section .text.cvm_rows_2,"ax",%progbits
     .global cvm_rows_2
     .type cvm_rows_2,%function
@@ -150,6 +185,57 @@ cvm_cols_2:
     add sp, sp, #24
     pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
     .size cvm_cols_2, . - cvm_cols_2
+
+    .section .text.cvm_cols_diff_2,"ax",%progbits
+    .global cvm_cols_diff_2
+    .type cvm_cols_diff_2,%function
+    .p2align 2
+    .thumb_func
+cvm_cols_diff_2:
+    push {r4, r5, r6, r7, r8, r9, r10, r11, lr}
+    ldm r3, {r4, r5}
+    movs r6, #0
+    movs r7, #0
+    push {r0, r1, r2, r3, r4, r5, r6, r7}
+    mov r8, r0
+1:
+    ldr r9, [sp, #16]
+    ldr r10, [r8, #0]
+    ldr r11, [r8, #4]
+    add r10, r10, r11
+    ldr r1, [r9], #4
+    smmulr r0, r1, r10
+    ldr r9, [sp, #4]
+    ldrd r11, r12, [sp, #24]
+    ldr r10, [r9, #0]
+    sub r10, r10, r0
+    smlal r11, r12, r10, r10
+    strd r11, r12, [sp, #24]
+    str r0, [r9], #4
+    str r9, [sp, #4]
+    ldr r9, [sp, #20]
+    ldr r10, [r8, #0]
+    ldr r11, [r8, #4]
+    sub r10, r10, r11
+    ldr r1, [r9], #4
+    smmulr r0, r1, r10
+    ldr r9, [sp, #4]
+    ldrd r11, r12, [sp, #24]
+    ldr r10, [r9, #0]
+    sub r10, r10, r0
+    smlal r11, r12, r10, r10
+    strd r11, r12, [sp, #24]
+    str r0, [r9], #4
+    str r9, [sp, #4]
+    add r8, r8, #64
+    ldr r10, [sp, #8]
+    subs r10, r10, #1
+    str r10, [sp, #8]
+    bne 1b
+    ldrd r0, r1, [sp, #24]
+    add sp, sp, #32
+    pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
+    .size cvm_cols_diff_2, . - cvm_cols_diff_2
 
     .section .text.cvm_rows_3,"ax",%progbits
     .global cvm_rows_3
@@ -241,6 +327,63 @@ cvm_cols_3:
     add sp, sp, #24
     pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
     .size cvm_cols_3, . - cvm_cols_3
+
+    .section .text.cvm_cols_diff_3,"ax",%progbits
+    .global cvm_cols_diff_3
+    .type cvm_cols_diff_3,%function
+    .p2align 2
+    .thumb_func
+cvm_cols_diff_3:
+    push {r4, r5, r6, r7, r8, r9, r10, r11, lr}
+    ldm r3, {r4, r5}
+    movs r6, #0
+    movs r7, #0
+    push {r0, r1, r2, r3, r4, r5, r6, r7}
+    mov r8, r0
+1:
+    ldr r9, [sp, #16]
+    ldr r10, [r8, #0]
+    ldr r11, [r8, #8]
+    add r10, r10, r11
+    ldr r2, [r9], #4
+    smmulr r0, r2, r10
+    ldr r10, [r8, #4]
+    ldmia r9!, {r2, r3}
+    smmlar r0, r2, r10, r0
+    smmulr r1, r3, r10
+    ldr r9, [sp, #4]
+    ldrd r11, r12, [sp, #24]
+    ldrd r10, lr, [r9, #0]
+    sub r10, r10, r0
+    smlal r11, r12, r10, r10
+    sub lr, lr, r1
+    smlal r11, r12, lr, lr
+    strd r11, r12, [sp, #24]
+    stmia r9!, {r0, r1}
+    str r9, [sp, #4]
+    ldr r9, [sp, #20]
+    ldr r10, [r8, #0]
+    ldr r11, [r8, #8]
+    sub r10, r10, r11
+    ldr r1, [r9], #4
+    smmulr r0, r1, r10
+    ldr r9, [sp, #4]
+    ldrd r11, r12, [sp, #24]
+    ldr r10, [r9, #0]
+    sub r10, r10, r0
+    smlal r11, r12, r10, r10
+    strd r11, r12, [sp, #24]
+    str r0, [r9], #4
+    str r9, [sp, #4]
+    add r8, r8, #64
+    ldr r10, [sp, #8]
+    subs r10, r10, #1
+    str r10, [sp, #8]
+    bne 1b
+    ldrd r0, r1, [sp, #24]
+    add sp, sp, #32
+    pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
+    .size cvm_cols_diff_3, . - cvm_cols_diff_3
 
     .section .text.cvm_rows_4,"ax",%progbits
     .global cvm_rows_4
@@ -351,6 +494,73 @@ cvm_cols_4:
     add sp, sp, #24
     pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
     .size cvm_cols_4, . - cvm_cols_4
+
+    .section .text.cvm_cols_diff_4,"ax",%progbits
+    .global cvm_cols_diff_4
+    .type cvm_cols_diff_4,%function
+    .p2align 2
+    .thumb_func
+cvm_cols_diff_4:
+    push {r4, r5, r6, r7, r8, r9, r10, r11, lr}
+    ldm r3, {r4, r5}
+    movs r6, #0
+    movs r7, #0
+    push {r0, r1, r2, r3, r4, r5, r6, r7}
+    mov r8, r0
+1:
+    ldr r9, [sp, #16]
+    ldr r10, [r8, #0]
+    ldr r11, [r8, #12]
+    add r10, r10, r11
+    ldr r2, [r9], #4
+    smmulr r0, r2, r10
+    ldr r10, [r8, #4]
+    ldr r11, [r8, #8]
+    add r10, r10, r11
+    ldmia r9!, {r2, r3}
+    smmlar r0, r2, r10, r0
+    smmulr r1, r3, r10
+    ldr r9, [sp, #4]
+    ldrd r11, r12, [sp, #24]
+    ldrd r10, lr, [r9, #0]
+    sub r10, r10, r0
+    smlal r11, r12, r10, r10
+    sub lr, lr, r1
+    smlal r11, r12, lr, lr
+    strd r11, r12, [sp, #24]
+    stmia r9!, {r0, r1}
+    str r9, [sp, #4]
+    ldr r9, [sp, #20]
+    ldr r10, [r8, #0]
+    ldr r11, [r8, #12]
+    sub r10, r10, r11
+    ldr r2, [r9], #4
+    smmulr r0, r2, r10
+    ldr r10, [r8, #4]
+    ldr r11, [r8, #8]
+    sub r10, r10, r11
+    ldmia r9!, {r2, r3}
+    smmlar r0, r2, r10, r0
+    smmulr r1, r3, r10
+    ldr r9, [sp, #4]
+    ldrd r11, r12, [sp, #24]
+    ldrd r10, lr, [r9, #0]
+    sub r10, r10, r0
+    smlal r11, r12, r10, r10
+    sub lr, lr, r1
+    smlal r11, r12, lr, lr
+    strd r11, r12, [sp, #24]
+    stmia r9!, {r0, r1}
+    str r9, [sp, #4]
+    add r8, r8, #64
+    ldr r10, [sp, #8]
+    subs r10, r10, #1
+    str r10, [sp, #8]
+    bne 1b
+    ldrd r0, r1, [sp, #24]
+    add sp, sp, #32
+    pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
+    .size cvm_cols_diff_4, . - cvm_cols_diff_4
 
     .section .text.cvm_rows_5,"ax",%progbits
     .global cvm_rows_5
@@ -474,6 +684,81 @@ cvm_cols_5:
     add sp, sp, #24
     pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
     .size cvm_cols_5, . - cvm_cols_5
+
+    .section .text.cvm_cols_diff_5,"ax",%progbits
+    .global cvm_cols_diff_5
+    .type cvm_cols_diff_5,%function
+    .p2align 2
+    .thumb_func
+cvm_cols_diff_5:
+    push {r4, r5, r6, r7, r8, r9, r10, r11, lr}
+    ldm r3, {r4, r5}
+    movs r6, #0
+    movs r7, #0
+    push {r0, r1, r2, r3, r4, r5, r6, r7}
+    mov r8, r0
+1:
+    ldr r9, [sp, #16]
+    ldr r10, [r8, #0]
+    ldr r11, [r8, #16]
+    add r10, r10, r11
+    ldr r3, [r9], #4
+    smmulr r0, r3, r10
+    ldr r10, [r8, #4]
+    ldr r11, [r8, #12]
+    add r10, r10, r11
+    ldmia r9!, {r3, r4}
+    smmlar r0, r3, r10, r0
+    smmulr r1, r4, r10
+    ldr r10, [r8, #8]
+    ldmia r9!, {r3, r4, r5}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmulr r2, r5, r10
+    ldr r9, [sp, #4]
+    ldrd r11, r12, [sp, #24]
+    ldrd r10, lr, [r9, #0]
+    sub r10, r10, r0
+    smlal r11, r12, r10, r10
+    sub lr, lr, r1
+    smlal r11, r12, lr, lr
+    ldr r10, [r9, #8]
+    sub r10, r10, r2
+    smlal r11, r12, r10, r10
+    strd r11, r12, [sp, #24]
+    stmia r9!, {r0, r1, r2}
+    str r9, [sp, #4]
+    ldr r9, [sp, #20]
+    ldr r10, [r8, #0]
+    ldr r11, [r8, #16]
+    sub r10, r10, r11
+    ldr r2, [r9], #4
+    smmulr r0, r2, r10
+    ldr r10, [r8, #4]
+    ldr r11, [r8, #12]
+    sub r10, r10, r11
+    ldmia r9!, {r2, r3}
+    smmlar r0, r2, r10, r0
+    smmulr r1, r3, r10
+    ldr r9, [sp, #4]
+    ldrd r11, r12, [sp, #24]
+    ldrd r10, lr, [r9, #0]
+    sub r10, r10, r0
+    smlal r11, r12, r10, r10
+    sub lr, lr, r1
+    smlal r11, r12, lr, lr
+    strd r11, r12, [sp, #24]
+    stmia r9!, {r0, r1}
+    str r9, [sp, #4]
+    add r8, r8, #64
+    ldr r10, [sp, #8]
+    subs r10, r10, #1
+    str r10, [sp, #8]
+    bne 1b
+    ldrd r0, r1, [sp, #24]
+    add sp, sp, #32
+    pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
+    .size cvm_cols_diff_5, . - cvm_cols_diff_5
 
     .section .text.cvm_rows_6,"ax",%progbits
     .global cvm_rows_6
@@ -618,6 +903,93 @@ cvm_cols_6:
     add sp, sp, #24
     pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
     .size cvm_cols_6, . - cvm_cols_6
+
+    .section .text.cvm_cols_diff_6,"ax",%progbits
+    .global cvm_cols_diff_6
+    .type cvm_cols_diff_6,%function
+    .p2align 2
+    .thumb_func
+cvm_cols_diff_6:
+    push {r4, r5, r6, r7, r8, r9, r10, r11, lr}
+    ldm r3, {r4, r5}
+    movs r6, #0
+    movs r7, #0
+    push {r0, r1, r2, r3, r4, r5, r6, r7}
+    mov r8, r0
+1:
+    ldr r9, [sp, #16]
+    ldr r10, [r8, #0]
+    ldr r11, [r8, #20]
+    add r10, r10, r11
+    ldr r3, [r9], #4
+    smmulr r0, r3, r10
+    ldr r10, [r8, #4]
+    ldr r11, [r8, #16]
+    add r10, r10, r11
+    ldmia r9!, {r3, r4}
+    smmlar r0, r3, r10, r0
+    smmulr r1, r4, r10
+    ldr r10, [r8, #8]
+    ldr r11, [r8, #12]
+    add r10, r10, r11
+    ldmia r9!, {r3, r4, r5}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmulr r2, r5, r10
+    ldr r9, [sp, #4]
+    ldrd r11, r12, [sp, #24]
+    ldrd r10, lr, [r9, #0]
+    sub r10, r10, r0
+    smlal r11, r12, r10, r10
+    sub lr, lr, r1
+    smlal r11, r12, lr, lr
+    ldr r10, [r9, #8]
+    sub r10, r10, r2
+    smlal r11, r12, r10, r10
+    strd r11, r12, [sp, #24]
+    stmia r9!, {r0, r1, r2}
+    str r9, [sp, #4]
+    ldr r9, [sp, #20]
+    ldr r10, [r8, #0]
+    ldr r11, [r8, #20]
+    sub r10, r10, r11
+    ldr r3, [r9], #4
+    smmulr r0, r3, r10
+    ldr r10, [r8, #4]
+    ldr r11, [r8, #16]
+    sub r10, r10, r11
+    ldmia r9!, {r3, r4}
+    smmlar r0, r3, r10, r0
+    smmulr r1, r4, r10
+    ldr r10, [r8, #8]
+    ldr r11, [r8, #12]
+    sub r10, r10, r11
+    ldmia r9!, {r3, r4, r5}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmulr r2, r5, r10
+    ldr r9, [sp, #4]
+    ldrd r11, r12, [sp, #24]
+    ldrd r10, lr, [r9, #0]
+    sub r10, r10, r0
+    smlal r11, r12, r10, r10
+    sub lr, lr, r1
+    smlal r11, r12, lr, lr
+    ldr r10, [r9, #8]
+    sub r10, r10, r2
+    smlal r11, r12, r10, r10
+    strd r11, r12, [sp, #24]
+    stmia r9!, {r0, r1, r2}
+    str r9, [sp, #4]
+    add r8, r8, #64
+    ldr r10, [sp, #8]
+    subs r10, r10, #1
+    str r10, [sp, #8]
+    bne 1b
+    ldrd r0, r1, [sp, #24]
+    add sp, sp, #32
+    pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
+    .size cvm_cols_diff_6, . - cvm_cols_diff_6
 
     .section .text.cvm_rows_7,"ax",%progbits
     .global cvm_rows_7
@@ -777,6 +1149,101 @@ cvm_cols_7:
     add sp, sp, #24
     pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
     .size cvm_cols_7, . - cvm_cols_7
+
+    .section .text.cvm_cols_diff_7,"ax",%progbits
+    .global cvm_cols_diff_7
+    .type cvm_cols_diff_7,%function
+    .p2align 2
+    .thumb_func
+cvm_cols_diff_7:
+    push {r4, r5, r6, r7, r8, r9, r10, r11, lr}
+    ldm r3, {r4, r5}
+    movs r6, #0
+    movs r7, #0
+    push {r0, r1, r2, r3, r4, r5, r6, r7}
+    mov r8, r0
+1:
+    ldr r9, [sp, #16]
+    ldr r10, [r8, #0]
+    ldr r11, [r8, #24]
+    add r10, r10, r11
+    ldr r4, [r9], #4
+    smmulr r0, r4, r10
+    ldr r10, [r8, #4]
+    ldr r11, [r8, #20]
+    add r10, r10, r11
+    ldmia r9!, {r4, r5}
+    smmlar r0, r4, r10, r0
+    smmulr r1, r5, r10
+    ldr r10, [r8, #8]
+    ldr r11, [r8, #16]
+    add r10, r10, r11
+    ldmia r9!, {r4, r5, r6}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmulr r2, r6, r10
+    ldr r10, [r8, #12]
+    ldmia r9!, {r4, r5, r6, r7}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmulr r3, r7, r10
+    ldr r9, [sp, #4]
+    ldrd r11, r12, [sp, #24]
+    ldrd r10, lr, [r9, #0]
+    sub r10, r10, r0
+    smlal r11, r12, r10, r10
+    sub lr, lr, r1
+    smlal r11, r12, lr, lr
+    ldrd r10, lr, [r9, #8]
+    sub r10, r10, r2
+    smlal r11, r12, r10, r10
+    sub lr, lr, r3
+    smlal r11, r12, lr, lr
+    strd r11, r12, [sp, #24]
+    stmia r9!, {r0, r1, r2, r3}
+    str r9, [sp, #4]
+    ldr r9, [sp, #20]
+    ldr r10, [r8, #0]
+    ldr r11, [r8, #24]
+    sub r10, r10, r11
+    ldr r3, [r9], #4
+    smmulr r0, r3, r10
+    ldr r10, [r8, #4]
+    ldr r11, [r8, #20]
+    sub r10, r10, r11
+    ldmia r9!, {r3, r4}
+    smmlar r0, r3, r10, r0
+    smmulr r1, r4, r10
+    ldr r10, [r8, #8]
+    ldr r11, [r8, #16]
+    sub r10, r10, r11
+    ldmia r9!, {r3, r4, r5}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmulr r2, r5, r10
+    ldr r9, [sp, #4]
+    ldrd r11, r12, [sp, #24]
+    ldrd r10, lr, [r9, #0]
+    sub r10, r10, r0
+    smlal r11, r12, r10, r10
+    sub lr, lr, r1
+    smlal r11, r12, lr, lr
+    ldr r10, [r9, #8]
+    sub r10, r10, r2
+    smlal r11, r12, r10, r10
+    strd r11, r12, [sp, #24]
+    stmia r9!, {r0, r1, r2}
+    str r9, [sp, #4]
+    add r8, r8, #64
+    ldr r10, [sp, #8]
+    subs r10, r10, #1
+    str r10, [sp, #8]
+    bne 1b
+    ldrd r0, r1, [sp, #24]
+    add sp, sp, #32
+    pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
+    .size cvm_cols_diff_7, . - cvm_cols_diff_7
 
     .section .text.cvm_rows_8,"ax",%progbits
     .global cvm_rows_8
@@ -959,6 +1426,113 @@ cvm_cols_8:
     add sp, sp, #24
     pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
     .size cvm_cols_8, . - cvm_cols_8
+
+    .section .text.cvm_cols_diff_8,"ax",%progbits
+    .global cvm_cols_diff_8
+    .type cvm_cols_diff_8,%function
+    .p2align 2
+    .thumb_func
+cvm_cols_diff_8:
+    push {r4, r5, r6, r7, r8, r9, r10, r11, lr}
+    ldm r3, {r4, r5}
+    movs r6, #0
+    movs r7, #0
+    push {r0, r1, r2, r3, r4, r5, r6, r7}
+    mov r8, r0
+1:
+    ldr r9, [sp, #16]
+    ldr r10, [r8, #0]
+    ldr r11, [r8, #28]
+    add r10, r10, r11
+    ldr r4, [r9], #4
+    smmulr r0, r4, r10
+    ldr r10, [r8, #4]
+    ldr r11, [r8, #24]
+    add r10, r10, r11
+    ldmia r9!, {r4, r5}
+    smmlar r0, r4, r10, r0
+    smmulr r1, r5, r10
+    ldr r10, [r8, #8]
+    ldr r11, [r8, #20]
+    add r10, r10, r11
+    ldmia r9!, {r4, r5, r6}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmulr r2, r6, r10
+    ldr r10, [r8, #12]
+    ldr r11, [r8, #16]
+    add r10, r10, r11
+    ldmia r9!, {r4, r5, r6, r7}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmulr r3, r7, r10
+    ldr r9, [sp, #4]
+    ldrd r11, r12, [sp, #24]
+    ldrd r10, lr, [r9, #0]
+    sub r10, r10, r0
+    smlal r11, r12, r10, r10
+    sub lr, lr, r1
+    smlal r11, r12, lr, lr
+    ldrd r10, lr, [r9, #8]
+    sub r10, r10, r2
+    smlal r11, r12, r10, r10
+    sub lr, lr, r3
+    smlal r11, r12, lr, lr
+    strd r11, r12, [sp, #24]
+    stmia r9!, {r0, r1, r2, r3}
+    str r9, [sp, #4]
+    ldr r9, [sp, #20]
+    ldr r10, [r8, #0]
+    ldr r11, [r8, #28]
+    sub r10, r10, r11
+    ldr r4, [r9], #4
+    smmulr r0, r4, r10
+    ldr r10, [r8, #4]
+    ldr r11, [r8, #24]
+    sub r10, r10, r11
+    ldmia r9!, {r4, r5}
+    smmlar r0, r4, r10, r0
+    smmulr r1, r5, r10
+    ldr r10, [r8, #8]
+    ldr r11, [r8, #20]
+    sub r10, r10, r11
+    ldmia r9!, {r4, r5, r6}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmulr r2, r6, r10
+    ldr r10, [r8, #12]
+    ldr r11, [r8, #16]
+    sub r10, r10, r11
+    ldmia r9!, {r4, r5, r6, r7}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmulr r3, r7, r10
+    ldr r9, [sp, #4]
+    ldrd r11, r12, [sp, #24]
+    ldrd r10, lr, [r9, #0]
+    sub r10, r10, r0
+    smlal r11, r12, r10, r10
+    sub lr, lr, r1
+    smlal r11, r12, lr, lr
+    ldrd r10, lr, [r9, #8]
+    sub r10, r10, r2
+    smlal r11, r12, r10, r10
+    sub lr, lr, r3
+    smlal r11, r12, lr, lr
+    strd r11, r12, [sp, #24]
+    stmia r9!, {r0, r1, r2, r3}
+    str r9, [sp, #4]
+    add r8, r8, #64
+    ldr r10, [sp, #8]
+    subs r10, r10, #1
+    str r10, [sp, #8]
+    bne 1b
+    ldrd r0, r1, [sp, #24]
+    add sp, sp, #32
+    pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
+    .size cvm_cols_diff_8, . - cvm_cols_diff_8
 
     .section .text.cvm_rows_9,"ax",%progbits
     .global cvm_rows_9
@@ -1159,6 +1733,123 @@ cvm_cols_9:
     add sp, sp, #24
     pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
     .size cvm_cols_9, . - cvm_cols_9
+
+    .section .text.cvm_cols_diff_9,"ax",%progbits
+    .global cvm_cols_diff_9
+    .type cvm_cols_diff_9,%function
+    .p2align 2
+    .thumb_func
+cvm_cols_diff_9:
+    push {r4, r5, r6, r7, r8, r9, r10, r11, lr}
+    ldm r3, {r4, r5}
+    movs r6, #0
+    movs r7, #0
+    push {r0, r1, r2, r3, r4, r5, r6, r7}
+    mov r8, r0
+1:
+    ldr r9, [sp, #16]
+    ldr r10, [r8, #0]
+    ldr r11, [r8, #32]
+    add r10, r10, r11
+    ldr r5, [r9], #4
+    smmulr r0, r5, r10
+    ldr r10, [r8, #4]
+    ldr r11, [r8, #28]
+    add r10, r10, r11
+    ldmia r9!, {r5, r6}
+    smmlar r0, r5, r10, r0
+    smmulr r1, r6, r10
+    ldr r10, [r8, #8]
+    ldr r11, [r8, #24]
+    add r10, r10, r11
+    ldmia r9!, {r5, r6, r7}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmulr r2, r7, r10
+    ldr r10, [r8, #12]
+    ldr r11, [r8, #20]
+    add r10, r10, r11
+    ldmia r9!, {r5, r6, r7, r11}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
+    smmulr r3, r11, r10
+    ldr r10, [r8, #16]
+    ldmia r9!, {r5, r6, r7, r11, r12}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
+    smmlar r3, r11, r10, r3
+    smmulr r4, r12, r10
+    ldr r9, [sp, #4]
+    ldrd r11, r12, [sp, #24]
+    ldrd r10, lr, [r9, #0]
+    sub r10, r10, r0
+    smlal r11, r12, r10, r10
+    sub lr, lr, r1
+    smlal r11, r12, lr, lr
+    ldrd r10, lr, [r9, #8]
+    sub r10, r10, r2
+    smlal r11, r12, r10, r10
+    sub lr, lr, r3
+    smlal r11, r12, lr, lr
+    ldr r10, [r9, #16]
+    sub r10, r10, r4
+    smlal r11, r12, r10, r10
+    strd r11, r12, [sp, #24]
+    stmia r9!, {r0, r1, r2, r3, r4}
+    str r9, [sp, #4]
+    ldr r9, [sp, #20]
+    ldr r10, [r8, #0]
+    ldr r11, [r8, #32]
+    sub r10, r10, r11
+    ldr r4, [r9], #4
+    smmulr r0, r4, r10
+    ldr r10, [r8, #4]
+    ldr r11, [r8, #28]
+    sub r10, r10, r11
+    ldmia r9!, {r4, r5}
+    smmlar r0, r4, r10, r0
+    smmulr r1, r5, r10
+    ldr r10, [r8, #8]
+    ldr r11, [r8, #24]
+    sub r10, r10, r11
+    ldmia r9!, {r4, r5, r6}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmulr r2, r6, r10
+    ldr r10, [r8, #12]
+    ldr r11, [r8, #20]
+    sub r10, r10, r11
+    ldmia r9!, {r4, r5, r6, r7}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmulr r3, r7, r10
+    ldr r9, [sp, #4]
+    ldrd r11, r12, [sp, #24]
+    ldrd r10, lr, [r9, #0]
+    sub r10, r10, r0
+    smlal r11, r12, r10, r10
+    sub lr, lr, r1
+    smlal r11, r12, lr, lr
+    ldrd r10, lr, [r9, #8]
+    sub r10, r10, r2
+    smlal r11, r12, r10, r10
+    sub lr, lr, r3
+    smlal r11, r12, lr, lr
+    strd r11, r12, [sp, #24]
+    stmia r9!, {r0, r1, r2, r3}
+    str r9, [sp, #4]
+    add r8, r8, #64
+    ldr r10, [sp, #8]
+    subs r10, r10, #1
+    str r10, [sp, #8]
+    bne 1b
+    ldrd r0, r1, [sp, #24]
+    add sp, sp, #32
+    pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
+    .size cvm_cols_diff_9, . - cvm_cols_diff_9
 
     .section .text.cvm_rows_10,"ax",%progbits
     .global cvm_rows_10
@@ -1385,6 +2076,137 @@ cvm_cols_10:
     add sp, sp, #24
     pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
     .size cvm_cols_10, . - cvm_cols_10
+
+    .section .text.cvm_cols_diff_10,"ax",%progbits
+    .global cvm_cols_diff_10
+    .type cvm_cols_diff_10,%function
+    .p2align 2
+    .thumb_func
+cvm_cols_diff_10:
+    push {r4, r5, r6, r7, r8, r9, r10, r11, lr}
+    ldm r3, {r4, r5}
+    movs r6, #0
+    movs r7, #0
+    push {r0, r1, r2, r3, r4, r5, r6, r7}
+    mov r8, r0
+1:
+    ldr r9, [sp, #16]
+    ldr r10, [r8, #0]
+    ldr r11, [r8, #36]
+    add r10, r10, r11
+    ldr r5, [r9], #4
+    smmulr r0, r5, r10
+    ldr r10, [r8, #4]
+    ldr r11, [r8, #32]
+    add r10, r10, r11
+    ldmia r9!, {r5, r6}
+    smmlar r0, r5, r10, r0
+    smmulr r1, r6, r10
+    ldr r10, [r8, #8]
+    ldr r11, [r8, #28]
+    add r10, r10, r11
+    ldmia r9!, {r5, r6, r7}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmulr r2, r7, r10
+    ldr r10, [r8, #12]
+    ldr r11, [r8, #24]
+    add r10, r10, r11
+    ldmia r9!, {r5, r6, r7, r11}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
+    smmulr r3, r11, r10
+    ldr r10, [r8, #16]
+    ldr r11, [r8, #20]
+    add r10, r10, r11
+    ldmia r9!, {r5, r6, r7, r11, r12}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
+    smmlar r3, r11, r10, r3
+    smmulr r4, r12, r10
+    ldr r9, [sp, #4]
+    ldrd r11, r12, [sp, #24]
+    ldrd r10, lr, [r9, #0]
+    sub r10, r10, r0
+    smlal r11, r12, r10, r10
+    sub lr, lr, r1
+    smlal r11, r12, lr, lr
+    ldrd r10, lr, [r9, #8]
+    sub r10, r10, r2
+    smlal r11, r12, r10, r10
+    sub lr, lr, r3
+    smlal r11, r12, lr, lr
+    ldr r10, [r9, #16]
+    sub r10, r10, r4
+    smlal r11, r12, r10, r10
+    strd r11, r12, [sp, #24]
+    stmia r9!, {r0, r1, r2, r3, r4}
+    str r9, [sp, #4]
+    ldr r9, [sp, #20]
+    ldr r10, [r8, #0]
+    ldr r11, [r8, #36]
+    sub r10, r10, r11
+    ldr r5, [r9], #4
+    smmulr r0, r5, r10
+    ldr r10, [r8, #4]
+    ldr r11, [r8, #32]
+    sub r10, r10, r11
+    ldmia r9!, {r5, r6}
+    smmlar r0, r5, r10, r0
+    smmulr r1, r6, r10
+    ldr r10, [r8, #8]
+    ldr r11, [r8, #28]
+    sub r10, r10, r11
+    ldmia r9!, {r5, r6, r7}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmulr r2, r7, r10
+    ldr r10, [r8, #12]
+    ldr r11, [r8, #24]
+    sub r10, r10, r11
+    ldmia r9!, {r5, r6, r7, r11}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
+    smmulr r3, r11, r10
+    ldr r10, [r8, #16]
+    ldr r11, [r8, #20]
+    sub r10, r10, r11
+    ldmia r9!, {r5, r6, r7, r11, r12}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
+    smmlar r3, r11, r10, r3
+    smmulr r4, r12, r10
+    ldr r9, [sp, #4]
+    ldrd r11, r12, [sp, #24]
+    ldrd r10, lr, [r9, #0]
+    sub r10, r10, r0
+    smlal r11, r12, r10, r10
+    sub lr, lr, r1
+    smlal r11, r12, lr, lr
+    ldrd r10, lr, [r9, #8]
+    sub r10, r10, r2
+    smlal r11, r12, r10, r10
+    sub lr, lr, r3
+    smlal r11, r12, lr, lr
+    ldr r10, [r9, #16]
+    sub r10, r10, r4
+    smlal r11, r12, r10, r10
+    strd r11, r12, [sp, #24]
+    stmia r9!, {r0, r1, r2, r3, r4}
+    str r9, [sp, #4]
+    add r8, r8, #64
+    ldr r10, [sp, #8]
+    subs r10, r10, #1
+    str r10, [sp, #8]
+    bne 1b
+    ldrd r0, r1, [sp, #24]
+    add sp, sp, #32
+    pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
+    .size cvm_cols_diff_10, . - cvm_cols_diff_10
 
     .section .text.cvm_rows_11,"ax",%progbits
     .global cvm_rows_11
@@ -1633,6 +2455,148 @@ cvm_cols_11:
     add sp, sp, #24
     pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
     .size cvm_cols_11, . - cvm_cols_11
+
+    .section .text.cvm_cols_diff_11,"ax",%progbits
+    .global cvm_cols_diff_11
+    .type cvm_cols_diff_11,%function
+    .p2align 2
+    .thumb_func
+cvm_cols_diff_11:
+    push {r4, r5, r6, r7, r8, r9, r10, r11, lr}
+    ldm r3, {r4, r5}
+    movs r6, #0
+    movs r7, #0
+    push {r0, r1, r2, r3, r4, r5, r6, r7}
+    mov r8, r0
+1:
+    ldr r9, [sp, #16]
+    ldr r10, [r8, #0]
+    ldr r11, [r8, #40]
+    add r10, r10, r11
+    ldr r6, [r9], #4
+    smmulr r0, r6, r10
+    ldr r10, [r8, #4]
+    ldr r11, [r8, #36]
+    add r10, r10, r11
+    ldmia r9!, {r6, r7}
+    smmlar r0, r6, r10, r0
+    smmulr r1, r7, r10
+    ldr r10, [r8, #8]
+    ldr r11, [r8, #32]
+    add r10, r10, r11
+    ldmia r9!, {r6, r7, r11}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmulr r2, r11, r10
+    ldr r10, [r8, #12]
+    ldr r11, [r8, #28]
+    add r10, r10, r11
+    ldmia r9!, {r6, r7, r11, r12}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmlar r2, r11, r10, r2
+    smmulr r3, r12, r10
+    ldr r10, [r8, #16]
+    ldr r11, [r8, #24]
+    add r10, r10, r11
+    ldmia r9!, {r6, r7, r11, r12, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmlar r2, r11, r10, r2
+    smmlar r3, r12, r10, r3
+    smmulr r4, lr, r10
+    ldr r10, [r8, #20]
+    ldmia r9!, {r6, r7, r11, r12, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmlar r2, r11, r10, r2
+    smmlar r3, r12, r10, r3
+    smmlar r4, lr, r10, r4
+    ldr r6, [r9], #4
+    smmulr r5, r6, r10
+    ldr r9, [sp, #4]
+    ldrd r11, r12, [sp, #24]
+    ldrd r10, lr, [r9, #0]
+    sub r10, r10, r0
+    smlal r11, r12, r10, r10
+    sub lr, lr, r1
+    smlal r11, r12, lr, lr
+    ldrd r10, lr, [r9, #8]
+    sub r10, r10, r2
+    smlal r11, r12, r10, r10
+    sub lr, lr, r3
+    smlal r11, r12, lr, lr
+    ldrd r10, lr, [r9, #16]
+    sub r10, r10, r4
+    smlal r11, r12, r10, r10
+    sub lr, lr, r5
+    smlal r11, r12, lr, lr
+    strd r11, r12, [sp, #24]
+    stmia r9!, {r0, r1, r2, r3, r4, r5}
+    str r9, [sp, #4]
+    ldr r9, [sp, #20]
+    ldr r10, [r8, #0]
+    ldr r11, [r8, #40]
+    sub r10, r10, r11
+    ldr r5, [r9], #4
+    smmulr r0, r5, r10
+    ldr r10, [r8, #4]
+    ldr r11, [r8, #36]
+    sub r10, r10, r11
+    ldmia r9!, {r5, r6}
+    smmlar r0, r5, r10, r0
+    smmulr r1, r6, r10
+    ldr r10, [r8, #8]
+    ldr r11, [r8, #32]
+    sub r10, r10, r11
+    ldmia r9!, {r5, r6, r7}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmulr r2, r7, r10
+    ldr r10, [r8, #12]
+    ldr r11, [r8, #28]
+    sub r10, r10, r11
+    ldmia r9!, {r5, r6, r7, r11}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
+    smmulr r3, r11, r10
+    ldr r10, [r8, #16]
+    ldr r11, [r8, #24]
+    sub r10, r10, r11
+    ldmia r9!, {r5, r6, r7, r11, r12}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
+    smmlar r3, r11, r10, r3
+    smmulr r4, r12, r10
+    ldr r9, [sp, #4]
+    ldrd r11, r12, [sp, #24]
+    ldrd r10, lr, [r9, #0]
+    sub r10, r10, r0
+    smlal r11, r12, r10, r10
+    sub lr, lr, r1
+    smlal r11, r12, lr, lr
+    ldrd r10, lr, [r9, #8]
+    sub r10, r10, r2
+    smlal r11, r12, r10, r10
+    sub lr, lr, r3
+    smlal r11, r12, lr, lr
+    ldr r10, [r9, #16]
+    sub r10, r10, r4
+    smlal r11, r12, r10, r10
+    strd r11, r12, [sp, #24]
+    stmia r9!, {r0, r1, r2, r3, r4}
+    str r9, [sp, #4]
+    add r8, r8, #64
+    ldr r10, [sp, #8]
+    subs r10, r10, #1
+    str r10, [sp, #8]
+    bne 1b
+    ldrd r0, r1, [sp, #24]
+    add sp, sp, #32
+    pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
+    .size cvm_cols_diff_11, . - cvm_cols_diff_11
 
     .section .text.cvm_rows_12,"ax",%progbits
     .global cvm_rows_12
@@ -1911,6 +2875,163 @@ cvm_cols_12:
     add sp, sp, #24
     pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
     .size cvm_cols_12, . - cvm_cols_12
+
+    .section .text.cvm_cols_diff_12,"ax",%progbits
+    .global cvm_cols_diff_12
+    .type cvm_cols_diff_12,%function
+    .p2align 2
+    .thumb_func
+cvm_cols_diff_12:
+    push {r4, r5, r6, r7, r8, r9, r10, r11, lr}
+    ldm r3, {r4, r5}
+    movs r6, #0
+    movs r7, #0
+    push {r0, r1, r2, r3, r4, r5, r6, r7}
+    mov r8, r0
+1:
+    ldr r9, [sp, #16]
+    ldr r10, [r8, #0]
+    ldr r11, [r8, #44]
+    add r10, r10, r11
+    ldr r6, [r9], #4
+    smmulr r0, r6, r10
+    ldr r10, [r8, #4]
+    ldr r11, [r8, #40]
+    add r10, r10, r11
+    ldmia r9!, {r6, r7}
+    smmlar r0, r6, r10, r0
+    smmulr r1, r7, r10
+    ldr r10, [r8, #8]
+    ldr r11, [r8, #36]
+    add r10, r10, r11
+    ldmia r9!, {r6, r7, r11}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmulr r2, r11, r10
+    ldr r10, [r8, #12]
+    ldr r11, [r8, #32]
+    add r10, r10, r11
+    ldmia r9!, {r6, r7, r11, r12}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmlar r2, r11, r10, r2
+    smmulr r3, r12, r10
+    ldr r10, [r8, #16]
+    ldr r11, [r8, #28]
+    add r10, r10, r11
+    ldmia r9!, {r6, r7, r11, r12, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmlar r2, r11, r10, r2
+    smmlar r3, r12, r10, r3
+    smmulr r4, lr, r10
+    ldr r10, [r8, #20]
+    ldr r11, [r8, #24]
+    add r10, r10, r11
+    ldmia r9!, {r6, r7, r11, r12, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmlar r2, r11, r10, r2
+    smmlar r3, r12, r10, r3
+    smmlar r4, lr, r10, r4
+    ldr r6, [r9], #4
+    smmulr r5, r6, r10
+    ldr r9, [sp, #4]
+    ldrd r11, r12, [sp, #24]
+    ldrd r10, lr, [r9, #0]
+    sub r10, r10, r0
+    smlal r11, r12, r10, r10
+    sub lr, lr, r1
+    smlal r11, r12, lr, lr
+    ldrd r10, lr, [r9, #8]
+    sub r10, r10, r2
+    smlal r11, r12, r10, r10
+    sub lr, lr, r3
+    smlal r11, r12, lr, lr
+    ldrd r10, lr, [r9, #16]
+    sub r10, r10, r4
+    smlal r11, r12, r10, r10
+    sub lr, lr, r5
+    smlal r11, r12, lr, lr
+    strd r11, r12, [sp, #24]
+    stmia r9!, {r0, r1, r2, r3, r4, r5}
+    str r9, [sp, #4]
+    ldr r9, [sp, #20]
+    ldr r10, [r8, #0]
+    ldr r11, [r8, #44]
+    sub r10, r10, r11
+    ldr r6, [r9], #4
+    smmulr r0, r6, r10
+    ldr r10, [r8, #4]
+    ldr r11, [r8, #40]
+    sub r10, r10, r11
+    ldmia r9!, {r6, r7}
+    smmlar r0, r6, r10, r0
+    smmulr r1, r7, r10
+    ldr r10, [r8, #8]
+    ldr r11, [r8, #36]
+    sub r10, r10, r11
+    ldmia r9!, {r6, r7, r11}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmulr r2, r11, r10
+    ldr r10, [r8, #12]
+    ldr r11, [r8, #32]
+    sub r10, r10, r11
+    ldmia r9!, {r6, r7, r11, r12}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmlar r2, r11, r10, r2
+    smmulr r3, r12, r10
+    ldr r10, [r8, #16]
+    ldr r11, [r8, #28]
+    sub r10, r10, r11
+    ldmia r9!, {r6, r7, r11, r12, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmlar r2, r11, r10, r2
+    smmlar r3, r12, r10, r3
+    smmulr r4, lr, r10
+    ldr r10, [r8, #20]
+    ldr r11, [r8, #24]
+    sub r10, r10, r11
+    ldmia r9!, {r6, r7, r11, r12, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmlar r2, r11, r10, r2
+    smmlar r3, r12, r10, r3
+    smmlar r4, lr, r10, r4
+    ldr r6, [r9], #4
+    smmulr r5, r6, r10
+    ldr r9, [sp, #4]
+    ldrd r11, r12, [sp, #24]
+    ldrd r10, lr, [r9, #0]
+    sub r10, r10, r0
+    smlal r11, r12, r10, r10
+    sub lr, lr, r1
+    smlal r11, r12, lr, lr
+    ldrd r10, lr, [r9, #8]
+    sub r10, r10, r2
+    smlal r11, r12, r10, r10
+    sub lr, lr, r3
+    smlal r11, r12, lr, lr
+    ldrd r10, lr, [r9, #16]
+    sub r10, r10, r4
+    smlal r11, r12, r10, r10
+    sub lr, lr, r5
+    smlal r11, r12, lr, lr
+    strd r11, r12, [sp, #24]
+    stmia r9!, {r0, r1, r2, r3, r4, r5}
+    str r9, [sp, #4]
+    add r8, r8, #64
+    ldr r10, [sp, #8]
+    subs r10, r10, #1
+    str r10, [sp, #8]
+    bne 1b
+    ldrd r0, r1, [sp, #24]
+    add sp, sp, #32
+    pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
+    .size cvm_cols_diff_12, . - cvm_cols_diff_12
 
     .section .text.cvm_rows_13,"ax",%progbits
     .global cvm_rows_13
@@ -2218,6 +3339,177 @@ cvm_cols_13:
     add sp, sp, #24
     pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
     .size cvm_cols_13, . - cvm_cols_13
+
+    .section .text.cvm_cols_diff_13,"ax",%progbits
+    .global cvm_cols_diff_13
+    .type cvm_cols_diff_13,%function
+    .p2align 2
+    .thumb_func
+cvm_cols_diff_13:
+    push {r4, r5, r6, r7, r8, r9, r10, r11, lr}
+    ldm r3, {r4, r5}
+    movs r6, #0
+    movs r7, #0
+    push {r0, r1, r2, r3, r4, r5, r6, r7}
+    mov r8, r0
+1:
+    ldr r9, [sp, #16]
+    ldr r10, [r8, #0]
+    ldr r11, [r8, #48]
+    add r10, r10, r11
+    ldr r7, [r9], #4
+    smmulr r0, r7, r10
+    ldr r10, [r8, #4]
+    ldr r11, [r8, #44]
+    add r10, r10, r11
+    ldmia r9!, {r7, r11}
+    smmlar r0, r7, r10, r0
+    smmulr r1, r11, r10
+    ldr r10, [r8, #8]
+    ldr r11, [r8, #40]
+    add r10, r10, r11
+    ldmia r9!, {r7, r11, r12}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmulr r2, r12, r10
+    ldr r10, [r8, #12]
+    ldr r11, [r8, #36]
+    add r10, r10, r11
+    ldmia r9!, {r7, r11, r12, lr}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmlar r2, r12, r10, r2
+    smmulr r3, lr, r10
+    ldr r10, [r8, #16]
+    ldr r11, [r8, #32]
+    add r10, r10, r11
+    ldmia r9!, {r7, r11, r12, lr}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmlar r2, r12, r10, r2
+    smmlar r3, lr, r10, r3
+    ldr r7, [r9], #4
+    smmulr r4, r7, r10
+    ldr r10, [r8, #20]
+    ldr r11, [r8, #28]
+    add r10, r10, r11
+    ldmia r9!, {r7, r11, r12, lr}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmlar r2, r12, r10, r2
+    smmlar r3, lr, r10, r3
+    ldmia r9!, {r7, r11}
+    smmlar r4, r7, r10, r4
+    smmulr r5, r11, r10
+    ldr r10, [r8, #24]
+    ldmia r9!, {r7, r11, r12, lr}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmlar r2, r12, r10, r2
+    smmlar r3, lr, r10, r3
+    ldmia r9!, {r7, r11, r12}
+    smmlar r4, r7, r10, r4
+    smmlar r5, r11, r10, r5
+    smmulr r6, r12, r10
+    ldr r9, [sp, #4]
+    ldrd r11, r12, [sp, #24]
+    ldrd r10, lr, [r9, #0]
+    sub r10, r10, r0
+    smlal r11, r12, r10, r10
+    sub lr, lr, r1
+    smlal r11, r12, lr, lr
+    ldrd r10, lr, [r9, #8]
+    sub r10, r10, r2
+    smlal r11, r12, r10, r10
+    sub lr, lr, r3
+    smlal r11, r12, lr, lr
+    ldrd r10, lr, [r9, #16]
+    sub r10, r10, r4
+    smlal r11, r12, r10, r10
+    sub lr, lr, r5
+    smlal r11, r12, lr, lr
+    ldr r10, [r9, #24]
+    sub r10, r10, r6
+    smlal r11, r12, r10, r10
+    strd r11, r12, [sp, #24]
+    stmia r9!, {r0, r1, r2, r3, r4, r5, r6}
+    str r9, [sp, #4]
+    ldr r9, [sp, #20]
+    ldr r10, [r8, #0]
+    ldr r11, [r8, #48]
+    sub r10, r10, r11
+    ldr r6, [r9], #4
+    smmulr r0, r6, r10
+    ldr r10, [r8, #4]
+    ldr r11, [r8, #44]
+    sub r10, r10, r11
+    ldmia r9!, {r6, r7}
+    smmlar r0, r6, r10, r0
+    smmulr r1, r7, r10
+    ldr r10, [r8, #8]
+    ldr r11, [r8, #40]
+    sub r10, r10, r11
+    ldmia r9!, {r6, r7, r11}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmulr r2, r11, r10
+    ldr r10, [r8, #12]
+    ldr r11, [r8, #36]
+    sub r10, r10, r11
+    ldmia r9!, {r6, r7, r11, r12}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmlar r2, r11, r10, r2
+    smmulr r3, r12, r10
+    ldr r10, [r8, #16]
+    ldr r11, [r8, #32]
+    sub r10, r10, r11
+    ldmia r9!, {r6, r7, r11, r12, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmlar r2, r11, r10, r2
+    smmlar r3, r12, r10, r3
+    smmulr r4, lr, r10
+    ldr r10, [r8, #20]
+    ldr r11, [r8, #28]
+    sub r10, r10, r11
+    ldmia r9!, {r6, r7, r11, r12, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmlar r2, r11, r10, r2
+    smmlar r3, r12, r10, r3
+    smmlar r4, lr, r10, r4
+    ldr r6, [r9], #4
+    smmulr r5, r6, r10
+    ldr r9, [sp, #4]
+    ldrd r11, r12, [sp, #24]
+    ldrd r10, lr, [r9, #0]
+    sub r10, r10, r0
+    smlal r11, r12, r10, r10
+    sub lr, lr, r1
+    smlal r11, r12, lr, lr
+    ldrd r10, lr, [r9, #8]
+    sub r10, r10, r2
+    smlal r11, r12, r10, r10
+    sub lr, lr, r3
+    smlal r11, r12, lr, lr
+    ldrd r10, lr, [r9, #16]
+    sub r10, r10, r4
+    smlal r11, r12, r10, r10
+    sub lr, lr, r5
+    smlal r11, r12, lr, lr
+    strd r11, r12, [sp, #24]
+    stmia r9!, {r0, r1, r2, r3, r4, r5}
+    str r9, [sp, #4]
+    add r8, r8, #64
+    ldr r10, [sp, #8]
+    subs r10, r10, #1
+    str r10, [sp, #8]
+    bne 1b
+    ldrd r0, r1, [sp, #24]
+    add sp, sp, #32
+    pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
+    .size cvm_cols_diff_13, . - cvm_cols_diff_13
 
     .section .text.cvm_rows_14,"ax",%progbits
     .global cvm_rows_14
@@ -2562,6 +3854,195 @@ cvm_cols_14:
     add sp, sp, #24
     pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
     .size cvm_cols_14, . - cvm_cols_14
+
+    .section .text.cvm_cols_diff_14,"ax",%progbits
+    .global cvm_cols_diff_14
+    .type cvm_cols_diff_14,%function
+    .p2align 2
+    .thumb_func
+cvm_cols_diff_14:
+    push {r4, r5, r6, r7, r8, r9, r10, r11, lr}
+    ldm r3, {r4, r5}
+    movs r6, #0
+    movs r7, #0
+    push {r0, r1, r2, r3, r4, r5, r6, r7}
+    mov r8, r0
+1:
+    ldr r9, [sp, #16]
+    ldr r10, [r8, #0]
+    ldr r11, [r8, #52]
+    add r10, r10, r11
+    ldr r7, [r9], #4
+    smmulr r0, r7, r10
+    ldr r10, [r8, #4]
+    ldr r11, [r8, #48]
+    add r10, r10, r11
+    ldmia r9!, {r7, r11}
+    smmlar r0, r7, r10, r0
+    smmulr r1, r11, r10
+    ldr r10, [r8, #8]
+    ldr r11, [r8, #44]
+    add r10, r10, r11
+    ldmia r9!, {r7, r11, r12}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmulr r2, r12, r10
+    ldr r10, [r8, #12]
+    ldr r11, [r8, #40]
+    add r10, r10, r11
+    ldmia r9!, {r7, r11, r12, lr}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmlar r2, r12, r10, r2
+    smmulr r3, lr, r10
+    ldr r10, [r8, #16]
+    ldr r11, [r8, #36]
+    add r10, r10, r11
+    ldmia r9!, {r7, r11, r12, lr}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmlar r2, r12, r10, r2
+    smmlar r3, lr, r10, r3
+    ldr r7, [r9], #4
+    smmulr r4, r7, r10
+    ldr r10, [r8, #20]
+    ldr r11, [r8, #32]
+    add r10, r10, r11
+    ldmia r9!, {r7, r11, r12, lr}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmlar r2, r12, r10, r2
+    smmlar r3, lr, r10, r3
+    ldmia r9!, {r7, r11}
+    smmlar r4, r7, r10, r4
+    smmulr r5, r11, r10
+    ldr r10, [r8, #24]
+    ldr r11, [r8, #28]
+    add r10, r10, r11
+    ldmia r9!, {r7, r11, r12, lr}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmlar r2, r12, r10, r2
+    smmlar r3, lr, r10, r3
+    ldmia r9!, {r7, r11, r12}
+    smmlar r4, r7, r10, r4
+    smmlar r5, r11, r10, r5
+    smmulr r6, r12, r10
+    ldr r9, [sp, #4]
+    ldrd r11, r12, [sp, #24]
+    ldrd r10, lr, [r9, #0]
+    sub r10, r10, r0
+    smlal r11, r12, r10, r10
+    sub lr, lr, r1
+    smlal r11, r12, lr, lr
+    ldrd r10, lr, [r9, #8]
+    sub r10, r10, r2
+    smlal r11, r12, r10, r10
+    sub lr, lr, r3
+    smlal r11, r12, lr, lr
+    ldrd r10, lr, [r9, #16]
+    sub r10, r10, r4
+    smlal r11, r12, r10, r10
+    sub lr, lr, r5
+    smlal r11, r12, lr, lr
+    ldr r10, [r9, #24]
+    sub r10, r10, r6
+    smlal r11, r12, r10, r10
+    strd r11, r12, [sp, #24]
+    stmia r9!, {r0, r1, r2, r3, r4, r5, r6}
+    str r9, [sp, #4]
+    ldr r9, [sp, #20]
+    ldr r10, [r8, #0]
+    ldr r11, [r8, #52]
+    sub r10, r10, r11
+    ldr r7, [r9], #4
+    smmulr r0, r7, r10
+    ldr r10, [r8, #4]
+    ldr r11, [r8, #48]
+    sub r10, r10, r11
+    ldmia r9!, {r7, r11}
+    smmlar r0, r7, r10, r0
+    smmulr r1, r11, r10
+    ldr r10, [r8, #8]
+    ldr r11, [r8, #44]
+    sub r10, r10, r11
+    ldmia r9!, {r7, r11, r12}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmulr r2, r12, r10
+    ldr r10, [r8, #12]
+    ldr r11, [r8, #40]
+    sub r10, r10, r11
+    ldmia r9!, {r7, r11, r12, lr}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmlar r2, r12, r10, r2
+    smmulr r3, lr, r10
+    ldr r10, [r8, #16]
+    ldr r11, [r8, #36]
+    sub r10, r10, r11
+    ldmia r9!, {r7, r11, r12, lr}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmlar r2, r12, r10, r2
+    smmlar r3, lr, r10, r3
+    ldr r7, [r9], #4
+    smmulr r4, r7, r10
+    ldr r10, [r8, #20]
+    ldr r11, [r8, #32]
+    sub r10, r10, r11
+    ldmia r9!, {r7, r11, r12, lr}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmlar r2, r12, r10, r2
+    smmlar r3, lr, r10, r3
+    ldmia r9!, {r7, r11}
+    smmlar r4, r7, r10, r4
+    smmulr r5, r11, r10
+    ldr r10, [r8, #24]
+    ldr r11, [r8, #28]
+    sub r10, r10, r11
+    ldmia r9!, {r7, r11, r12, lr}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmlar r2, r12, r10, r2
+    smmlar r3, lr, r10, r3
+    ldmia r9!, {r7, r11, r12}
+    smmlar r4, r7, r10, r4
+    smmlar r5, r11, r10, r5
+    smmulr r6, r12, r10
+    ldr r9, [sp, #4]
+    ldrd r11, r12, [sp, #24]
+    ldrd r10, lr, [r9, #0]
+    sub r10, r10, r0
+    smlal r11, r12, r10, r10
+    sub lr, lr, r1
+    smlal r11, r12, lr, lr
+    ldrd r10, lr, [r9, #8]
+    sub r10, r10, r2
+    smlal r11, r12, r10, r10
+    sub lr, lr, r3
+    smlal r11, r12, lr, lr
+    ldrd r10, lr, [r9, #16]
+    sub r10, r10, r4
+    smlal r11, r12, r10, r10
+    sub lr, lr, r5
+    smlal r11, r12, lr, lr
+    ldr r10, [r9, #24]
+    sub r10, r10, r6
+    smlal r11, r12, r10, r10
+    strd r11, r12, [sp, #24]
+    stmia r9!, {r0, r1, r2, r3, r4, r5, r6}
+    str r9, [sp, #4]
+    add r8, r8, #64
+    ldr r10, [sp, #8]
+    subs r10, r10, #1
+    str r10, [sp, #8]
+    bne 1b
+    ldrd r0, r1, [sp, #24]
+    add sp, sp, #32
+    pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
+    .size cvm_cols_diff_14, . - cvm_cols_diff_14
 
     .section .text.cvm_rows_15,"ax",%progbits
     .global cvm_rows_15
@@ -2952,6 +4433,211 @@ cvm_cols_15:
     add sp, sp, #24
     pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
     .size cvm_cols_15, . - cvm_cols_15
+
+    .section .text.cvm_cols_diff_15,"ax",%progbits
+    .global cvm_cols_diff_15
+    .type cvm_cols_diff_15,%function
+    .p2align 2
+    .thumb_func
+cvm_cols_diff_15:
+    push {r4, r5, r6, r7, r8, r9, r10, r11, lr}
+    ldm r3, {r4, r5}
+    movs r6, #0
+    movs r7, #0
+    push {r0, r1, r2, r3, r4, r5, r6, r7}
+    mov r8, r0
+1:
+    ldr r9, [sp, #16]
+    ldr r10, [r8, #0]
+    ldr r11, [r8, #56]
+    add r10, r10, r11
+    ldr r11, [r9], #4
+    smmulr r0, r11, r10
+    ldr r10, [r8, #4]
+    ldr r11, [r8, #52]
+    add r10, r10, r11
+    ldmia r9!, {r11, r12}
+    smmlar r0, r11, r10, r0
+    smmulr r1, r12, r10
+    ldr r10, [r8, #8]
+    ldr r11, [r8, #48]
+    add r10, r10, r11
+    ldmia r9!, {r11, r12, lr}
+    smmlar r0, r11, r10, r0
+    smmlar r1, r12, r10, r1
+    smmulr r2, lr, r10
+    ldr r10, [r8, #12]
+    ldr r11, [r8, #44]
+    add r10, r10, r11
+    ldmia r9!, {r11, r12, lr}
+    smmlar r0, r11, r10, r0
+    smmlar r1, r12, r10, r1
+    smmlar r2, lr, r10, r2
+    ldr r11, [r9], #4
+    smmulr r3, r11, r10
+    ldr r10, [r8, #16]
+    ldr r11, [r8, #40]
+    add r10, r10, r11
+    ldmia r9!, {r11, r12, lr}
+    smmlar r0, r11, r10, r0
+    smmlar r1, r12, r10, r1
+    smmlar r2, lr, r10, r2
+    ldmia r9!, {r11, r12}
+    smmlar r3, r11, r10, r3
+    smmulr r4, r12, r10
+    ldr r10, [r8, #20]
+    ldr r11, [r8, #36]
+    add r10, r10, r11
+    ldmia r9!, {r11, r12, lr}
+    smmlar r0, r11, r10, r0
+    smmlar r1, r12, r10, r1
+    smmlar r2, lr, r10, r2
+    ldmia r9!, {r11, r12, lr}
+    smmlar r3, r11, r10, r3
+    smmlar r4, r12, r10, r4
+    smmulr r5, lr, r10
+    ldr r10, [r8, #24]
+    ldr r11, [r8, #32]
+    add r10, r10, r11
+    ldmia r9!, {r11, r12, lr}
+    smmlar r0, r11, r10, r0
+    smmlar r1, r12, r10, r1
+    smmlar r2, lr, r10, r2
+    ldmia r9!, {r11, r12, lr}
+    smmlar r3, r11, r10, r3
+    smmlar r4, r12, r10, r4
+    smmlar r5, lr, r10, r5
+    ldr r11, [r9], #4
+    smmulr r6, r11, r10
+    ldr r10, [r8, #28]
+    ldmia r9!, {r11, r12, lr}
+    smmlar r0, r11, r10, r0
+    smmlar r1, r12, r10, r1
+    smmlar r2, lr, r10, r2
+    ldmia r9!, {r11, r12, lr}
+    smmlar r3, r11, r10, r3
+    smmlar r4, r12, r10, r4
+    smmlar r5, lr, r10, r5
+    ldmia r9!, {r11, r12}
+    smmlar r6, r11, r10, r6
+    smmulr r7, r12, r10
+    ldr r9, [sp, #4]
+    ldrd r11, r12, [sp, #24]
+    ldrd r10, lr, [r9, #0]
+    sub r10, r10, r0
+    smlal r11, r12, r10, r10
+    sub lr, lr, r1
+    smlal r11, r12, lr, lr
+    ldrd r10, lr, [r9, #8]
+    sub r10, r10, r2
+    smlal r11, r12, r10, r10
+    sub lr, lr, r3
+    smlal r11, r12, lr, lr
+    ldrd r10, lr, [r9, #16]
+    sub r10, r10, r4
+    smlal r11, r12, r10, r10
+    sub lr, lr, r5
+    smlal r11, r12, lr, lr
+    ldrd r10, lr, [r9, #24]
+    sub r10, r10, r6
+    smlal r11, r12, r10, r10
+    sub lr, lr, r7
+    smlal r11, r12, lr, lr
+    strd r11, r12, [sp, #24]
+    stmia r9!, {r0, r1, r2, r3, r4, r5, r6, r7}
+    str r9, [sp, #4]
+    ldr r9, [sp, #20]
+    ldr r10, [r8, #0]
+    ldr r11, [r8, #56]
+    sub r10, r10, r11
+    ldr r7, [r9], #4
+    smmulr r0, r7, r10
+    ldr r10, [r8, #4]
+    ldr r11, [r8, #52]
+    sub r10, r10, r11
+    ldmia r9!, {r7, r11}
+    smmlar r0, r7, r10, r0
+    smmulr r1, r11, r10
+    ldr r10, [r8, #8]
+    ldr r11, [r8, #48]
+    sub r10, r10, r11
+    ldmia r9!, {r7, r11, r12}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmulr r2, r12, r10
+    ldr r10, [r8, #12]
+    ldr r11, [r8, #44]
+    sub r10, r10, r11
+    ldmia r9!, {r7, r11, r12, lr}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmlar r2, r12, r10, r2
+    smmulr r3, lr, r10
+    ldr r10, [r8, #16]
+    ldr r11, [r8, #40]
+    sub r10, r10, r11
+    ldmia r9!, {r7, r11, r12, lr}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmlar r2, r12, r10, r2
+    smmlar r3, lr, r10, r3
+    ldr r7, [r9], #4
+    smmulr r4, r7, r10
+    ldr r10, [r8, #20]
+    ldr r11, [r8, #36]
+    sub r10, r10, r11
+    ldmia r9!, {r7, r11, r12, lr}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmlar r2, r12, r10, r2
+    smmlar r3, lr, r10, r3
+    ldmia r9!, {r7, r11}
+    smmlar r4, r7, r10, r4
+    smmulr r5, r11, r10
+    ldr r10, [r8, #24]
+    ldr r11, [r8, #32]
+    sub r10, r10, r11
+    ldmia r9!, {r7, r11, r12, lr}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmlar r2, r12, r10, r2
+    smmlar r3, lr, r10, r3
+    ldmia r9!, {r7, r11, r12}
+    smmlar r4, r7, r10, r4
+    smmlar r5, r11, r10, r5
+    smmulr r6, r12, r10
+    ldr r9, [sp, #4]
+    ldrd r11, r12, [sp, #24]
+    ldrd r10, lr, [r9, #0]
+    sub r10, r10, r0
+    smlal r11, r12, r10, r10
+    sub lr, lr, r1
+    smlal r11, r12, lr, lr
+    ldrd r10, lr, [r9, #8]
+    sub r10, r10, r2
+    smlal r11, r12, r10, r10
+    sub lr, lr, r3
+    smlal r11, r12, lr, lr
+    ldrd r10, lr, [r9, #16]
+    sub r10, r10, r4
+    smlal r11, r12, r10, r10
+    sub lr, lr, r5
+    smlal r11, r12, lr, lr
+    ldr r10, [r9, #24]
+    sub r10, r10, r6
+    smlal r11, r12, r10, r10
+    strd r11, r12, [sp, #24]
+    stmia r9!, {r0, r1, r2, r3, r4, r5, r6}
+    str r9, [sp, #4]
+    add r8, r8, #64
+    ldr r10, [sp, #8]
+    subs r10, r10, #1
+    str r10, [sp, #8]
+    bne 1b
+    ldrd r0, r1, [sp, #24]
+    add sp, sp, #32
+    pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
+    .size cvm_cols_diff_15, . - cvm_cols_diff_15
 
     .section .text.cvm_rows_16,"ax",%progbits
     .global cvm_rows_16
@@ -3396,4 +5082,229 @@ cvm_cols_16:
     add sp, sp, #24
     pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
     .size cvm_cols_16, . - cvm_cols_16
+
+    .section .text.cvm_cols_diff_16,"ax",%progbits
+    .global cvm_cols_diff_16
+    .type cvm_cols_diff_16,%function
+    .p2align 2
+    .thumb_func
+cvm_cols_diff_16:
+    push {r4, r5, r6, r7, r8, r9, r10, r11, lr}
+    ldm r3, {r4, r5}
+    movs r6, #0
+    movs r7, #0
+    push {r0, r1, r2, r3, r4, r5, r6, r7}
+    mov r8, r0
+1:
+    ldr r9, [sp, #16]
+    ldr r10, [r8, #0]
+    ldr r11, [r8, #60]
+    add r10, r10, r11
+    ldr r11, [r9], #4
+    smmulr r0, r11, r10
+    ldr r10, [r8, #4]
+    ldr r11, [r8, #56]
+    add r10, r10, r11
+    ldmia r9!, {r11, r12}
+    smmlar r0, r11, r10, r0
+    smmulr r1, r12, r10
+    ldr r10, [r8, #8]
+    ldr r11, [r8, #52]
+    add r10, r10, r11
+    ldmia r9!, {r11, r12, lr}
+    smmlar r0, r11, r10, r0
+    smmlar r1, r12, r10, r1
+    smmulr r2, lr, r10
+    ldr r10, [r8, #12]
+    ldr r11, [r8, #48]
+    add r10, r10, r11
+    ldmia r9!, {r11, r12, lr}
+    smmlar r0, r11, r10, r0
+    smmlar r1, r12, r10, r1
+    smmlar r2, lr, r10, r2
+    ldr r11, [r9], #4
+    smmulr r3, r11, r10
+    ldr r10, [r8, #16]
+    ldr r11, [r8, #44]
+    add r10, r10, r11
+    ldmia r9!, {r11, r12, lr}
+    smmlar r0, r11, r10, r0
+    smmlar r1, r12, r10, r1
+    smmlar r2, lr, r10, r2
+    ldmia r9!, {r11, r12}
+    smmlar r3, r11, r10, r3
+    smmulr r4, r12, r10
+    ldr r10, [r8, #20]
+    ldr r11, [r8, #40]
+    add r10, r10, r11
+    ldmia r9!, {r11, r12, lr}
+    smmlar r0, r11, r10, r0
+    smmlar r1, r12, r10, r1
+    smmlar r2, lr, r10, r2
+    ldmia r9!, {r11, r12, lr}
+    smmlar r3, r11, r10, r3
+    smmlar r4, r12, r10, r4
+    smmulr r5, lr, r10
+    ldr r10, [r8, #24]
+    ldr r11, [r8, #36]
+    add r10, r10, r11
+    ldmia r9!, {r11, r12, lr}
+    smmlar r0, r11, r10, r0
+    smmlar r1, r12, r10, r1
+    smmlar r2, lr, r10, r2
+    ldmia r9!, {r11, r12, lr}
+    smmlar r3, r11, r10, r3
+    smmlar r4, r12, r10, r4
+    smmlar r5, lr, r10, r5
+    ldr r11, [r9], #4
+    smmulr r6, r11, r10
+    ldr r10, [r8, #28]
+    ldr r11, [r8, #32]
+    add r10, r10, r11
+    ldmia r9!, {r11, r12, lr}
+    smmlar r0, r11, r10, r0
+    smmlar r1, r12, r10, r1
+    smmlar r2, lr, r10, r2
+    ldmia r9!, {r11, r12, lr}
+    smmlar r3, r11, r10, r3
+    smmlar r4, r12, r10, r4
+    smmlar r5, lr, r10, r5
+    ldmia r9!, {r11, r12}
+    smmlar r6, r11, r10, r6
+    smmulr r7, r12, r10
+    ldr r9, [sp, #4]
+    ldrd r11, r12, [sp, #24]
+    ldrd r10, lr, [r9, #0]
+    sub r10, r10, r0
+    smlal r11, r12, r10, r10
+    sub lr, lr, r1
+    smlal r11, r12, lr, lr
+    ldrd r10, lr, [r9, #8]
+    sub r10, r10, r2
+    smlal r11, r12, r10, r10
+    sub lr, lr, r3
+    smlal r11, r12, lr, lr
+    ldrd r10, lr, [r9, #16]
+    sub r10, r10, r4
+    smlal r11, r12, r10, r10
+    sub lr, lr, r5
+    smlal r11, r12, lr, lr
+    ldrd r10, lr, [r9, #24]
+    sub r10, r10, r6
+    smlal r11, r12, r10, r10
+    sub lr, lr, r7
+    smlal r11, r12, lr, lr
+    strd r11, r12, [sp, #24]
+    stmia r9!, {r0, r1, r2, r3, r4, r5, r6, r7}
+    str r9, [sp, #4]
+    ldr r9, [sp, #20]
+    ldr r10, [r8, #0]
+    ldr r11, [r8, #60]
+    sub r10, r10, r11
+    ldr r11, [r9], #4
+    smmulr r0, r11, r10
+    ldr r10, [r8, #4]
+    ldr r11, [r8, #56]
+    sub r10, r10, r11
+    ldmia r9!, {r11, r12}
+    smmlar r0, r11, r10, r0
+    smmulr r1, r12, r10
+    ldr r10, [r8, #8]
+    ldr r11, [r8, #52]
+    sub r10, r10, r11
+    ldmia r9!, {r11, r12, lr}
+    smmlar r0, r11, r10, r0
+    smmlar r1, r12, r10, r1
+    smmulr r2, lr, r10
+    ldr r10, [r8, #12]
+    ldr r11, [r8, #48]
+    sub r10, r10, r11
+    ldmia r9!, {r11, r12, lr}
+    smmlar r0, r11, r10, r0
+    smmlar r1, r12, r10, r1
+    smmlar r2, lr, r10, r2
+    ldr r11, [r9], #4
+    smmulr r3, r11, r10
+    ldr r10, [r8, #16]
+    ldr r11, [r8, #44]
+    sub r10, r10, r11
+    ldmia r9!, {r11, r12, lr}
+    smmlar r0, r11, r10, r0
+    smmlar r1, r12, r10, r1
+    smmlar r2, lr, r10, r2
+    ldmia r9!, {r11, r12}
+    smmlar r3, r11, r10, r3
+    smmulr r4, r12, r10
+    ldr r10, [r8, #20]
+    ldr r11, [r8, #40]
+    sub r10, r10, r11
+    ldmia r9!, {r11, r12, lr}
+    smmlar r0, r11, r10, r0
+    smmlar r1, r12, r10, r1
+    smmlar r2, lr, r10, r2
+    ldmia r9!, {r11, r12, lr}
+    smmlar r3, r11, r10, r3
+    smmlar r4, r12, r10, r4
+    smmulr r5, lr, r10
+    ldr r10, [r8, #24]
+    ldr r11, [r8, #36]
+    sub r10, r10, r11
+    ldmia r9!, {r11, r12, lr}
+    smmlar r0, r11, r10, r0
+    smmlar r1, r12, r10, r1
+    smmlar r2, lr, r10, r2
+    ldmia r9!, {r11, r12, lr}
+    smmlar r3, r11, r10, r3
+    smmlar r4, r12, r10, r4
+    smmlar r5, lr, r10, r5
+    ldr r11, [r9], #4
+    smmulr r6, r11, r10
+    ldr r10, [r8, #28]
+    ldr r11, [r8, #32]
+    sub r10, r10, r11
+    ldmia r9!, {r11, r12, lr}
+    smmlar r0, r11, r10, r0
+    smmlar r1, r12, r10, r1
+    smmlar r2, lr, r10, r2
+    ldmia r9!, {r11, r12, lr}
+    smmlar r3, r11, r10, r3
+    smmlar r4, r12, r10, r4
+    smmlar r5, lr, r10, r5
+    ldmia r9!, {r11, r12}
+    smmlar r6, r11, r10, r6
+    smmulr r7, r12, r10
+    ldr r9, [sp, #4]
+    ldrd r11, r12, [sp, #24]
+    ldrd r10, lr, [r9, #0]
+    sub r10, r10, r0
+    smlal r11, r12, r10, r10
+    sub lr, lr, r1
+    smlal r11, r12, lr, lr
+    ldrd r10, lr, [r9, #8]
+    sub r10, r10, r2
+    smlal r11, r12, r10, r10
+    sub lr, lr, r3
+    smlal r11, r12, lr, lr
+    ldrd r10, lr, [r9, #16]
+    sub r10, r10, r4
+    smlal r11, r12, r10, r10
+    sub lr, lr, r5
+    smlal r11, r12, lr, lr
+    ldrd r10, lr, [r9, #24]
+    sub r10, r10, r6
+    smlal r11, r12, r10, r10
+    sub lr, lr, r7
+    smlal r11, r12, lr, lr
+    strd r11, r12, [sp, #24]
+    stmia r9!, {r0, r1, r2, r3, r4, r5, r6, r7}
+    str r9, [sp, #4]
+    add r8, r8, #64
+    ldr r10, [sp, #8]
+    subs r10, r10, #1
+    str r10, [sp, #8]
+    bne 1b
+    ldrd r0, r1, [sp, #24]
+    add sp, sp, #32
+    pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
+    .size cvm_cols_diff_16, . - cvm_cols_diff_16
 

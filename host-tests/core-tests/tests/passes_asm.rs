@@ -89,24 +89,33 @@ fn start(s: &mut String, name: &str, ctx_regs: &str) {
     header(s, name);
     writeln!(s, "    push {{r4, r5, r6, r7, r8, r9, r10, r11, lr}}").unwrap();
     writeln!(s, "    ldm r3, {ctx_regs}").unwrap();
+    writeln!(s, "    push {{r0, r1, r2, r3, r4, r5}}").unwrap();
+    loop_start(s);
+}
+
+fn loop_start(s: &mut String) {
     s.push_str(
-        "    push {r0, r1, r2, r3, r4, r5}\n\
-         \x20   mov r8, r0\n\
+        "    mov r8, r0\n\
          1:\n\
          \x20   ldr r9, [sp, #16]\n",
     );
 }
 
-/// The loop's end (`n` counted down at `sp + 8`) and the return.
-fn end(s: &mut String, name: &str) {
+/// The loop's end (`n` counted down at `sp + 8`), the frame of `words`
+/// words dropped, and the return.
+fn end(s: &mut String, name: &str, words: usize) {
     s.push_str(
         "    ldr r10, [sp, #8]\n\
          \x20   subs r10, r10, #1\n\
          \x20   str r10, [sp, #8]\n\
-         \x20   bne 1b\n\
-         \x20   add sp, sp, #24\n\
-         \x20   pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}\n",
+         \x20   bne 1b\n",
     );
+    if words == 8 {
+        // The distance, returned in r0 (low word) and r1.
+        writeln!(s, "    ldrd r0, r1, [sp, #24]").unwrap();
+    }
+    writeln!(s, "    add sp, sp, #{}", 4 * words).unwrap();
+    writeln!(s, "    pop {{r4, r5, r6, r7, r8, r9, r10, r11, pc}}").unwrap();
     writeln!(s, "    .size {name}, . - {name}\n").unwrap();
 }
 
@@ -160,20 +169,72 @@ fn rows(s: &mut String, j: usize) {
     writeln!(s, "    add r10, r10, #4").unwrap();
     writeln!(s, "    str r10, [sp, #4]").unwrap();
     writeln!(s, "    add r8, r8, #{}", 2 * j).unwrap();
-    end(s, &name);
+    end(s, &name, 6);
 }
 
 /// `cvm_cols_J(t, out, n, ctx)`: for each of the `n` rows of `t` (`J`
 /// words each, 64 bytes apart), the even and the odd block of the column
 /// pass, stored at `out` (`J` words per row: even part first).
 /// `ctx = [even, odd]`.
-fn cols(s: &mut String, j: usize) {
+///
+/// `cvm_cols_diff_J(t, e, n, ctx)` stores the new map over the old one in
+/// `e` and returns `Σ (old - new)²` over the words it overwrites
+/// (wrapping, 64 bits: one `SUB` and one `SMLAL` per word, the sum kept at
+/// `sp + 24` between blocks). It reads the old map one word pair per
+/// `LDRD`, where a separate distance pass reads three words per `LDM`:
+/// the firmware uses it where the map is in memory without wait states
+/// (see `embed.rs`).
+fn cols(s: &mut String, j: usize, diff: bool) {
     let (h, g) = halves(j);
-    let name = format!("cvm_cols_{j}");
-    start(s, &name, "{r4, r5}");
+    let name = if diff {
+        format!("cvm_cols_diff_{j}")
+    } else {
+        format!("cvm_cols_{j}")
+    };
+    if diff {
+        header(s, &name);
+        s.push_str(
+            "    push {r4, r5, r6, r7, r8, r9, r10, r11, lr}\n\
+             \x20   ldm r3, {r4, r5}\n\
+             \x20   movs r6, #0\n\
+             \x20   movs r7, #0\n\
+             \x20   push {r0, r1, r2, r3, r4, r5, r6, r7}\n",
+        );
+        loop_start(s);
+    } else {
+        start(s, &name, "{r4, r5}");
+    }
     // r8 the row, r9 the coefficients, r10 the input, r11, r12 and lr
     // streamed coefficients (three per `LDM`).
     let temps = ["r11", "r12", "lr"];
+    let store = |s: &mut String, n: usize| {
+        if diff {
+            writeln!(s, "    ldr r9, [sp, #4]").unwrap();
+            writeln!(s, "    ldrd r11, r12, [sp, #24]").unwrap();
+            // The old words two per `LDRD`: one bus access per pair where
+            // the row buffers are not tightly coupled (the H743).
+            for k in (0..n).step_by(2) {
+                if k + 1 < n {
+                    writeln!(s, "    ldrd r10, lr, [r9, #{}]", 4 * k).unwrap();
+                } else {
+                    writeln!(s, "    ldr r10, [r9, #{}]", 4 * k).unwrap();
+                }
+                writeln!(s, "    sub r10, r10, r{k}").unwrap();
+                writeln!(s, "    smlal r11, r12, r10, r10").unwrap();
+                if k + 1 < n {
+                    writeln!(s, "    sub lr, lr, r{}", k + 1).unwrap();
+                    writeln!(s, "    smlal r11, r12, lr, lr").unwrap();
+                }
+            }
+            writeln!(s, "    strd r11, r12, [sp, #24]").unwrap();
+            store_run(s, "r9", n);
+            writeln!(s, "    str r9, [sp, #4]").unwrap();
+        } else {
+            writeln!(s, "    ldr r10, [sp, #4]").unwrap();
+            store_run(s, "r10", n);
+            writeln!(s, "    str r10, [sp, #4]").unwrap();
+        }
+    };
     block(s, h, &temps, &|l, s| {
         writeln!(s, "    ldr r10, [r8, #{}]", 4 * l).unwrap();
         if l < g {
@@ -181,22 +242,18 @@ fn cols(s: &mut String, j: usize) {
             writeln!(s, "    add r10, r10, r11").unwrap();
         }
     });
-    writeln!(s, "    ldr r10, [sp, #4]").unwrap();
-    store_run(s, "r10", h);
+    store(s, h);
     if g > 0 {
-        writeln!(s, "    str r10, [sp, #4]").unwrap();
         writeln!(s, "    ldr r9, [sp, #20]").unwrap();
         block(s, g, &temps, &|l, s| {
             writeln!(s, "    ldr r10, [r8, #{}]", 4 * l).unwrap();
             writeln!(s, "    ldr r11, [r8, #{}]", 4 * (j - 1 - l)).unwrap();
             writeln!(s, "    sub r10, r10, r11").unwrap();
         });
-        writeln!(s, "    ldr r10, [sp, #4]").unwrap();
-        store_run(s, "r10", g);
+        store(s, g);
     }
-    writeln!(s, "    str r10, [sp, #4]").unwrap();
     writeln!(s, "    add r8, r8, #{T_STRIDE}").unwrap();
-    end(s, &name);
+    end(s, &name, if diff { 8 } else { 6 });
 }
 
 fn generate() -> String {
@@ -219,7 +276,8 @@ fn generate() -> String {
     );
     for j in 1..=MAX_J {
         rows(&mut s, j);
-        cols(&mut s, j);
+        cols(&mut s, j, false);
+        cols(&mut s, j, true);
     }
     s
 }
@@ -414,6 +472,33 @@ fn run(text: &str, name: &str, m: &mut Machine, args: [u32; 4]) -> usize {
                 }
             }
             "mov" => m.r[reg(ops[0])] = m.r[reg(ops[1])],
+            "movs" => {
+                let v = imm(ops[1]);
+                m.r[reg(ops[0])] = v;
+                m.z = v == 0;
+            }
+            "ldrd" | "strd" => {
+                let (a, b) = (reg(ops[0]), reg(ops[1]));
+                let base = reg(ops[2].trim_start_matches('['));
+                let off = imm(ops[3].trim_end_matches(']'));
+                let at = m.r[base] + off;
+                if op == "ldrd" {
+                    m.r[a] = m.load(at, 4);
+                    m.r[b] = m.load(at + 4, 4);
+                } else {
+                    let (va, vb) = (m.r[a], m.r[b]);
+                    m.store(at, 4, va);
+                    m.store(at + 4, 4, vb);
+                }
+            }
+            "smlal" => {
+                let (lo, hi) = (reg(ops[0]), reg(ops[1]));
+                let acc = ((m.r[hi] as u64) << 32 | m.r[lo] as u64).wrapping_add(
+                    (m.r[reg(ops[2])] as i32 as i64 * m.r[reg(ops[3])] as i32 as i64) as u64,
+                );
+                m.r[lo] = acc as u32;
+                m.r[hi] = (acc >> 32) as u32;
+            }
             "add" | "sub" | "subs" => {
                 let a = m.r[reg(ops[1])];
                 let b = if ops[2].starts_with('#') {
@@ -642,6 +727,50 @@ fn the_column_passes_match_the_reference_for_every_axis_length() {
                 }
             }
             // Nothing written past the `n` rows.
+            assert!(!m.mem.contains_key(&(OUT + 4 * (j * c.n) as u32)));
+
+            // The same map over an old one, with the distance between
+            // them.
+            let new: Vec<i32> = (0..j * c.n)
+                .map(|k| m.load(OUT + 4 * k as u32, 4) as i32)
+                .collect();
+            let old: Vec<i32> = (0..j * c.n)
+                .map(|k| {
+                    if trial % 3 == 0 {
+                        new[k].wrapping_add(r.random_range(-2..3))
+                    } else {
+                        r.random()
+                    }
+                })
+                .collect();
+            let mut m = Machine::new();
+            for (i, row) in t.iter().enumerate() {
+                m.words(T + (T_STRIDE * i) as u32, row);
+            }
+            m.words(EVEN, &c.even);
+            m.words(ODD, &c.odd);
+            m.words(CTX, &[EVEN as i32, ODD as i32]);
+            m.words(OUT, &old);
+            run(
+                &text,
+                &format!("cvm_cols_diff_{j}"),
+                &mut m,
+                [T, OUT, c.n as u32, CTX],
+            );
+            let want = old.iter().zip(&new).fold(0u64, |a, (&o, &n)| {
+                // As the Rust passes: a wrapping 32-bit difference.
+                let d = o.wrapping_sub(n) as i64;
+                a.wrapping_add((d * d) as u64)
+            });
+            let got = (m.r[1] as u64) << 32 | m.r[0] as u64;
+            assert_eq!(got, want, "cvm_cols_diff_{j}: distance, {} rows", c.n);
+            for (k, &w) in new.iter().enumerate() {
+                assert_eq!(
+                    m.load(OUT + 4 * k as u32, 4) as i32,
+                    w,
+                    "cvm_cols_diff_{j}: word {k}"
+                );
+            }
             assert!(!m.mem.contains_key(&(OUT + 4 * (j * c.n) as u32)));
         }
     }
