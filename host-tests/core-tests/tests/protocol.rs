@@ -463,3 +463,58 @@ fn flags_are_the_documented_bits() {
     }
     assert_eq!(flags::DEFECT, flags::CVM_DEFECT | flags::POWER_DEFECT);
 }
+
+/// `body*XXXX\n` with the body's checksum.
+fn sealed(body: &str) -> Vec<u8> {
+    format!("{body}*{:04X}\n", crc16(body.as_bytes())).into_bytes()
+}
+
+/// An object line whose fields are replaced one at a time: its numbers
+/// must be whole decimal numbers of their width (no empty field, no more
+/// than 20 digits, nothing above the type's maximum), and its extents and
+/// channels consistent; each bad field alone is refused.
+#[test]
+fn object_fields_are_checked_one_by_one() {
+    // id, row0, row1, col0, col1, area, peak, peak row, peak col, peak
+    // magnitude, peak power, centroid row and column (Q8), channels.
+    let good = [
+        "0", "0", "2", "0", "3", "12", "385844", "2", "2", "4938812", "859", "296", "385", "16",
+    ];
+    let line = |f: &[&str]| sealed(&format!("O,{}", f.join(",")));
+    let with = |i: usize, v: &str| {
+        let mut f = good.to_vec();
+        f[i] = v;
+        line(&f)
+    };
+    let Ok(Line::Object(o)) = protocol::parse(&line(&good)) else {
+        panic!("the good line must parse");
+    };
+    assert_eq!(
+        (o.row0, o.row1, o.col0, o.col1, o.channels),
+        (0, 2, 0, 3, 16)
+    );
+    // The widest centroid a u64 holds, 20 digits.
+    let max = u64::MAX.to_string();
+    let Ok(Line::Object(o)) = protocol::parse(&with(11, &max)) else {
+        panic!("a 20-digit centroid must parse");
+    };
+    assert_eq!(o.centroid_row_q8, u64::MAX);
+    let bad: [(usize, &str); 9] = [
+        (1, "3"),                      // row0 > row1
+        (3, "4"),                      // col0 > col1
+        (13, "17"),                    // a channel bit that is not a decision
+        (11, ""),                      // an empty number
+        (12, "000000000000000000001"), // 21 digits, though the value is 1
+        (11, "18446744073709551616"),  // u64::MAX + 1
+        (1, "4294967296"),             // u32::MAX + 1
+        (10, "65536"),                 // peak power above u16
+        (11, "+1"),                    // not a digit
+    ];
+    for (i, v) in bad {
+        assert_eq!(
+            protocol::parse(&with(i, v)).err(),
+            Some(ParseError::Format),
+            "field {i} = {v:?} must be refused"
+        );
+    }
+}
