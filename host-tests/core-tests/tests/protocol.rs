@@ -518,3 +518,21 @@ fn object_fields_are_checked_one_by_one() {
         );
     }
 }
+
+/// A score line carries whole scores of 9 characters: none at all, or a
+/// partial one, is refused.
+#[test]
+fn score_lines_hold_whole_scores() {
+    let one = "QBwQAIBJj";
+    assert!(matches!(
+        protocol::parse(&sealed(&format!("S,4,7,{one}{one}"))),
+        Ok(Line::Scores { row: 4, col0: 7, chars }) if chars.len() == 18
+    ));
+    for bad in ["", &one[..8], &format!("{one}Q")] {
+        assert_eq!(
+            protocol::parse(&sealed(&format!("S,4,7,{bad}"))).err(),
+            Some(ParseError::Format),
+            "{bad:?}"
+        );
+    }
+}
