@@ -662,7 +662,7 @@ fn cols_model<const H: usize, const G: usize, const DIFF: bool, const NEAR: bool
 
 /// The generated Cortex-M passes (`passes_arm.s`, written by the host test
 /// `passes_asm`, which also runs them on a model of the instructions
-/// against the arithmetic of [`rows_model`] and [`cols_model`]).
+/// against the arithmetic of `rows_model` and `cols_model`).
 #[cfg(target_arch = "arm")]
 mod arm {
     core::arch::global_asm!(include_str!("passes_arm.s"), options(raw));
