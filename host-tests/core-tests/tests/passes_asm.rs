@@ -700,13 +700,19 @@ fn the_column_passes_match_the_reference_for_every_axis_length() {
                         .collect()
                 })
                 .collect();
-            let mut m = Machine::new();
-            for (i, row) in t.iter().enumerate() {
-                m.words(T + (T_STRIDE * i) as u32, row);
-            }
-            m.words(EVEN, &c.even);
-            m.words(ODD, &c.odd);
-            m.words(CTX, &[EVEN as i32, ODD as i32]);
+            // The row pass's output and the factor, as both column passes
+            // find them.
+            let machine = || {
+                let mut m = Machine::new();
+                for (i, row) in t.iter().enumerate() {
+                    m.words(T + (T_STRIDE * i) as u32, row);
+                }
+                m.words(EVEN, &c.even);
+                m.words(ODD, &c.odd);
+                m.words(CTX, &[EVEN as i32, ODD as i32]);
+                m
+            };
+            let mut m = machine();
             run(
                 &text,
                 &format!("cvm_cols_{j}"),
@@ -743,13 +749,7 @@ fn the_column_passes_match_the_reference_for_every_axis_length() {
                     }
                 })
                 .collect();
-            let mut m = Machine::new();
-            for (i, row) in t.iter().enumerate() {
-                m.words(T + (T_STRIDE * i) as u32, row);
-            }
-            m.words(EVEN, &c.even);
-            m.words(ODD, &c.odd);
-            m.words(CTX, &[EVEN as i32, ODD as i32]);
+            let mut m = machine();
             m.words(OUT, &old);
             run(
                 &text,
