@@ -129,8 +129,15 @@ pub mod h743 {
     };
     /// A frame read that has not finished after twice its bus time plus
     /// 100 us is a lost beam (a 15x15 frame takes 144 us at 25 MHz).
-    pub const READ_TIMEOUT_US: u64 =
-        2 * (GEOMETRY.cells() as u64 * 16 * 1_000_000).div_ceil(SPI_HZ as u64) + 100;
+    /// It is counted by a 16-bit timer in microseconds.
+    pub const READ_TIMEOUT_US: u32 = {
+        let us = 2 * (GEOMETRY.cells() as u64 * 16 * 1_000_000).div_ceil(SPI_HZ as u64) + 100;
+        assert!(
+            us <= 1 << 16,
+            "the read timeout must fit TIM13's 16-bit count"
+        );
+        us as u32
+    };
     /// Beams scored between two yields of the scoring task.
     pub const SCORE_BURST: u32 = 8;
     const _: () = assert!(

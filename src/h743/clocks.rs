@@ -12,6 +12,9 @@ use embassy_stm32::rcc::*;
 use embassy_stm32::time::Hertz;
 
 pub const HSE_HZ: u32 = 8_000_000;
+/// The APB1 timers' kernel clock: PCLK1 (100 MHz) times 2, as RM0433
+/// doubles it whenever the APB1 prescaler divides (`TIMPRE` = 0).
+pub const APB1_TIMER_HZ: u32 = 200_000_000;
 
 pub fn config() -> embassy_stm32::Config {
     let mut config = embassy_stm32::Config::default();

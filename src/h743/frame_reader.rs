@@ -17,7 +17,8 @@ use embassy_stm32::pac::dma::vals::{Dir, Dmdis, Pl, Size};
 use embassy_stm32::pac::spi::vals::{Comm, Fthlv, Master, Mbr};
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::signal::Signal;
-use embassy_time::{Duration, with_timeout};
+
+use super::read_deadline::ReadDeadline;
 
 /// DMA1 stream 1 (and DMAMUX1 channel 1), in LISR/LIFCR.
 const STREAM: usize = 1;
@@ -35,12 +36,14 @@ pub enum ReadError {
 }
 
 #[derive(Clone, Copy)]
-enum DmaEnd {
+pub(super) enum DmaEnd {
     Complete,
     Error,
+    /// The read's deadline ran out first (`read_deadline`).
+    Timeout,
 }
 
-static DMA_END: Signal<CriticalSectionRawMutex, DmaEnd> = Signal::new();
+pub(super) static DMA_END: Signal<CriticalSectionRawMutex, DmaEnd> = Signal::new();
 
 #[interrupt]
 fn DMA1_STREAM1() {
@@ -65,6 +68,7 @@ fn clear_flags(w: &mut pac::dma::regs::Ixr) {
 /// SPI1 configured once; then one [`FrameReader::read`] per frame.
 pub struct FrameReader {
     counts: ReadCounts,
+    deadline: ReadDeadline,
 }
 
 /// Failed reads since start-up, by cause.
@@ -78,8 +82,9 @@ pub struct ReadCounts {
 impl FrameReader {
     /// Takes SPI1 over from the pins' set-up (`embassy_stm32::spi::Spi`
     /// configured the pins, the kernel clock and the bus clock) with SCK =
-    /// kernel clock / `div`.
-    pub fn new(div: Mbr) -> Self {
+    /// kernel clock / `div`; a read that takes more than `timeout_us`
+    /// microseconds is a [`ReadError::Timeout`].
+    pub fn new(div: Mbr, timeout_us: u32) -> Self {
         pac::RCC.ahb1enr().modify(|w| w.set_dma1en(true));
         let spi = pac::SPI1;
         spi.cr1().modify(|w| w.set_spe(false));
@@ -111,6 +116,7 @@ impl FrameReader {
         unsafe { irq.enable() };
         FrameReader {
             counts: ReadCounts::default(),
+            deadline: ReadDeadline::new(timeout_us),
         }
     }
 
@@ -120,7 +126,7 @@ impl FrameReader {
 
     /// Reads `buf.len()` samples (at most 65535). `buf` must be in memory
     /// that DMA1 reaches (the `.dma_buffers` section: AXI SRAM).
-    pub async fn read(&mut self, buf: &mut [u16], timeout: Duration) -> Result<(), ReadError> {
+    pub async fn read(&mut self, buf: &mut [u16]) -> Result<(), ReadError> {
         let spi = pac::SPI1;
         let st = pac::DMA1.st(STREAM);
         let n = buf.len().min(u16::MAX as usize) as u16;
@@ -142,16 +148,17 @@ impl FrameReader {
         });
         spi.cr2().modify(|w| w.set_tsize(n));
         spi.cr1().modify(|w| w.set_spe(true));
+        self.deadline.start();
         spi.cr1().modify(|w| w.set_cstart(true));
 
-        let end = with_timeout(timeout, DMA_END.wait()).await;
+        let end = DMA_END.wait().await;
         let overrun = spi.sr().read().ovr();
         self.stop();
         let result = match end {
-            Err(_) => Err(ReadError::Timeout),
-            Ok(DmaEnd::Error) => Err(ReadError::Dma),
-            Ok(DmaEnd::Complete) if overrun => Err(ReadError::Overrun),
-            Ok(DmaEnd::Complete) => Ok(()),
+            DmaEnd::Timeout => Err(ReadError::Timeout),
+            DmaEnd::Error => Err(ReadError::Dma),
+            DmaEnd::Complete if overrun => Err(ReadError::Overrun),
+            DmaEnd::Complete => Ok(()),
         };
         match result {
             Err(ReadError::Overrun) => self.counts.overruns = self.counts.overruns.wrapping_add(1),
@@ -166,6 +173,7 @@ impl FrameReader {
     /// suspended transfer and flushes the FIFOs (RM0433 §50.4.9), the
     /// stream is disabled, and every flag of both is cleared.
     fn stop(&mut self) {
+        self.deadline.stop();
         let spi = pac::SPI1;
         let dma = pac::DMA1;
         spi.cr1().modify(|w| w.set_spe(false));

@@ -22,6 +22,7 @@
 mod clocks;
 mod drdy;
 mod frame_reader;
+mod read_deadline;
 mod resets;
 mod tasks;
 
@@ -60,8 +61,8 @@ use tasks::{acquire_task, score_task, uart_task};
 use crate::config::h743::FIRMWARE_VERSION;
 use crate::config::h743::{
     BAUD, COLS, CORE, J1, J2, KEEP_RESERVE, MAX_COLS, MAX_DEFECT_LINES_PER_ROW,
-    POWER_THRESHOLD_UNITS, QUEUE_BYTES, ROWS, SCORES, SPI_DIV, SPI_HZ, SYSCLK_HZ, THRESHOLD_UNITS,
-    WATCHDOG_US,
+    POWER_THRESHOLD_UNITS, QUEUE_BYTES, READ_TIMEOUT_US, ROWS, SCORES, SPI_DIV, SPI_HZ, SYSCLK_HZ,
+    THRESHOLD_UNITS, WATCHDOG_US,
 };
 use crate::config::{BEAM_LOG, FRAME_BUFFERS};
 use crate::frames::SampleBuffers;
@@ -207,7 +208,7 @@ fn main() -> ! {
     spi_cfg.frequency = Hertz(SPI_HZ);
     let spi = spi::Spi::new_blocking_rxonly(pins.spi, pins.sck, pins.miso, spi_cfg);
     core::mem::forget(spi);
-    let reader = FrameReader::new(SPI_DIV);
+    let reader = FrameReader::new(SPI_DIV, READ_TIMEOUT_US);
     let cs = Output::new(pins.cs, Level::High, Speed::VeryHigh);
 
     let mut uart_cfg = usart::Config::default();

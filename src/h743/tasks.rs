@@ -12,20 +12,19 @@ use embassy_time::{Duration, Instant, with_timeout};
 
 use super::frame_reader::FrameReader;
 use super::{ACQ, BEAMS, CELLS, FRAMES, KICK, QUEUE, ROOM, START, TX_LINE};
-use crate::config::h743::{FEED_MS, IDLE_END_MS, MAX_COLS, READ_TIMEOUT_US, SCORE_BURST};
+use crate::config::h743::{FEED_MS, IDLE_END_MS, MAX_COLS, SCORE_BURST};
 use crate::frames::Samples;
 use crate::sink::QueueSink;
 
 /// Reads one frame per START into the buffer it names.
 #[embassy_executor::task]
 pub async fn acquire_task(mut reader: FrameReader, mut cs: Output<'static>) {
-    let timeout = Duration::from_micros(READ_TIMEOUT_US);
     loop {
         let buf = START.wait().await;
         // SAFETY: `buf` is Filling: this task owns it until `read_done`.
         let samples = unsafe { FRAMES.buffer(buf) };
         cs.set_low();
-        let result = reader.read(&mut samples[..CELLS], timeout).await;
+        let result = reader.read(&mut samples[..CELLS]).await;
         cs.set_high();
         ACQ.lock(|a| a.borrow_mut().read_done(buf, result.is_ok()));
         BEAMS.signal(());

@@ -15,6 +15,7 @@ from .serial import Spi, Usart
 
 # The embassy time driver runs on TIM12 (time-driver-any picks it on this chip).
 TIM12_IRQ = 43
+TIM13_IRQ = 44
 GPIO_PORTS = "ABCDEFGHIJK"
 # Pull-ups/downs and modes of the debug pins after reset (RM0433 §11.4).
 GPIO_RESET = {"A": {0x00: 0xABFF_FFFF, 0x08: 0x0C00_0000, 0x0C: 0x6400_0000},
@@ -59,6 +60,8 @@ class Machine:
         self.iwdg = bus.add(0x5800_4800, 0x400, system.Iwdg(bus, self.dbgmcu, self.debugger))
         self.tim12 = bus.add(0x4000_1800, 0x400, system.Timer(
             bus, nvic, TIM12_IRQ, self.rcc.apb1_timer_hz, bits=16), clock=(0xE8, 6, "TIM12"))
+        self.tim13 = bus.add(0x4000_1C00, 0x400, system.Timer(
+            bus, nvic, TIM13_IRQ, self.rcc.apb1_timer_hz, bits=16), clock=(0xE8, 7, "TIM13"))
         self.dma = bus.add(0x4002_0000, 0x400, Dma(bus, nvic), clock=(0xD8, 0, "DMA1"))
         bus.add(0x4002_0800, 0x400, Dmamux(self.dma))
         slave = self.detector if self.detector else NoSlave()

@@ -422,8 +422,9 @@ class Iwdg:
 
 
 class Timer:
-    """A general-purpose timer as the time driver uses it: up-counting with
-    prescaler, auto-reload, update and compare flags and interrupts."""
+    """A general-purpose timer as the time driver and the read deadline use
+    it: up-counting with prescaler, auto-reload, one-pulse mode (OPM), update
+    and compare flags and interrupts."""
 
     def __init__(self, bus, nvic, irq, clock_hz, bits=32):
         self.bus = bus
@@ -477,6 +478,10 @@ class Timer:
             return
         period = self.arr + 1
         start = self.cnt0
+        one_shot = self.cr1 & (1 << 3) and start + ticks > self.arr
+        if one_shot:
+            # OPM: the update event clears CEN; the count stops at 0.
+            ticks = period - start
         if start + ticks > self.arr:
             self.sr |= 1  # UIF
             self.psc_active = self.psc
@@ -488,6 +493,8 @@ class Timer:
                 self.sr |= 1 << (ch + 1)
         self.cnt0 = (start + ticks) % period
         self.t0 += ticks * tick
+        if one_shot:
+            self.cr1 &= ~1
         self.update_irq()
 
     def schedule(self):

@@ -245,6 +245,46 @@ class UsartTests(unittest.TestCase):
         self.assertTrue(u.read(0x1C, 4) >> 6 & 1, "TC once the last byte is out")
 
 
+class OnePulseTimer(unittest.TestCase):
+    def test_update_event_stops_the_count_and_raises_the_interrupt(self):
+        # The read deadline: 1 MHz counts (200 MHz / 200), ARR = 99, OPM:
+        # the update event comes after 100 us = 40 000 core cycles.
+        bus, core = world()
+        t = system.Timer(bus, core.nvic, 44, lambda: 200e6, bits=16)
+        t.write(0x28, 4, 199)              # PSC
+        t.write(0x2C, 4, 99)               # ARR
+        t.write(0x00, 4, 1 << 2)           # URS
+        t.write(0x14, 4, 1)                # UG: loads PSC, no UIF (URS)
+        self.assertEqual(t.read(0x10, 4), 0)
+        t.write(0x0C, 4, 1)                # UIE
+        t.write(0x24, 4, 0)
+        t.write(0x00, 4, (1 << 3) | (1 << 2) | 1)  # OPM, URS, CEN
+        run_until(bus, core, 40_000 - 400)
+        self.assertFalse(core.nvic.pending[44])
+        self.assertEqual(t.read(0x24, 4), 99)
+        run_until(bus, core, 40_001)
+        self.assertTrue(core.nvic.pending[44])
+        self.assertEqual(t.read(0x10, 4) & 1, 1, "UIF")
+        self.assertEqual(t.read(0x00, 4) & 1, 0, "OPM clears CEN")
+        run_until(bus, core, 200_000)
+        self.assertEqual(t.read(0x24, 4), 0, "the count stays stopped at 0")
+
+    def test_stopped_before_the_deadline_nothing_fires(self):
+        bus, core = world()
+        t = system.Timer(bus, core.nvic, 44, lambda: 200e6, bits=16)
+        t.write(0x28, 4, 199)
+        t.write(0x2C, 4, 99)
+        t.write(0x00, 4, 1 << 2)
+        t.write(0x14, 4, 1)
+        t.write(0x0C, 4, 1)
+        t.write(0x00, 4, (1 << 3) | (1 << 2) | 1)
+        run_until(bus, core, 20_000)
+        t.write(0x00, 4, 1 << 2)           # CEN = 0 halfway
+        run_until(bus, core, 400_000)
+        self.assertFalse(core.nvic.pending[44])
+        self.assertEqual(t.read(0x10, 4), 0)
+
+
 class Watchdog(unittest.TestCase):
     def test_expiry_resets_unless_fed(self):
         bus, core = world()
