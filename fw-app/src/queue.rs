@@ -134,12 +134,14 @@ impl<const CAP: usize> LineQueue<CAP> {
         true
     }
 
+    /// Appends `bytes` (the caller has checked that they fit) as at most
+    /// two block copies: up to the end of the ring, then from its start.
     fn write_bytes(&mut self, bytes: &[u8]) {
-        for &b in bytes {
-            let at = (self.head + self.used) % CAP;
-            self.buf[at] = b;
-            self.used += 1;
-        }
+        let at = (self.head + self.used) % CAP;
+        let (tail, wrapped) = bytes.split_at(bytes.len().min(CAP - at));
+        copy(self.buf.get_mut(at..).unwrap_or(&mut []), tail);
+        copy(&mut self.buf, wrapped);
+        self.used += bytes.len();
     }
 
     fn byte_at(&self, k: usize) -> u8 {
@@ -155,13 +157,25 @@ impl<const CAP: usize> LineQueue<CAP> {
         }
         let len = usize::from(u16::from_le_bytes([self.byte_at(0), self.byte_at(1)]));
         let n = len.min(out.len());
-        for (k, o) in out.iter_mut().take(n).enumerate() {
-            *o = self.byte_at(LEN_BYTES + k);
-        }
+        let at = (self.head + LEN_BYTES) % CAP;
+        let (out, _) = out.split_at_mut(n);
+        let (tail, wrapped) = out.split_at_mut(n.min(CAP - at));
+        copy(tail, self.buf.get(at..).unwrap_or(&[]));
+        copy(wrapped, &self.buf);
         let total = (LEN_BYTES + len).min(self.used);
         self.head = (self.head + total) % CAP;
         self.used -= total;
         Some(n)
+    }
+}
+
+/// Copies the first `min(dst.len(), src.len())` bytes of `src` into `dst`
+/// with one `memcpy`: the line bytes move a block at a time, not one
+/// modulo-indexed byte at a time.
+fn copy(dst: &mut [u8], src: &[u8]) {
+    let n = dst.len().min(src.len());
+    if let (Some(d), Some(s)) = (dst.get_mut(..n), src.get(..n)) {
+        d.copy_from_slice(s);
     }
 }
 
