@@ -130,6 +130,17 @@ const NEAR_WORDS: usize = near_words(&CORE);
 #[unsafe(link_section = ".dtcm")]
 static NEAR: NearMaps = NearMaps(core::cell::UnsafeCell::new(core::mem::MaybeUninit::uninit()));
 
+/// The scoring side's state (sequencer, engine, the rows of results), in
+/// DTCM: the scoring task reads and writes it for every beam, which in the
+/// task's future (AXI SRAM) cost about 450 stall cycles per beam
+/// (scripts/twin-cost.sh). NOLOAD: `main` writes it before any task runs.
+struct DriverCell(core::cell::UnsafeCell<core::mem::MaybeUninit<ScanDriver<'static, MAX_COLS>>>);
+// SAFETY: written once by `main`, then used by the scoring task only.
+unsafe impl Sync for DriverCell {}
+#[unsafe(link_section = ".dtcm")]
+static DRIVER: DriverCell =
+    DriverCell(core::cell::UnsafeCell::new(core::mem::MaybeUninit::uninit()));
+
 type Acq = Acquisition<FRAME_BUFFERS, BEAM_LOG>;
 type Queue = LineQueue<QUEUE_BYTES>;
 
@@ -250,7 +261,9 @@ fn main() -> ! {
         Ok(p) => p,
         Err(e) => defmt::panic!("pipeline refused its buffers: {}", e),
     };
-    let driver = ScanDriver::new(pipeline, COLS as u32, ROWS);
+    // SAFETY: written here, once, before any task runs; only the scoring
+    // task uses it after.
+    let driver = unsafe { (*DRIVER.0.get()).write(ScanDriver::new(pipeline, COLS as u32, ROWS)) };
 
     let drdy = ExtiInput::new_blocking(pins.drdy, pins.drdy_exti, Pull::Down, TriggerEdge::Rising);
     let mask = ExtiGroupMask::new(&[&drdy]);

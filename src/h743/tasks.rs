@@ -69,7 +69,7 @@ async fn wait_for_room(wdg: &mut IndependentWatchdog<'static, IWDG1>) {
 
 #[embassy_executor::task]
 pub async fn score_task(
-    mut driver: ScanDriver<'static, MAX_COLS>,
+    driver: &'static mut ScanDriver<'static, MAX_COLS>,
     mut wdg: IndependentWatchdog<'static, IWDG1>,
 ) {
     let mut frames = Samples {
@@ -100,7 +100,7 @@ pub async fn score_task(
             last_beam = Instant::now();
             idle_ended = false;
             if driver.step(rec, &mut frames, &mut sink) {
-                report_scan(&driver);
+                report_scan(driver);
             }
             KICK.signal(());
             // A backlog of beams must not keep the UART task and the
@@ -120,7 +120,7 @@ pub async fn score_task(
                 KICK.signal(());
                 if finished {
                     warn!("no beam for {} ms: scan ended early", IDLE_END_MS);
-                    report_scan(&driver);
+                    report_scan(driver);
                 }
                 if !more {
                     break;
