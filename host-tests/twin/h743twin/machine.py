@@ -32,6 +32,12 @@ class Machine:
         self.image, self.text = load_elf(elf_path)
         self.core.load(self.image)
         self.core.watch_opcodes(self.text)
+        self.stack = stack_range(elf_path)
+        if self.stack:
+            # Painted once, at power-on: the lowest word that no longer
+            # holds the pattern is the deepest the stack has reached.
+            lo, hi = self.stack
+            self.core.uc.mem_write(lo, STACK_PAINT * ((hi - lo) // 4))
         self.uart = []          # (byte, cycle)
         self.resets = []        # (cause, cycle)
         self.detector = None
@@ -238,6 +244,35 @@ def load_elf(path):
     return image, text
 
 
+STACK_PAINT = b"\xa5\x5a\xc3\x3c"
+
+
+def stack_range(path):
+    """(_stack_end, _stack_start) of a cortex-m-rt ELF whose memory map
+    bounds the stack (the H743's: DTCM above `.dtcm`), or None."""
+    with open(path, "rb") as f:
+        symtab = ELFFile(f).get_section_by_name(".symtab")
+        if symtab is None:
+            return None
+        ends = [symtab.get_symbol_by_name(n) for n in ("_stack_end", "_stack_start")]
+        if not all(ends):
+            return None
+        lo, hi = (e[0]["st_value"] for e in ends)
+    return (lo, hi) if lo < hi else None
+
+
+def _stack_free(self):
+    """Bytes of the stack never written since power-on, or None."""
+    if not self.stack:
+        return None
+    lo, hi = self.stack
+    data = bytes(self.core.uc.mem_read(lo, hi - lo))
+    free = 0
+    while free < len(data) and data[free:free + 4] == STACK_PAINT:
+        free += 4
+    return free
+
+
 def cycles_of_ms(ms):
     return round(ms * CLOCK_HZ / 1e3)
 
@@ -268,6 +303,8 @@ def _stats(self):
         "exti_edges": self.exti.edges,
         "sysclk_hz": self.rcc.sysclk_hz(),
         "fault": core.fault,
+        "stack_bytes": self.stack[1] - self.stack[0] if self.stack else None,
+        "stack_free_bytes": self.stack_free(),
     }
     if core.profile is not None:
         s["profile"] = dict(sorted(core.profile.items(), key=lambda kv: -kv[1]))
@@ -279,3 +316,4 @@ def _stats(self):
 
 
 Machine.stats = _stats
+Machine.stack_free = _stack_free
