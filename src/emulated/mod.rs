@@ -175,7 +175,19 @@ async fn scan_task(syst: cortex_m::peripheral::SYST) {
     let cells = scorer.cells();
     let n = frame_bytes(cells);
     let mut acq: Acquisition<FRAME_BUFFERS, BEAM_LOG> = Acquisition::new();
-    let mut released = [false; FRAME_BUFFERS];
+    let released: [core::cell::Cell<bool>; FRAME_BUFFERS] = Default::default();
+    // One decoder for the whole scan: built per beam, its 512-byte sample
+    // buffer was cleared for every beam (about 220 instructions).
+    let mut frames = Decoder {
+        bufs: &FRAMES,
+        cells,
+        samples: [0; cvm_core::MAX_CELLS],
+        release: |b: usize| {
+            if let Some(r) = released.get(b) {
+                r.set(true);
+            }
+        },
+    };
     let mut stopwatch = Stopwatch::new(syst);
     let mut beam: u64 = 0;
     let mut sink = QueueSink(&QUEUE);
@@ -207,12 +219,6 @@ async fn scan_task(syst: cortex_m::peripheral::SYST) {
         beam += 1;
         while let Some(rec) = acq.take_next() {
             drain().await;
-            let mut frames = Decoder {
-                bufs: &FRAMES,
-                cells,
-                samples: [0; cvm_core::MAX_CELLS],
-                release: |b: usize| released[b % FRAME_BUFFERS] = true,
-            };
             let mut step = Some(rec);
             loop {
                 stopwatch.time(|| driver.step(step.take(), &mut frames, &mut sink));
@@ -221,8 +227,8 @@ async fn scan_task(syst: cortex_m::peripheral::SYST) {
                 }
                 drain().await;
             }
-            for (b, r) in released.iter_mut().enumerate() {
-                if core::mem::take(r) {
+            for (b, r) in released.iter().enumerate() {
+                if r.take() {
                     acq.release(b);
                 }
             }
@@ -231,12 +237,6 @@ async fn scan_task(syst: cortex_m::peripheral::SYST) {
 
     loop {
         drain().await;
-        let mut frames = Decoder {
-            bufs: &FRAMES,
-            cells,
-            samples: [0; cvm_core::MAX_CELLS],
-            release: |_b: usize| {},
-        };
         let (more, _) = stopwatch.time(|| driver.end_of_data(&mut frames, &mut sink));
         if !more {
             break;
