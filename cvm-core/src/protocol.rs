@@ -41,9 +41,16 @@ pub trait LineSink {
     fn line(&mut self, line: &[u8], priority: Priority);
 }
 
+// The encoder's two tables are read for every character of every line. On
+// bare metal they go to their own section, `.cvm_hot_rodata`, so that a
+// board's memory map can put them in memory without wait states (the H743
+// keeps them in DTCM, loaded from flash at start-up; from flash each read
+// waits for the bus); elsewhere they are ordinary read-only data.
+
 /// CRC-16/CCITT-FALSE, catalogued as CRC-16/IBM-3740; its table is built
 /// at compile time.
-const CRC16: crc::Crc<u16> = crc::Crc::<u16>::new(&crc::CRC_16_IBM_3740);
+#[cfg_attr(target_os = "none", unsafe(link_section = ".cvm_hot_rodata"))]
+static CRC16: crc::Crc<u16> = crc::Crc::<u16>::new(&crc::CRC_16_IBM_3740);
 
 /// CRC-16/CCITT-FALSE of `data` (check value: `crc16(b"123456789") == 0x29B1`).
 pub fn crc16(data: &[u8]) -> u16 {
@@ -52,7 +59,8 @@ pub fn crc16(data: &[u8]) -> u16 {
 
 const HEX: &[u8; 16] = b"0123456789ABCDEF";
 /// URL-safe base64 alphabet: no `,`, `*` or newline, so scores need no escaping.
-const B64: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789-_";
+#[cfg_attr(target_os = "none", unsafe(link_section = ".cvm_hot_rodata"))]
+static B64: [u8; 64] = *b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789-_";
 
 /// A line under construction in a fixed buffer. Writes past `MAX_LINE`
 /// are dropped (they cannot happen for the lines this module writes; the

@@ -174,8 +174,28 @@ unsafe fn UART4() {
     unsafe { EXECUTOR_ACQ.on_interrupt() }
 }
 
+/// Copies `.dtcm_rodata` (the line encoder's tables) from its load image
+/// in flash to DTCM, which the reset handler does not initialise.
+fn load_dtcm_rodata() {
+    unsafe extern "C" {
+        static __sidtcm_rodata: u32;
+        static mut __sdtcm_rodata: u32;
+        static mut __edtcm_rodata: u32;
+    }
+    // SAFETY: the linker script places the section in DTCM, word-aligned,
+    // with a load image of the same length in flash; nothing reads it
+    // before this copy (the encoder runs in the tasks).
+    unsafe {
+        let src = &raw const __sidtcm_rodata;
+        let dst = &raw mut __sdtcm_rodata;
+        let words = (&raw mut __edtcm_rodata).offset_from(dst) as usize;
+        core::ptr::copy_nonoverlapping(src, dst, words);
+    }
+}
+
 #[entry]
 fn main() -> ! {
+    load_dtcm_rodata();
     let mut core = cortex_m::Peripherals::take()
         .unwrap_or_else(|| defmt::panic!("core peripherals taken twice"));
     core.SCB.enable_icache();

@@ -4,7 +4,8 @@ What only silicon would otherwise show: the vector table at the start of
 flash, .bss and .data as single ranges inside AXI SRAM (the reset handler
 zeroes and copies them with loops that stop only at their end symbols), the
 stack in DTCM, and every buffer a DMA stream touches in memory DMA1
-reaches. Prints one line per check; exits 1 with the failed checks named.
+reaches, and the line encoder's tables in DTCM with their load image in
+flash. Prints one line per check; exits 1 with the failed checks named.
 """
 
 import sys
@@ -67,6 +68,16 @@ def check(path):
             expect(f"row buffer {part[-1]} in {rname}", inside(a, a + z, region), f"{part} at {a:#x}..{a + z:#x}")
         except KeyError as e:
             expect(f"row buffer {part[-1]} in {rname}", False, str(e))
+    lo, hi, load = (syms.get(n) for n in ("__sdtcm_rodata", "__edtcm_rodata", "__sidtcm_rodata"))
+    expect("line encoder's tables in DTCM, loaded from flash",
+           None not in (lo, hi, load) and lo < hi and inside(lo, hi, DTCM) and inside(load, load + hi - lo, FLASH),
+           f"{lo:#x}..{hi:#x} from {load:#x}" if None not in (lo, hi, load) else "symbols missing")
+    for part in ("8protocol5CRC16", "8protocol3B64"):
+        try:
+            n, a, z = obj(part)
+            expect(f"{part} in .dtcm_rodata", lo is not None and lo <= a and a + z <= hi, f"at {a:#x}")
+        except KeyError as e:
+            expect(f"{part} in .dtcm_rodata", False, str(e))
     return results
 
 
