@@ -10,7 +10,8 @@ use embassy_stm32::mode::Blocking;
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 
-use super::{ACQ, START};
+use super::ACQ;
+use super::frame_reader;
 
 /// The DRDY line's EXTI mask and the LINE_SYNC input, for the interrupt.
 pub struct DrdyIo {
@@ -37,7 +38,7 @@ fn EXTI9_5() {
         io.mask.clear();
         let sync = io.line_sync.is_high();
         if let Some(buf) = ACQ.lock(|a| a.borrow_mut().drdy(sync)) {
-            START.signal(buf);
+            frame_reader::start(buf);
         }
     });
 }

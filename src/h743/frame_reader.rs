@@ -10,15 +10,31 @@
 //! acquisition. (embassy's SPI driver is not used for the transfer: its
 //! `read` reports no error on this chip and its DMA handler panics on a
 //! transfer error.)
+//!
+//! Reads run from interrupts, with no task in between: the DRDY interrupt
+//! starts one ([`start`]); the end of the transfer (DMA1 stream 1), a
+//! transfer error, or the read's deadline (TIM13, `read_deadline`) ends it
+//! ([`end`]), releases CS, hands the result to the acquisition log and
+//! wakes the scoring task. All three interrupts have the same priority, so
+//! none preempts another, and the first to end a read makes the others'
+//! late calls do nothing. (An acquisition task in its own interrupt
+//! executor did the same with two wake-ups and two polls per beam, about
+//! 230 instructions more on the chip model.)
 
+use core::cell::RefCell;
+
+use defmt::warn;
+use embassy_stm32::gpio::Output;
 use embassy_stm32::interrupt;
+use embassy_stm32::interrupt::InterruptExt;
 use embassy_stm32::pac;
 use embassy_stm32::pac::dma::vals::{Dir, Dmdis, Pl, Size};
 use embassy_stm32::pac::spi::vals::{Comm, Fthlv, Master, Mbr};
+use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
-use embassy_sync::signal::Signal;
 
 use super::read_deadline::ReadDeadline;
+use super::{ACQ, BEAMS, CELLS, FRAMES};
 
 /// DMA1 stream 1 (and DMAMUX1 channel 1), in LISR/LIFCR.
 const STREAM: usize = 1;
@@ -35,15 +51,19 @@ pub enum ReadError {
     Timeout,
 }
 
+/// How a read ended.
 #[derive(Clone, Copy)]
-pub(super) enum DmaEnd {
+pub(super) enum ReadEnd {
     Complete,
     Error,
     /// The read's deadline ran out first (`read_deadline`).
     Timeout,
 }
 
-pub(super) static DMA_END: Signal<CriticalSectionRawMutex, DmaEnd> = Signal::new();
+/// The reader, shared by the three interrupts that start and end reads;
+/// `main` puts it here before DRDY is enabled.
+pub static READER: Mutex<CriticalSectionRawMutex, RefCell<Option<FrameReader>>> =
+    Mutex::new(RefCell::new(None));
 
 #[interrupt]
 fn DMA1_STREAM1() {
@@ -51,9 +71,46 @@ fn DMA1_STREAM1() {
     let isr = dma.isr(0).read();
     dma.ifcr(0).write(clear_flags);
     if isr.teif(STREAM) || isr.dmeif(STREAM) || isr.feif(STREAM) {
-        DMA_END.signal(DmaEnd::Error);
+        end(ReadEnd::Error);
     } else if isr.tcif(STREAM) {
-        DMA_END.signal(DmaEnd::Complete);
+        end(ReadEnd::Complete);
+    }
+}
+
+/// Starts reading the frame of the beam the acquisition log gave buffer
+/// `buf` (DRDY interrupt).
+pub fn start(buf: usize) {
+    // SAFETY: `buf` is Filling: the acquisition side owns it until the
+    // read ends and `read_done` hands it on.
+    let samples = unsafe { FRAMES.buffer(buf) };
+    let stale = READER.lock(|r| {
+        let mut r = r.borrow_mut();
+        let r = r.as_mut()?;
+        // The log waits for the SPI before it gives out a buffer, so no
+        // read is running; should one be, it ends as a timeout.
+        let stale = r.end(ReadEnd::Timeout);
+        r.start(buf, &mut samples[..CELLS]);
+        stale
+    });
+    if let Some(ended) = stale {
+        report(ended);
+    }
+}
+
+/// Ends the read in progress, if any, as `how` says (DMA and TIM13
+/// interrupts).
+pub(super) fn end(how: ReadEnd) {
+    if let Some(ended) = READER.lock(|r| r.borrow_mut().as_mut().and_then(|r| r.end(how))) {
+        report(ended);
+    }
+}
+
+/// An ended read's result to the acquisition log; wakes the scoring task.
+fn report((buf, result, counts): (usize, Result<(), ReadError>, ReadCounts)) {
+    ACQ.lock(|a| a.borrow_mut().read_done(buf, result.is_ok()));
+    BEAMS.signal(());
+    if let Err(e) = result {
+        warn!("frame lost: {} ({})", e, counts);
     }
 }
 
@@ -65,10 +122,14 @@ fn clear_flags(w: &mut pac::dma::regs::Ixr) {
     w.set_feif(STREAM, true);
 }
 
-/// SPI1 configured once; then one [`FrameReader::read`] per frame.
+/// SPI1 configured once; then one [`FrameReader::start`] and one
+/// [`FrameReader::end`] per frame.
 pub struct FrameReader {
     counts: ReadCounts,
     deadline: ReadDeadline,
+    cs: Output<'static>,
+    /// The buffer being filled.
+    reading: Option<usize>,
 }
 
 /// Failed reads since start-up, by cause.
@@ -83,8 +144,9 @@ impl FrameReader {
     /// Takes SPI1 over from the pins' set-up (`embassy_stm32::spi::Spi`
     /// configured the pins, the kernel clock and the bus clock) with SCK =
     /// kernel clock / `div`; a read that takes more than `timeout_us`
-    /// microseconds is a [`ReadError::Timeout`].
-    pub fn new(div: Mbr, timeout_us: u32) -> Self {
+    /// microseconds is a [`ReadError::Timeout`]; `cs` is the detector's
+    /// chip select (high: idle).
+    pub fn new(div: Mbr, timeout_us: u32, cs: Output<'static>) -> Self {
         pac::RCC.ahb1enr().modify(|w| w.set_dma1en(true));
         let spi = pac::SPI1;
         spi.cr1().modify(|w| w.set_spe(false));
@@ -110,29 +172,28 @@ impl FrameReader {
             .ccr(STREAM)
             .write(|w| w.set_dmareq_id(REQ_SPI1_RX));
         let irq = interrupt::DMA1_STREAM1;
-        use embassy_stm32::interrupt::InterruptExt;
         irq.set_priority(interrupt::Priority::P5);
-        // SAFETY: the handler above only touches DMA1's flags and a signal.
+        // SAFETY: the handler above only touches DMA1's flags and the
+        // mutex-protected reader and acquisition log.
         unsafe { irq.enable() };
         FrameReader {
             counts: ReadCounts::default(),
             deadline: ReadDeadline::new(timeout_us),
+            cs,
+            reading: None,
         }
     }
 
-    pub fn counts(&self) -> ReadCounts {
-        self.counts
-    }
-
-    /// Reads `buf.len()` samples (at most 65535). `buf` must be in memory
-    /// that DMA1 reaches (the `.dma_buffers` section: AXI SRAM).
-    pub async fn read(&mut self, buf: &mut [u16]) -> Result<(), ReadError> {
+    /// Asserts CS and starts reading `samples.len()` samples (at most
+    /// 65535) into buffer `buf`, `samples`, which must be in memory that
+    /// DMA1 reaches (the `.dma_buffers` section: AXI SRAM).
+    fn start(&mut self, buf: usize, samples: &mut [u16]) {
         let spi = pac::SPI1;
         let st = pac::DMA1.st(STREAM);
-        let n = buf.len().min(u16::MAX as usize) as u16;
-        DMA_END.reset();
+        let n = samples.len().min(u16::MAX as usize) as u16;
+        self.cs.set_low();
         st.par().write_value(spi.rxdr16().as_ptr() as u32);
-        st.m0ar().write_value(buf.as_mut_ptr() as u32);
+        st.m0ar().write_value(samples.as_mut_ptr() as u32);
         st.ndtr().write(|w| w.set_ndt(n));
         st.fcr().write(|w| w.set_dmdis(Dmdis::ENABLED));
         st.cr().write(|w| {
@@ -150,15 +211,22 @@ impl FrameReader {
         spi.cr1().modify(|w| w.set_spe(true));
         self.deadline.start();
         spi.cr1().modify(|w| w.set_cstart(true));
+        self.reading = Some(buf);
+    }
 
-        let end = DMA_END.wait().await;
-        let overrun = spi.sr().read().ovr();
+    /// Ends the read in progress as `how` says: stops SPI1, the stream and
+    /// the deadline, releases CS, counts a failure. Returns the buffer, the
+    /// result and the failure counts, or `None` when no read was running.
+    fn end(&mut self, how: ReadEnd) -> Option<(usize, Result<(), ReadError>, ReadCounts)> {
+        let buf = self.reading.take()?;
+        let overrun = pac::SPI1.sr().read().ovr();
         self.stop();
-        let result = match end {
-            DmaEnd::Timeout => Err(ReadError::Timeout),
-            DmaEnd::Error => Err(ReadError::Dma),
-            DmaEnd::Complete if overrun => Err(ReadError::Overrun),
-            DmaEnd::Complete => Ok(()),
+        self.cs.set_high();
+        let result = match how {
+            ReadEnd::Timeout => Err(ReadError::Timeout),
+            ReadEnd::Error => Err(ReadError::Dma),
+            ReadEnd::Complete if overrun => Err(ReadError::Overrun),
+            ReadEnd::Complete => Ok(()),
         };
         match result {
             Err(ReadError::Overrun) => self.counts.overruns = self.counts.overruns.wrapping_add(1),
@@ -166,7 +234,7 @@ impl FrameReader {
             Err(ReadError::Timeout) => self.counts.timeouts = self.counts.timeouts.wrapping_add(1),
             Ok(()) => {}
         }
-        result
+        Some((buf, result, self.counts))
     }
 
     /// Ends the transfer whatever its state: SPE = 0 aborts a running or
@@ -194,6 +262,7 @@ impl FrameReader {
             w.set_modfc(true);
             w.set_tifrec(true);
         });
-        DMA_END.reset();
+        // An end the other interrupt raised meanwhile is for this read.
+        interrupt::DMA1_STREAM1.unpend();
     }
 }

@@ -1,14 +1,16 @@
 //! The NUCLEO-H743ZI2 board.
 //!
-//! Three priority levels:
+//! Two levels:
 //!
-//! - **DRDY interrupt** (EXTI9_5, highest): samples LINE_SYNC, records the
-//!   beam in the `Acquisition` log and, when a frame buffer is free and the
-//!   SPI idle, tells the acquisition task which buffer to fill. Every edge is
-//!   counted here, even while the SPI or the scoring side is busy.
-//! - **Acquisition task** (interrupt executor on the otherwise unused UART4
-//!   vector): CS low, SPI1 read with DMA into the buffer (`frame_reader`),
-//!   CS high, result (or overrun, DMA error, timeout) into the log.
+//! - **Interrupts** (one priority, so none preempts another):
+//!   - DRDY (EXTI9_5): samples LINE_SYNC, records the beam in the
+//!     `Acquisition` log and, when a frame buffer is free and the SPI idle,
+//!     starts reading the frame into it (`frame_reader`: CS low, SPI1 with
+//!     DMA1 stream 1, the read's deadline on TIM13). Every edge is counted
+//!     here, even while the SPI or the scoring side is busy.
+//!   - End of the read (DMA1 stream 1: complete or error; TIM13: the
+//!     deadline): CS high, the result (or overrun, DMA error, timeout) into
+//!     the log, the scoring task woken.
 //! - **Thread mode**: the scoring task (sequencing, `cvm_core::Pipeline`,
 //!   lines into the bounded queue, watchdog feeding, idle end of scan) and
 //!   the UART task (USART3 TX with DMA from the queue). The scoring task
@@ -38,7 +40,7 @@ use cvm_fw_app::driver::ScanDriver;
 use cvm_fw_app::queue::LineQueue;
 use defmt::info;
 use defmt_rtt as _;
-use embassy_executor::{Executor, InterruptExecutor};
+use embassy_executor::Executor;
 use embassy_stm32::exti::blocking::ExtiGroupMask;
 use embassy_stm32::exti::{ExtiInput, TriggerEdge};
 use embassy_stm32::gpio::{Input, Level, Output, Pull, Speed};
@@ -54,9 +56,9 @@ use embassy_sync::blocking_mutex::raw::{CriticalSectionRawMutex, ThreadModeRawMu
 use embassy_sync::signal::Signal;
 
 use drdy::{DRDY_IO, DrdyIo};
-use frame_reader::FrameReader;
+use frame_reader::{FrameReader, READER};
 use static_cell::StaticCell;
-use tasks::{acquire_task, score_task, uart_task};
+use tasks::{score_task, uart_task};
 
 use crate::config::h743::FIRMWARE_VERSION;
 use crate::config::h743::{
@@ -157,22 +159,13 @@ unsafe impl Sync for TxLine {}
 #[unsafe(link_section = ".dma_buffers")]
 static TX_LINE: TxLine = TxLine(core::cell::UnsafeCell::new([0; MAX_LINE]));
 
-/// DRDY interrupt -> acquisition task: the buffer to fill.
-static START: Signal<CriticalSectionRawMutex, usize> = Signal::new();
 /// Acquisition -> scoring: beam records are waiting.
 static BEAMS: Signal<CriticalSectionRawMutex, ()> = Signal::new();
 /// Scoring -> UART: lines are waiting. UART -> scoring: room was made.
 static KICK: Signal<ThreadModeRawMutex, ()> = Signal::new();
 static ROOM: Signal<ThreadModeRawMutex, ()> = Signal::new();
 
-static EXECUTOR_ACQ: InterruptExecutor = InterruptExecutor::new();
 static EXECUTOR: StaticCell<Executor> = StaticCell::new();
-
-#[interrupt]
-unsafe fn UART4() {
-    // SAFETY: UART4 is used as this executor's software interrupt only.
-    unsafe { EXECUTOR_ACQ.on_interrupt() }
-}
 
 /// Copies `.dtcm_rodata` (the line encoder's tables) from its load image
 /// in flash to DTCM, which the reset handler does not initialise.
@@ -239,8 +232,9 @@ fn main() -> ! {
     spi_cfg.frequency = Hertz(SPI_HZ);
     let spi = spi::Spi::new_blocking_rxonly(pins.spi, pins.sck, pins.miso, spi_cfg);
     core::mem::forget(spi);
-    let reader = FrameReader::new(SPI_DIV, READ_TIMEOUT_US);
     let cs = Output::new(pins.cs, Level::High, Speed::VeryHigh);
+    let reader = FrameReader::new(SPI_DIV, READ_TIMEOUT_US, cs);
+    READER.lock(|r| r.replace(Some(reader)));
 
     let mut uart_cfg = usart::Config::default();
     uart_cfg.baudrate = BAUD;
@@ -296,12 +290,6 @@ fn main() -> ! {
         }))
     });
 
-    interrupt::UART4.set_priority(IrqPriority::P6);
-    let acq_spawner = EXECUTOR_ACQ.start(interrupt::UART4);
-    match acquire_task(reader, cs) {
-        Ok(t) => acq_spawner.spawn(t),
-        Err(_) => defmt::panic!("acquisition task already running"),
-    }
     interrupt::EXTI9_5.set_priority(IrqPriority::P5);
     // SAFETY: the handler only touches the mutex-protected statics above.
     unsafe { interrupt::EXTI9_5.enable() };

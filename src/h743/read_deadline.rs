@@ -8,7 +8,7 @@
 //! still fired after the read, woke the acquisition task for nothing and
 //! cost about 460 instructions per beam on the chip model
 //! (docs/performance.md); starting and stopping TIM13 costs a few register
-//! writes.
+//! writes. Its interrupt has the priority of the DRDY and DMA interrupts.
 
 use embassy_stm32::interrupt;
 use embassy_stm32::interrupt::InterruptExt;
@@ -16,7 +16,7 @@ use embassy_stm32::pac;
 use embassy_stm32::pac::timer::vals::Urs;
 
 use super::clocks::APB1_TIMER_HZ;
-use super::frame_reader::{DMA_END, DmaEnd};
+use super::frame_reader::{ReadEnd, end};
 
 /// One count per microsecond.
 const PRESCALER: u32 = APB1_TIMER_HZ / 1_000_000;
@@ -31,7 +31,7 @@ fn TIM8_UP_TIM13() {
     // One-shot: the update event has already cleared CEN.
     t.cr1().write(|_| {});
     t.sr().write(|_| {});
-    DMA_END.signal(DmaEnd::Timeout);
+    end(ReadEnd::Timeout);
 }
 
 /// TIM13, set up for reads of at most `timeout_us` microseconds.
@@ -54,7 +54,8 @@ impl ReadDeadline {
         let irq = interrupt::TIM8_UP_TIM13;
         // The DMA stream's priority: neither preempts the other.
         irq.set_priority(interrupt::Priority::P5);
-        // SAFETY: the handler only touches TIM13 and a signal.
+        // SAFETY: the handler only touches TIM13 and what `frame_reader::end`
+        // touches (the mutex-protected reader and acquisition log).
         unsafe { irq.enable() };
         ReadDeadline(())
     }

@@ -1,38 +1,18 @@
-//! The three tasks: acquisition (interrupt executor), scoring and UART
-//! (thread mode).
+//! The two tasks, both in thread mode: scoring and UART. (Frames are read
+//! from interrupts: `frame_reader`.)
 
 use cvm_fw_app::driver::ScanDriver;
 use defmt::{error, info, warn};
-use embassy_stm32::gpio::Output;
 use embassy_stm32::mode::Async;
 use embassy_stm32::peripherals::IWDG1;
 use embassy_stm32::usart::UartTx;
 use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_time::{Duration, Instant, with_timeout};
 
-use super::frame_reader::FrameReader;
-use super::{ACQ, BEAMS, CELLS, FRAMES, KICK, QUEUE, ROOM, START, TX_LINE};
+use super::{ACQ, BEAMS, CELLS, FRAMES, KICK, QUEUE, ROOM, TX_LINE};
 use crate::config::h743::{FEED_MS, IDLE_END_MS, MAX_COLS, SCORE_BURST};
 use crate::frames::Samples;
 use crate::sink::QueueSink;
-
-/// Reads one frame per START into the buffer it names.
-#[embassy_executor::task]
-pub async fn acquire_task(mut reader: FrameReader, mut cs: Output<'static>) {
-    loop {
-        let buf = START.wait().await;
-        // SAFETY: `buf` is Filling: this task owns it until `read_done`.
-        let samples = unsafe { FRAMES.buffer(buf) };
-        cs.set_low();
-        let result = reader.read(&mut samples[..CELLS]).await;
-        cs.set_high();
-        ACQ.lock(|a| a.borrow_mut().read_done(buf, result.is_ok()));
-        BEAMS.signal(());
-        if let Err(e) = result {
-            warn!("frame lost: {} ({})", e, reader.counts());
-        }
-    }
-}
 
 /// Sends queued lines with DMA.
 #[embassy_executor::task]
