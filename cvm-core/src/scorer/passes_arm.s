@@ -29,8 +29,8 @@ cvm_rows_1:
     ldrh r10, [r8, #0]
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr r1, [r9], #4
-    smmulr r0, r1, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [sp, #4]
     str r0, [r10, #0]
     add r10, r10, #4
@@ -57,8 +57,8 @@ cvm_cols_1:
 1:
     ldr r9, [sp, #16]
     ldr r10, [r8, #0]
-    ldr r1, [r9], #4
-    smmulr r0, r1, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [sp, #4]
     str r0, [r10], #4
     str r10, [sp, #4]
@@ -86,8 +86,8 @@ cvm_cols_diff_1:
 1:
     ldr r9, [sp, #16]
     ldr r10, [r8, #0]
-    ldr r1, [r9], #4
-    smmulr r0, r1, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r9, [sp, #4]
     ldrd r11, r12, [sp, #24]
     ldr r10, [r9, #0]
@@ -123,8 +123,8 @@ cvm_rows_2:
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr r1, [r9], #4
-    smmulr r0, r1, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [sp, #4]
     str r0, [r10, #0]
     ldr r9, [sp, #20]
@@ -133,8 +133,8 @@ cvm_rows_2:
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr r1, [r9], #4
-    smmulr r0, r1, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [sp, #4]
     str r0, [r10, #64]
     add r10, r10, #4
@@ -163,8 +163,8 @@ cvm_cols_2:
     ldr r10, [r8, #0]
     ldr r11, [r8, #4]
     add r10, r10, r11
-    ldr r1, [r9], #4
-    smmulr r0, r1, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [sp, #4]
     str r0, [r10], #4
     str r10, [sp, #4]
@@ -172,8 +172,8 @@ cvm_cols_2:
     ldr r10, [r8, #0]
     ldr r11, [r8, #4]
     sub r10, r10, r11
-    ldr r1, [r9], #4
-    smmulr r0, r1, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [sp, #4]
     str r0, [r10], #4
     str r10, [sp, #4]
@@ -203,8 +203,8 @@ cvm_cols_diff_2:
     ldr r10, [r8, #0]
     ldr r11, [r8, #4]
     add r10, r10, r11
-    ldr r1, [r9], #4
-    smmulr r0, r1, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r9, [sp, #4]
     ldrd r11, r12, [sp, #24]
     ldr r10, [r9, #0]
@@ -217,8 +217,8 @@ cvm_cols_diff_2:
     ldr r10, [r8, #0]
     ldr r11, [r8, #4]
     sub r10, r10, r11
-    ldr r1, [r9], #4
-    smmulr r0, r1, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r9, [sp, #4]
     ldrd r11, r12, [sp, #24]
     ldr r10, [r9, #0]
@@ -254,14 +254,14 @@ cvm_rows_3:
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr r2, [r9], #4
-    smmulr r0, r2, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldrh r10, [r8, #2]
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r2, r3}
-    smmlar r0, r2, r10, r0
-    smmulr r1, r3, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [sp, #4]
     str r0, [r10, #0]
     str r1, [r10, #64]
@@ -271,8 +271,8 @@ cvm_rows_3:
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr r1, [r9], #4
-    smmulr r0, r1, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [sp, #4]
     str r0, [r10, #128]
     add r10, r10, #4
@@ -301,12 +301,12 @@ cvm_cols_3:
     ldr r10, [r8, #0]
     ldr r11, [r8, #8]
     add r10, r10, r11
-    ldr r2, [r9], #4
-    smmulr r0, r2, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
-    ldmia r9!, {r2, r3}
-    smmlar r0, r2, r10, r0
-    smmulr r1, r3, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1}
     str r10, [sp, #4]
@@ -314,8 +314,8 @@ cvm_cols_3:
     ldr r10, [r8, #0]
     ldr r11, [r8, #8]
     sub r10, r10, r11
-    ldr r1, [r9], #4
-    smmulr r0, r1, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [sp, #4]
     str r0, [r10], #4
     str r10, [sp, #4]
@@ -345,12 +345,12 @@ cvm_cols_diff_3:
     ldr r10, [r8, #0]
     ldr r11, [r8, #8]
     add r10, r10, r11
-    ldr r2, [r9], #4
-    smmulr r0, r2, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
-    ldmia r9!, {r2, r3}
-    smmlar r0, r2, r10, r0
-    smmulr r1, r3, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r9, [sp, #4]
     ldrd r11, r12, [sp, #24]
     ldrd r10, lr, [r9, #0]
@@ -365,8 +365,8 @@ cvm_cols_diff_3:
     ldr r10, [r8, #0]
     ldr r11, [r8, #8]
     sub r10, r10, r11
-    ldr r1, [r9], #4
-    smmulr r0, r1, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r9, [sp, #4]
     ldrd r11, r12, [sp, #24]
     ldr r10, [r9, #0]
@@ -402,16 +402,16 @@ cvm_rows_4:
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr r2, [r9], #4
-    smmulr r0, r2, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #4]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r2, r3}
-    smmlar r0, r2, r10, r0
-    smmulr r1, r3, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [sp, #4]
     str r0, [r10, #0]
     str r1, [r10, #64]
@@ -421,16 +421,16 @@ cvm_rows_4:
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr r2, [r9], #4
-    smmulr r0, r2, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #4]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r2, r3}
-    smmlar r0, r2, r10, r0
-    smmulr r1, r3, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [sp, #4]
     str r0, [r10, #128]
     str r1, [r10, #192]
@@ -460,14 +460,14 @@ cvm_cols_4:
     ldr r10, [r8, #0]
     ldr r11, [r8, #12]
     add r10, r10, r11
-    ldr r2, [r9], #4
-    smmulr r0, r2, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #8]
     add r10, r10, r11
-    ldmia r9!, {r2, r3}
-    smmlar r0, r2, r10, r0
-    smmulr r1, r3, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1}
     str r10, [sp, #4]
@@ -475,14 +475,14 @@ cvm_cols_4:
     ldr r10, [r8, #0]
     ldr r11, [r8, #12]
     sub r10, r10, r11
-    ldr r2, [r9], #4
-    smmulr r0, r2, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #8]
     sub r10, r10, r11
-    ldmia r9!, {r2, r3}
-    smmlar r0, r2, r10, r0
-    smmulr r1, r3, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1}
     str r10, [sp, #4]
@@ -512,14 +512,14 @@ cvm_cols_diff_4:
     ldr r10, [r8, #0]
     ldr r11, [r8, #12]
     add r10, r10, r11
-    ldr r2, [r9], #4
-    smmulr r0, r2, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #8]
     add r10, r10, r11
-    ldmia r9!, {r2, r3}
-    smmlar r0, r2, r10, r0
-    smmulr r1, r3, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r9, [sp, #4]
     ldrd r11, r12, [sp, #24]
     ldrd r10, lr, [r9, #0]
@@ -534,14 +534,14 @@ cvm_cols_diff_4:
     ldr r10, [r8, #0]
     ldr r11, [r8, #12]
     sub r10, r10, r11
-    ldr r2, [r9], #4
-    smmulr r0, r2, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #8]
     sub r10, r10, r11
-    ldmia r9!, {r2, r3}
-    smmlar r0, r2, r10, r0
-    smmulr r1, r3, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r9, [sp, #4]
     ldrd r11, r12, [sp, #24]
     ldrd r10, lr, [r9, #0]
@@ -579,23 +579,23 @@ cvm_rows_5:
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr r3, [r9], #4
-    smmulr r0, r3, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #6]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r3, r4}
-    smmlar r0, r3, r10, r0
-    smmulr r1, r4, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldrh r10, [r8, #4]
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r3, r4, r5}
-    smmlar r0, r3, r10, r0
-    smmlar r1, r4, r10, r1
-    smmulr r2, r5, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [sp, #4]
     str r0, [r10, #0]
     str r1, [r10, #64]
@@ -606,16 +606,16 @@ cvm_rows_5:
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr r2, [r9], #4
-    smmulr r0, r2, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #6]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r2, r3}
-    smmlar r0, r2, r10, r0
-    smmulr r1, r3, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [sp, #4]
     str r0, [r10, #192]
     str r1, [r10, #256]
@@ -645,19 +645,19 @@ cvm_cols_5:
     ldr r10, [r8, #0]
     ldr r11, [r8, #16]
     add r10, r10, r11
-    ldr r3, [r9], #4
-    smmulr r0, r3, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #12]
     add r10, r10, r11
-    ldmia r9!, {r3, r4}
-    smmlar r0, r3, r10, r0
-    smmulr r1, r4, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
-    ldmia r9!, {r3, r4, r5}
-    smmlar r0, r3, r10, r0
-    smmlar r1, r4, r10, r1
-    smmulr r2, r5, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1, r2}
     str r10, [sp, #4]
@@ -665,14 +665,14 @@ cvm_cols_5:
     ldr r10, [r8, #0]
     ldr r11, [r8, #16]
     sub r10, r10, r11
-    ldr r2, [r9], #4
-    smmulr r0, r2, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #12]
     sub r10, r10, r11
-    ldmia r9!, {r2, r3}
-    smmlar r0, r2, r10, r0
-    smmulr r1, r3, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1}
     str r10, [sp, #4]
@@ -702,19 +702,19 @@ cvm_cols_diff_5:
     ldr r10, [r8, #0]
     ldr r11, [r8, #16]
     add r10, r10, r11
-    ldr r3, [r9], #4
-    smmulr r0, r3, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #12]
     add r10, r10, r11
-    ldmia r9!, {r3, r4}
-    smmlar r0, r3, r10, r0
-    smmulr r1, r4, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
-    ldmia r9!, {r3, r4, r5}
-    smmlar r0, r3, r10, r0
-    smmlar r1, r4, r10, r1
-    smmulr r2, r5, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r9, [sp, #4]
     ldrd r11, r12, [sp, #24]
     ldrd r10, lr, [r9, #0]
@@ -732,14 +732,14 @@ cvm_cols_diff_5:
     ldr r10, [r8, #0]
     ldr r11, [r8, #16]
     sub r10, r10, r11
-    ldr r2, [r9], #4
-    smmulr r0, r2, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #12]
     sub r10, r10, r11
-    ldmia r9!, {r2, r3}
-    smmlar r0, r2, r10, r0
-    smmulr r1, r3, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r9, [sp, #4]
     ldrd r11, r12, [sp, #24]
     ldrd r10, lr, [r9, #0]
@@ -777,25 +777,25 @@ cvm_rows_6:
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr r3, [r9], #4
-    smmulr r0, r3, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #8]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r3, r4}
-    smmlar r0, r3, r10, r0
-    smmulr r1, r4, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldrh r10, [r8, #4]
     ldrh lr, [r8, #6]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r3, r4, r5}
-    smmlar r0, r3, r10, r0
-    smmlar r1, r4, r10, r1
-    smmulr r2, r5, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [sp, #4]
     str r0, [r10, #0]
     str r1, [r10, #64]
@@ -806,25 +806,25 @@ cvm_rows_6:
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr r3, [r9], #4
-    smmulr r0, r3, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #8]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r3, r4}
-    smmlar r0, r3, r10, r0
-    smmulr r1, r4, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldrh r10, [r8, #4]
     ldrh lr, [r8, #6]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r3, r4, r5}
-    smmlar r0, r3, r10, r0
-    smmlar r1, r4, r10, r1
-    smmulr r2, r5, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [sp, #4]
     str r0, [r10, #192]
     str r1, [r10, #256]
@@ -855,21 +855,21 @@ cvm_cols_6:
     ldr r10, [r8, #0]
     ldr r11, [r8, #20]
     add r10, r10, r11
-    ldr r3, [r9], #4
-    smmulr r0, r3, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #16]
     add r10, r10, r11
-    ldmia r9!, {r3, r4}
-    smmlar r0, r3, r10, r0
-    smmulr r1, r4, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #12]
     add r10, r10, r11
-    ldmia r9!, {r3, r4, r5}
-    smmlar r0, r3, r10, r0
-    smmlar r1, r4, r10, r1
-    smmulr r2, r5, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1, r2}
     str r10, [sp, #4]
@@ -877,21 +877,21 @@ cvm_cols_6:
     ldr r10, [r8, #0]
     ldr r11, [r8, #20]
     sub r10, r10, r11
-    ldr r3, [r9], #4
-    smmulr r0, r3, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #16]
     sub r10, r10, r11
-    ldmia r9!, {r3, r4}
-    smmlar r0, r3, r10, r0
-    smmulr r1, r4, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #12]
     sub r10, r10, r11
-    ldmia r9!, {r3, r4, r5}
-    smmlar r0, r3, r10, r0
-    smmlar r1, r4, r10, r1
-    smmulr r2, r5, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1, r2}
     str r10, [sp, #4]
@@ -921,21 +921,21 @@ cvm_cols_diff_6:
     ldr r10, [r8, #0]
     ldr r11, [r8, #20]
     add r10, r10, r11
-    ldr r3, [r9], #4
-    smmulr r0, r3, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #16]
     add r10, r10, r11
-    ldmia r9!, {r3, r4}
-    smmlar r0, r3, r10, r0
-    smmulr r1, r4, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #12]
     add r10, r10, r11
-    ldmia r9!, {r3, r4, r5}
-    smmlar r0, r3, r10, r0
-    smmlar r1, r4, r10, r1
-    smmulr r2, r5, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r9, [sp, #4]
     ldrd r11, r12, [sp, #24]
     ldrd r10, lr, [r9, #0]
@@ -953,21 +953,21 @@ cvm_cols_diff_6:
     ldr r10, [r8, #0]
     ldr r11, [r8, #20]
     sub r10, r10, r11
-    ldr r3, [r9], #4
-    smmulr r0, r3, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #16]
     sub r10, r10, r11
-    ldmia r9!, {r3, r4}
-    smmlar r0, r3, r10, r0
-    smmulr r1, r4, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #12]
     sub r10, r10, r11
-    ldmia r9!, {r3, r4, r5}
-    smmlar r0, r3, r10, r0
-    smmlar r1, r4, r10, r1
-    smmulr r2, r5, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r9, [sp, #4]
     ldrd r11, r12, [sp, #24]
     ldrd r10, lr, [r9, #0]
@@ -1008,33 +1008,33 @@ cvm_rows_7:
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr r4, [r9], #4
-    smmulr r0, r4, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #10]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r4, r5}
-    smmlar r0, r4, r10, r0
-    smmulr r1, r5, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldrh r10, [r8, #4]
     ldrh lr, [r8, #8]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r4, r5, r6}
-    smmlar r0, r4, r10, r0
-    smmlar r1, r5, r10, r1
-    smmulr r2, r6, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldrh r10, [r8, #6]
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r4, r5, r6, r7}
-    smmlar r0, r4, r10, r0
-    smmlar r1, r5, r10, r1
-    smmlar r2, r6, r10, r2
-    smmulr r3, r7, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldr r10, [sp, #4]
     str r0, [r10, #0]
     str r1, [r10, #64]
@@ -1046,25 +1046,25 @@ cvm_rows_7:
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr r3, [r9], #4
-    smmulr r0, r3, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #10]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r3, r4}
-    smmlar r0, r3, r10, r0
-    smmulr r1, r4, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldrh r10, [r8, #4]
     ldrh lr, [r8, #8]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r3, r4, r5}
-    smmlar r0, r3, r10, r0
-    smmlar r1, r4, r10, r1
-    smmulr r2, r5, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [sp, #4]
     str r0, [r10, #256]
     str r1, [r10, #320]
@@ -1095,27 +1095,27 @@ cvm_cols_7:
     ldr r10, [r8, #0]
     ldr r11, [r8, #24]
     add r10, r10, r11
-    ldr r4, [r9], #4
-    smmulr r0, r4, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #20]
     add r10, r10, r11
-    ldmia r9!, {r4, r5}
-    smmlar r0, r4, r10, r0
-    smmulr r1, r5, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #16]
     add r10, r10, r11
-    ldmia r9!, {r4, r5, r6}
-    smmlar r0, r4, r10, r0
-    smmlar r1, r5, r10, r1
-    smmulr r2, r6, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [r8, #12]
-    ldmia r9!, {r4, r5, r6, r7}
-    smmlar r0, r4, r10, r0
-    smmlar r1, r5, r10, r1
-    smmlar r2, r6, r10, r2
-    smmulr r3, r7, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1, r2, r3}
     str r10, [sp, #4]
@@ -1123,21 +1123,21 @@ cvm_cols_7:
     ldr r10, [r8, #0]
     ldr r11, [r8, #24]
     sub r10, r10, r11
-    ldr r3, [r9], #4
-    smmulr r0, r3, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #20]
     sub r10, r10, r11
-    ldmia r9!, {r3, r4}
-    smmlar r0, r3, r10, r0
-    smmulr r1, r4, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #16]
     sub r10, r10, r11
-    ldmia r9!, {r3, r4, r5}
-    smmlar r0, r3, r10, r0
-    smmlar r1, r4, r10, r1
-    smmulr r2, r5, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1, r2}
     str r10, [sp, #4]
@@ -1167,27 +1167,27 @@ cvm_cols_diff_7:
     ldr r10, [r8, #0]
     ldr r11, [r8, #24]
     add r10, r10, r11
-    ldr r4, [r9], #4
-    smmulr r0, r4, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #20]
     add r10, r10, r11
-    ldmia r9!, {r4, r5}
-    smmlar r0, r4, r10, r0
-    smmulr r1, r5, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #16]
     add r10, r10, r11
-    ldmia r9!, {r4, r5, r6}
-    smmlar r0, r4, r10, r0
-    smmlar r1, r5, r10, r1
-    smmulr r2, r6, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [r8, #12]
-    ldmia r9!, {r4, r5, r6, r7}
-    smmlar r0, r4, r10, r0
-    smmlar r1, r5, r10, r1
-    smmlar r2, r6, r10, r2
-    smmulr r3, r7, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldr r9, [sp, #4]
     ldrd r11, r12, [sp, #24]
     ldrd r10, lr, [r9, #0]
@@ -1207,21 +1207,21 @@ cvm_cols_diff_7:
     ldr r10, [r8, #0]
     ldr r11, [r8, #24]
     sub r10, r10, r11
-    ldr r3, [r9], #4
-    smmulr r0, r3, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #20]
     sub r10, r10, r11
-    ldmia r9!, {r3, r4}
-    smmlar r0, r3, r10, r0
-    smmulr r1, r4, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #16]
     sub r10, r10, r11
-    ldmia r9!, {r3, r4, r5}
-    smmlar r0, r3, r10, r0
-    smmlar r1, r4, r10, r1
-    smmulr r2, r5, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r9, [sp, #4]
     ldrd r11, r12, [sp, #24]
     ldrd r10, lr, [r9, #0]
@@ -1262,35 +1262,35 @@ cvm_rows_8:
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr r4, [r9], #4
-    smmulr r0, r4, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #12]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r4, r5}
-    smmlar r0, r4, r10, r0
-    smmulr r1, r5, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldrh r10, [r8, #4]
     ldrh lr, [r8, #10]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r4, r5, r6}
-    smmlar r0, r4, r10, r0
-    smmlar r1, r5, r10, r1
-    smmulr r2, r6, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldrh r10, [r8, #6]
     ldrh lr, [r8, #8]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r4, r5, r6, r7}
-    smmlar r0, r4, r10, r0
-    smmlar r1, r5, r10, r1
-    smmlar r2, r6, r10, r2
-    smmulr r3, r7, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldr r10, [sp, #4]
     str r0, [r10, #0]
     str r1, [r10, #64]
@@ -1302,35 +1302,35 @@ cvm_rows_8:
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr r4, [r9], #4
-    smmulr r0, r4, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #12]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r4, r5}
-    smmlar r0, r4, r10, r0
-    smmulr r1, r5, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldrh r10, [r8, #4]
     ldrh lr, [r8, #10]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r4, r5, r6}
-    smmlar r0, r4, r10, r0
-    smmlar r1, r5, r10, r1
-    smmulr r2, r6, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldrh r10, [r8, #6]
     ldrh lr, [r8, #8]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r4, r5, r6, r7}
-    smmlar r0, r4, r10, r0
-    smmlar r1, r5, r10, r1
-    smmlar r2, r6, r10, r2
-    smmulr r3, r7, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldr r10, [sp, #4]
     str r0, [r10, #256]
     str r1, [r10, #320]
@@ -1362,29 +1362,29 @@ cvm_cols_8:
     ldr r10, [r8, #0]
     ldr r11, [r8, #28]
     add r10, r10, r11
-    ldr r4, [r9], #4
-    smmulr r0, r4, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #24]
     add r10, r10, r11
-    ldmia r9!, {r4, r5}
-    smmlar r0, r4, r10, r0
-    smmulr r1, r5, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #20]
     add r10, r10, r11
-    ldmia r9!, {r4, r5, r6}
-    smmlar r0, r4, r10, r0
-    smmlar r1, r5, r10, r1
-    smmulr r2, r6, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #16]
     add r10, r10, r11
-    ldmia r9!, {r4, r5, r6, r7}
-    smmlar r0, r4, r10, r0
-    smmlar r1, r5, r10, r1
-    smmlar r2, r6, r10, r2
-    smmulr r3, r7, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1, r2, r3}
     str r10, [sp, #4]
@@ -1392,29 +1392,29 @@ cvm_cols_8:
     ldr r10, [r8, #0]
     ldr r11, [r8, #28]
     sub r10, r10, r11
-    ldr r4, [r9], #4
-    smmulr r0, r4, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #24]
     sub r10, r10, r11
-    ldmia r9!, {r4, r5}
-    smmlar r0, r4, r10, r0
-    smmulr r1, r5, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #20]
     sub r10, r10, r11
-    ldmia r9!, {r4, r5, r6}
-    smmlar r0, r4, r10, r0
-    smmlar r1, r5, r10, r1
-    smmulr r2, r6, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #16]
     sub r10, r10, r11
-    ldmia r9!, {r4, r5, r6, r7}
-    smmlar r0, r4, r10, r0
-    smmlar r1, r5, r10, r1
-    smmlar r2, r6, r10, r2
-    smmulr r3, r7, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1, r2, r3}
     str r10, [sp, #4]
@@ -1444,29 +1444,29 @@ cvm_cols_diff_8:
     ldr r10, [r8, #0]
     ldr r11, [r8, #28]
     add r10, r10, r11
-    ldr r4, [r9], #4
-    smmulr r0, r4, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #24]
     add r10, r10, r11
-    ldmia r9!, {r4, r5}
-    smmlar r0, r4, r10, r0
-    smmulr r1, r5, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #20]
     add r10, r10, r11
-    ldmia r9!, {r4, r5, r6}
-    smmlar r0, r4, r10, r0
-    smmlar r1, r5, r10, r1
-    smmulr r2, r6, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #16]
     add r10, r10, r11
-    ldmia r9!, {r4, r5, r6, r7}
-    smmlar r0, r4, r10, r0
-    smmlar r1, r5, r10, r1
-    smmlar r2, r6, r10, r2
-    smmulr r3, r7, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldr r9, [sp, #4]
     ldrd r11, r12, [sp, #24]
     ldrd r10, lr, [r9, #0]
@@ -1486,29 +1486,29 @@ cvm_cols_diff_8:
     ldr r10, [r8, #0]
     ldr r11, [r8, #28]
     sub r10, r10, r11
-    ldr r4, [r9], #4
-    smmulr r0, r4, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #24]
     sub r10, r10, r11
-    ldmia r9!, {r4, r5}
-    smmlar r0, r4, r10, r0
-    smmulr r1, r5, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #20]
     sub r10, r10, r11
-    ldmia r9!, {r4, r5, r6}
-    smmlar r0, r4, r10, r0
-    smmlar r1, r5, r10, r1
-    smmulr r2, r6, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #16]
     sub r10, r10, r11
-    ldmia r9!, {r4, r5, r6, r7}
-    smmlar r0, r4, r10, r0
-    smmlar r1, r5, r10, r1
-    smmlar r2, r6, r10, r2
-    smmulr r3, r7, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldr r9, [sp, #4]
     ldrd r11, r12, [sp, #24]
     ldrd r10, lr, [r9, #0]
@@ -1551,45 +1551,44 @@ cvm_rows_9:
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr r5, [r9], #4
-    smmulr r0, r5, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #14]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r5, r6}
-    smmlar r0, r5, r10, r0
-    smmulr r1, r6, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldrh r10, [r8, #4]
     ldrh lr, [r8, #12]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r5, r6, r7}
-    smmlar r0, r5, r10, r0
-    smmlar r1, r6, r10, r1
-    smmulr r2, r7, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldrh r10, [r8, #6]
     ldrh lr, [r8, #10]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r5, r6, r7, lr}
-    smmlar r0, r5, r10, r0
-    smmlar r1, r6, r10, r1
-    smmlar r2, r7, r10, r2
-    smmulr r3, lr, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldrh r10, [r8, #8]
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r5, r6, r7, lr}
-    smmlar r0, r5, r10, r0
-    smmlar r1, r6, r10, r1
-    smmlar r2, r7, r10, r2
-    smmlar r3, lr, r10, r3
-    ldr r5, [r9], #4
-    smmulr r4, r5, r10
+    ldmia r9!, {r4, r5, r6, r7, lr}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmlar r3, r7, r10, r3
+    smmulr r4, lr, r10
     ldr r10, [sp, #4]
     str r0, [r10, #0]
     str r1, [r10, #64]
@@ -1602,35 +1601,35 @@ cvm_rows_9:
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr r4, [r9], #4
-    smmulr r0, r4, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #14]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r4, r5}
-    smmlar r0, r4, r10, r0
-    smmulr r1, r5, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldrh r10, [r8, #4]
     ldrh lr, [r8, #12]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r4, r5, r6}
-    smmlar r0, r4, r10, r0
-    smmlar r1, r5, r10, r1
-    smmulr r2, r6, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldrh r10, [r8, #6]
     ldrh lr, [r8, #10]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r4, r5, r6, r7}
-    smmlar r0, r4, r10, r0
-    smmlar r1, r5, r10, r1
-    smmlar r2, r6, r10, r2
-    smmulr r3, r7, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldr r10, [sp, #4]
     str r0, [r10, #320]
     str r1, [r10, #384]
@@ -1662,36 +1661,36 @@ cvm_cols_9:
     ldr r10, [r8, #0]
     ldr r11, [r8, #32]
     add r10, r10, r11
-    ldr r5, [r9], #4
-    smmulr r0, r5, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #28]
     add r10, r10, r11
-    ldmia r9!, {r5, r6}
-    smmlar r0, r5, r10, r0
-    smmulr r1, r6, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #24]
     add r10, r10, r11
-    ldmia r9!, {r5, r6, r7}
-    smmlar r0, r5, r10, r0
-    smmlar r1, r6, r10, r1
-    smmulr r2, r7, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #20]
     add r10, r10, r11
-    ldmia r9!, {r5, r6, r7, r11}
-    smmlar r0, r5, r10, r0
-    smmlar r1, r6, r10, r1
-    smmlar r2, r7, r10, r2
-    smmulr r3, r11, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldr r10, [r8, #16]
-    ldmia r9!, {r5, r6, r7, r11, r12}
-    smmlar r0, r5, r10, r0
-    smmlar r1, r6, r10, r1
-    smmlar r2, r7, r10, r2
-    smmlar r3, r11, r10, r3
-    smmulr r4, r12, r10
+    ldmia r9!, {r4, r5, r6, r7, r11}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmlar r3, r7, r10, r3
+    smmulr r4, r11, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1, r2, r3, r4}
     str r10, [sp, #4]
@@ -1699,29 +1698,29 @@ cvm_cols_9:
     ldr r10, [r8, #0]
     ldr r11, [r8, #32]
     sub r10, r10, r11
-    ldr r4, [r9], #4
-    smmulr r0, r4, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #28]
     sub r10, r10, r11
-    ldmia r9!, {r4, r5}
-    smmlar r0, r4, r10, r0
-    smmulr r1, r5, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #24]
     sub r10, r10, r11
-    ldmia r9!, {r4, r5, r6}
-    smmlar r0, r4, r10, r0
-    smmlar r1, r5, r10, r1
-    smmulr r2, r6, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #20]
     sub r10, r10, r11
-    ldmia r9!, {r4, r5, r6, r7}
-    smmlar r0, r4, r10, r0
-    smmlar r1, r5, r10, r1
-    smmlar r2, r6, r10, r2
-    smmulr r3, r7, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1, r2, r3}
     str r10, [sp, #4]
@@ -1751,36 +1750,36 @@ cvm_cols_diff_9:
     ldr r10, [r8, #0]
     ldr r11, [r8, #32]
     add r10, r10, r11
-    ldr r5, [r9], #4
-    smmulr r0, r5, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #28]
     add r10, r10, r11
-    ldmia r9!, {r5, r6}
-    smmlar r0, r5, r10, r0
-    smmulr r1, r6, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #24]
     add r10, r10, r11
-    ldmia r9!, {r5, r6, r7}
-    smmlar r0, r5, r10, r0
-    smmlar r1, r6, r10, r1
-    smmulr r2, r7, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #20]
     add r10, r10, r11
-    ldmia r9!, {r5, r6, r7, r11}
-    smmlar r0, r5, r10, r0
-    smmlar r1, r6, r10, r1
-    smmlar r2, r7, r10, r2
-    smmulr r3, r11, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldr r10, [r8, #16]
-    ldmia r9!, {r5, r6, r7, r11, r12}
-    smmlar r0, r5, r10, r0
-    smmlar r1, r6, r10, r1
-    smmlar r2, r7, r10, r2
-    smmlar r3, r11, r10, r3
-    smmulr r4, r12, r10
+    ldmia r9!, {r4, r5, r6, r7, r11}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmlar r3, r7, r10, r3
+    smmulr r4, r11, r10
     ldr r9, [sp, #4]
     ldrd r11, r12, [sp, #24]
     ldrd r10, lr, [r9, #0]
@@ -1803,29 +1802,29 @@ cvm_cols_diff_9:
     ldr r10, [r8, #0]
     ldr r11, [r8, #32]
     sub r10, r10, r11
-    ldr r4, [r9], #4
-    smmulr r0, r4, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #28]
     sub r10, r10, r11
-    ldmia r9!, {r4, r5}
-    smmlar r0, r4, r10, r0
-    smmulr r1, r5, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #24]
     sub r10, r10, r11
-    ldmia r9!, {r4, r5, r6}
-    smmlar r0, r4, r10, r0
-    smmlar r1, r5, r10, r1
-    smmulr r2, r6, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #20]
     sub r10, r10, r11
-    ldmia r9!, {r4, r5, r6, r7}
-    smmlar r0, r4, r10, r0
-    smmlar r1, r5, r10, r1
-    smmlar r2, r6, r10, r2
-    smmulr r3, r7, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldr r9, [sp, #4]
     ldrd r11, r12, [sp, #24]
     ldrd r10, lr, [r9, #0]
@@ -1868,47 +1867,46 @@ cvm_rows_10:
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr r5, [r9], #4
-    smmulr r0, r5, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #16]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r5, r6}
-    smmlar r0, r5, r10, r0
-    smmulr r1, r6, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldrh r10, [r8, #4]
     ldrh lr, [r8, #14]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r5, r6, r7}
-    smmlar r0, r5, r10, r0
-    smmlar r1, r6, r10, r1
-    smmulr r2, r7, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldrh r10, [r8, #6]
     ldrh lr, [r8, #12]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r5, r6, r7, lr}
-    smmlar r0, r5, r10, r0
-    smmlar r1, r6, r10, r1
-    smmlar r2, r7, r10, r2
-    smmulr r3, lr, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldrh r10, [r8, #8]
     ldrh lr, [r8, #10]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r5, r6, r7, lr}
-    smmlar r0, r5, r10, r0
-    smmlar r1, r6, r10, r1
-    smmlar r2, r7, r10, r2
-    smmlar r3, lr, r10, r3
-    ldr r5, [r9], #4
-    smmulr r4, r5, r10
+    ldmia r9!, {r4, r5, r6, r7, lr}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmlar r3, r7, r10, r3
+    smmulr r4, lr, r10
     ldr r10, [sp, #4]
     str r0, [r10, #0]
     str r1, [r10, #64]
@@ -1921,47 +1919,46 @@ cvm_rows_10:
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr r5, [r9], #4
-    smmulr r0, r5, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #16]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r5, r6}
-    smmlar r0, r5, r10, r0
-    smmulr r1, r6, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldrh r10, [r8, #4]
     ldrh lr, [r8, #14]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r5, r6, r7}
-    smmlar r0, r5, r10, r0
-    smmlar r1, r6, r10, r1
-    smmulr r2, r7, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldrh r10, [r8, #6]
     ldrh lr, [r8, #12]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r5, r6, r7, lr}
-    smmlar r0, r5, r10, r0
-    smmlar r1, r6, r10, r1
-    smmlar r2, r7, r10, r2
-    smmulr r3, lr, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldrh r10, [r8, #8]
     ldrh lr, [r8, #10]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r5, r6, r7, lr}
-    smmlar r0, r5, r10, r0
-    smmlar r1, r6, r10, r1
-    smmlar r2, r7, r10, r2
-    smmlar r3, lr, r10, r3
-    ldr r5, [r9], #4
-    smmulr r4, r5, r10
+    ldmia r9!, {r4, r5, r6, r7, lr}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmlar r3, r7, r10, r3
+    smmulr r4, lr, r10
     ldr r10, [sp, #4]
     str r0, [r10, #320]
     str r1, [r10, #384]
@@ -1994,38 +1991,38 @@ cvm_cols_10:
     ldr r10, [r8, #0]
     ldr r11, [r8, #36]
     add r10, r10, r11
-    ldr r5, [r9], #4
-    smmulr r0, r5, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #32]
     add r10, r10, r11
-    ldmia r9!, {r5, r6}
-    smmlar r0, r5, r10, r0
-    smmulr r1, r6, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #28]
     add r10, r10, r11
-    ldmia r9!, {r5, r6, r7}
-    smmlar r0, r5, r10, r0
-    smmlar r1, r6, r10, r1
-    smmulr r2, r7, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #24]
     add r10, r10, r11
-    ldmia r9!, {r5, r6, r7, r11}
-    smmlar r0, r5, r10, r0
-    smmlar r1, r6, r10, r1
-    smmlar r2, r7, r10, r2
-    smmulr r3, r11, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldr r10, [r8, #16]
     ldr r11, [r8, #20]
     add r10, r10, r11
-    ldmia r9!, {r5, r6, r7, r11, r12}
-    smmlar r0, r5, r10, r0
-    smmlar r1, r6, r10, r1
-    smmlar r2, r7, r10, r2
-    smmlar r3, r11, r10, r3
-    smmulr r4, r12, r10
+    ldmia r9!, {r4, r5, r6, r7, r11}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmlar r3, r7, r10, r3
+    smmulr r4, r11, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1, r2, r3, r4}
     str r10, [sp, #4]
@@ -2033,38 +2030,38 @@ cvm_cols_10:
     ldr r10, [r8, #0]
     ldr r11, [r8, #36]
     sub r10, r10, r11
-    ldr r5, [r9], #4
-    smmulr r0, r5, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #32]
     sub r10, r10, r11
-    ldmia r9!, {r5, r6}
-    smmlar r0, r5, r10, r0
-    smmulr r1, r6, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #28]
     sub r10, r10, r11
-    ldmia r9!, {r5, r6, r7}
-    smmlar r0, r5, r10, r0
-    smmlar r1, r6, r10, r1
-    smmulr r2, r7, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #24]
     sub r10, r10, r11
-    ldmia r9!, {r5, r6, r7, r11}
-    smmlar r0, r5, r10, r0
-    smmlar r1, r6, r10, r1
-    smmlar r2, r7, r10, r2
-    smmulr r3, r11, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldr r10, [r8, #16]
     ldr r11, [r8, #20]
     sub r10, r10, r11
-    ldmia r9!, {r5, r6, r7, r11, r12}
-    smmlar r0, r5, r10, r0
-    smmlar r1, r6, r10, r1
-    smmlar r2, r7, r10, r2
-    smmlar r3, r11, r10, r3
-    smmulr r4, r12, r10
+    ldmia r9!, {r4, r5, r6, r7, r11}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmlar r3, r7, r10, r3
+    smmulr r4, r11, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1, r2, r3, r4}
     str r10, [sp, #4]
@@ -2094,38 +2091,38 @@ cvm_cols_diff_10:
     ldr r10, [r8, #0]
     ldr r11, [r8, #36]
     add r10, r10, r11
-    ldr r5, [r9], #4
-    smmulr r0, r5, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #32]
     add r10, r10, r11
-    ldmia r9!, {r5, r6}
-    smmlar r0, r5, r10, r0
-    smmulr r1, r6, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #28]
     add r10, r10, r11
-    ldmia r9!, {r5, r6, r7}
-    smmlar r0, r5, r10, r0
-    smmlar r1, r6, r10, r1
-    smmulr r2, r7, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #24]
     add r10, r10, r11
-    ldmia r9!, {r5, r6, r7, r11}
-    smmlar r0, r5, r10, r0
-    smmlar r1, r6, r10, r1
-    smmlar r2, r7, r10, r2
-    smmulr r3, r11, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldr r10, [r8, #16]
     ldr r11, [r8, #20]
     add r10, r10, r11
-    ldmia r9!, {r5, r6, r7, r11, r12}
-    smmlar r0, r5, r10, r0
-    smmlar r1, r6, r10, r1
-    smmlar r2, r7, r10, r2
-    smmlar r3, r11, r10, r3
-    smmulr r4, r12, r10
+    ldmia r9!, {r4, r5, r6, r7, r11}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmlar r3, r7, r10, r3
+    smmulr r4, r11, r10
     ldr r9, [sp, #4]
     ldrd r11, r12, [sp, #24]
     ldrd r10, lr, [r9, #0]
@@ -2148,38 +2145,38 @@ cvm_cols_diff_10:
     ldr r10, [r8, #0]
     ldr r11, [r8, #36]
     sub r10, r10, r11
-    ldr r5, [r9], #4
-    smmulr r0, r5, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #32]
     sub r10, r10, r11
-    ldmia r9!, {r5, r6}
-    smmlar r0, r5, r10, r0
-    smmulr r1, r6, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #28]
     sub r10, r10, r11
-    ldmia r9!, {r5, r6, r7}
-    smmlar r0, r5, r10, r0
-    smmlar r1, r6, r10, r1
-    smmulr r2, r7, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #24]
     sub r10, r10, r11
-    ldmia r9!, {r5, r6, r7, r11}
-    smmlar r0, r5, r10, r0
-    smmlar r1, r6, r10, r1
-    smmlar r2, r7, r10, r2
-    smmulr r3, r11, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldr r10, [r8, #16]
     ldr r11, [r8, #20]
     sub r10, r10, r11
-    ldmia r9!, {r5, r6, r7, r11, r12}
-    smmlar r0, r5, r10, r0
-    smmlar r1, r6, r10, r1
-    smmlar r2, r7, r10, r2
-    smmlar r3, r11, r10, r3
-    smmulr r4, r12, r10
+    ldmia r9!, {r4, r5, r6, r7, r11}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmlar r3, r7, r10, r3
+    smmulr r4, r11, r10
     ldr r9, [sp, #4]
     ldrd r11, r12, [sp, #24]
     ldrd r10, lr, [r9, #0]
@@ -2225,59 +2222,57 @@ cvm_rows_11:
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr r6, [r9], #4
-    smmulr r0, r6, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #18]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r6, r7}
-    smmlar r0, r6, r10, r0
-    smmulr r1, r7, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldrh r10, [r8, #4]
     ldrh lr, [r8, #16]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r6, r7, lr}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmulr r2, lr, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldrh r10, [r8, #6]
     ldrh lr, [r8, #14]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r6, r7, lr}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmlar r2, lr, r10, r2
-    ldr r6, [r9], #4
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
     smmulr r3, r6, r10
     ldrh r10, [r8, #8]
     ldrh lr, [r8, #12]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r6, r7, lr}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r6, r7}
-    smmlar r3, r6, r10, r3
-    smmulr r4, r7, r10
+    ldmia r9!, {r4, r5, r6, r7, lr}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmlar r3, r7, r10, r3
+    smmulr r4, lr, r10
     ldrh r10, [r8, #10]
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r6, r7, lr}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r6, r7, lr}
-    smmlar r3, r6, r10, r3
-    smmlar r4, r7, r10, r4
-    smmulr r5, lr, r10
+    ldmia r9!, {r5, r6, r7, lr}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
+    smmlar r3, lr, r10, r3
+    ldmia r9!, {r5, r6}
+    smmlar r4, r5, r10, r4
+    smmulr r5, r6, r10
     ldr r10, [sp, #4]
     str r0, [r10, #0]
     str r1, [r10, #64]
@@ -2291,47 +2286,46 @@ cvm_rows_11:
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr r5, [r9], #4
-    smmulr r0, r5, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #18]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r5, r6}
-    smmlar r0, r5, r10, r0
-    smmulr r1, r6, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldrh r10, [r8, #4]
     ldrh lr, [r8, #16]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r5, r6, r7}
-    smmlar r0, r5, r10, r0
-    smmlar r1, r6, r10, r1
-    smmulr r2, r7, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldrh r10, [r8, #6]
     ldrh lr, [r8, #14]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r5, r6, r7, lr}
-    smmlar r0, r5, r10, r0
-    smmlar r1, r6, r10, r1
-    smmlar r2, r7, r10, r2
-    smmulr r3, lr, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldrh r10, [r8, #8]
     ldrh lr, [r8, #12]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r5, r6, r7, lr}
-    smmlar r0, r5, r10, r0
-    smmlar r1, r6, r10, r1
-    smmlar r2, r7, r10, r2
-    smmlar r3, lr, r10, r3
-    ldr r5, [r9], #4
-    smmulr r4, r5, r10
+    ldmia r9!, {r4, r5, r6, r7, lr}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmlar r3, r7, r10, r3
+    smmulr r4, lr, r10
     ldr r10, [sp, #4]
     str r0, [r10, #384]
     str r1, [r10, #448]
@@ -2364,47 +2358,46 @@ cvm_cols_11:
     ldr r10, [r8, #0]
     ldr r11, [r8, #40]
     add r10, r10, r11
-    ldr r6, [r9], #4
-    smmulr r0, r6, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #36]
     add r10, r10, r11
-    ldmia r9!, {r6, r7}
-    smmlar r0, r6, r10, r0
-    smmulr r1, r7, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #32]
     add r10, r10, r11
-    ldmia r9!, {r6, r7, r11}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmulr r2, r11, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #28]
     add r10, r10, r11
-    ldmia r9!, {r6, r7, r11, r12}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmlar r2, r11, r10, r2
-    smmulr r3, r12, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldr r10, [r8, #16]
     ldr r11, [r8, #24]
     add r10, r10, r11
-    ldmia r9!, {r6, r7, r11, r12, lr}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmlar r2, r11, r10, r2
-    smmlar r3, r12, r10, r3
-    smmulr r4, lr, r10
+    ldmia r9!, {r4, r5, r6, r7, r11}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmlar r3, r7, r10, r3
+    smmulr r4, r11, r10
     ldr r10, [r8, #20]
-    ldmia r9!, {r6, r7, r11, r12, lr}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmlar r2, r11, r10, r2
-    smmlar r3, r12, r10, r3
-    smmlar r4, lr, r10, r4
-    ldr r6, [r9], #4
-    smmulr r5, r6, r10
+    ldmia r9!, {r5, r6, r7, r11, r12, lr}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
+    smmlar r3, r11, r10, r3
+    smmlar r4, r12, r10, r4
+    smmulr r5, lr, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1, r2, r3, r4, r5}
     str r10, [sp, #4]
@@ -2412,38 +2405,38 @@ cvm_cols_11:
     ldr r10, [r8, #0]
     ldr r11, [r8, #40]
     sub r10, r10, r11
-    ldr r5, [r9], #4
-    smmulr r0, r5, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #36]
     sub r10, r10, r11
-    ldmia r9!, {r5, r6}
-    smmlar r0, r5, r10, r0
-    smmulr r1, r6, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #32]
     sub r10, r10, r11
-    ldmia r9!, {r5, r6, r7}
-    smmlar r0, r5, r10, r0
-    smmlar r1, r6, r10, r1
-    smmulr r2, r7, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #28]
     sub r10, r10, r11
-    ldmia r9!, {r5, r6, r7, r11}
-    smmlar r0, r5, r10, r0
-    smmlar r1, r6, r10, r1
-    smmlar r2, r7, r10, r2
-    smmulr r3, r11, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldr r10, [r8, #16]
     ldr r11, [r8, #24]
     sub r10, r10, r11
-    ldmia r9!, {r5, r6, r7, r11, r12}
-    smmlar r0, r5, r10, r0
-    smmlar r1, r6, r10, r1
-    smmlar r2, r7, r10, r2
-    smmlar r3, r11, r10, r3
-    smmulr r4, r12, r10
+    ldmia r9!, {r4, r5, r6, r7, r11}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmlar r3, r7, r10, r3
+    smmulr r4, r11, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1, r2, r3, r4}
     str r10, [sp, #4]
@@ -2473,47 +2466,46 @@ cvm_cols_diff_11:
     ldr r10, [r8, #0]
     ldr r11, [r8, #40]
     add r10, r10, r11
-    ldr r6, [r9], #4
-    smmulr r0, r6, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #36]
     add r10, r10, r11
-    ldmia r9!, {r6, r7}
-    smmlar r0, r6, r10, r0
-    smmulr r1, r7, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #32]
     add r10, r10, r11
-    ldmia r9!, {r6, r7, r11}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmulr r2, r11, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #28]
     add r10, r10, r11
-    ldmia r9!, {r6, r7, r11, r12}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmlar r2, r11, r10, r2
-    smmulr r3, r12, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldr r10, [r8, #16]
     ldr r11, [r8, #24]
     add r10, r10, r11
-    ldmia r9!, {r6, r7, r11, r12, lr}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmlar r2, r11, r10, r2
-    smmlar r3, r12, r10, r3
-    smmulr r4, lr, r10
+    ldmia r9!, {r4, r5, r6, r7, r11}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmlar r3, r7, r10, r3
+    smmulr r4, r11, r10
     ldr r10, [r8, #20]
-    ldmia r9!, {r6, r7, r11, r12, lr}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmlar r2, r11, r10, r2
-    smmlar r3, r12, r10, r3
-    smmlar r4, lr, r10, r4
-    ldr r6, [r9], #4
-    smmulr r5, r6, r10
+    ldmia r9!, {r5, r6, r7, r11, r12, lr}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
+    smmlar r3, r11, r10, r3
+    smmlar r4, r12, r10, r4
+    smmulr r5, lr, r10
     ldr r9, [sp, #4]
     ldrd r11, r12, [sp, #24]
     ldrd r10, lr, [r9, #0]
@@ -2538,38 +2530,38 @@ cvm_cols_diff_11:
     ldr r10, [r8, #0]
     ldr r11, [r8, #40]
     sub r10, r10, r11
-    ldr r5, [r9], #4
-    smmulr r0, r5, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #36]
     sub r10, r10, r11
-    ldmia r9!, {r5, r6}
-    smmlar r0, r5, r10, r0
-    smmulr r1, r6, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #32]
     sub r10, r10, r11
-    ldmia r9!, {r5, r6, r7}
-    smmlar r0, r5, r10, r0
-    smmlar r1, r6, r10, r1
-    smmulr r2, r7, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #28]
     sub r10, r10, r11
-    ldmia r9!, {r5, r6, r7, r11}
-    smmlar r0, r5, r10, r0
-    smmlar r1, r6, r10, r1
-    smmlar r2, r7, r10, r2
-    smmulr r3, r11, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldr r10, [r8, #16]
     ldr r11, [r8, #24]
     sub r10, r10, r11
-    ldmia r9!, {r5, r6, r7, r11, r12}
-    smmlar r0, r5, r10, r0
-    smmlar r1, r6, r10, r1
-    smmlar r2, r7, r10, r2
-    smmlar r3, r11, r10, r3
-    smmulr r4, r12, r10
+    ldmia r9!, {r4, r5, r6, r7, r11}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmlar r3, r7, r10, r3
+    smmulr r4, r11, r10
     ldr r9, [sp, #4]
     ldrd r11, r12, [sp, #24]
     ldrd r10, lr, [r9, #0]
@@ -2615,61 +2607,59 @@ cvm_rows_12:
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr r6, [r9], #4
-    smmulr r0, r6, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #20]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r6, r7}
-    smmlar r0, r6, r10, r0
-    smmulr r1, r7, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldrh r10, [r8, #4]
     ldrh lr, [r8, #18]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r6, r7, lr}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmulr r2, lr, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldrh r10, [r8, #6]
     ldrh lr, [r8, #16]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r6, r7, lr}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmlar r2, lr, r10, r2
-    ldr r6, [r9], #4
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
     smmulr r3, r6, r10
     ldrh r10, [r8, #8]
     ldrh lr, [r8, #14]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r6, r7, lr}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r6, r7}
-    smmlar r3, r6, r10, r3
-    smmulr r4, r7, r10
+    ldmia r9!, {r4, r5, r6, r7, lr}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmlar r3, r7, r10, r3
+    smmulr r4, lr, r10
     ldrh r10, [r8, #10]
     ldrh lr, [r8, #12]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r6, r7, lr}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r6, r7, lr}
-    smmlar r3, r6, r10, r3
-    smmlar r4, r7, r10, r4
-    smmulr r5, lr, r10
+    ldmia r9!, {r5, r6, r7, lr}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
+    smmlar r3, lr, r10, r3
+    ldmia r9!, {r5, r6}
+    smmlar r4, r5, r10, r4
+    smmulr r5, r6, r10
     ldr r10, [sp, #4]
     str r0, [r10, #0]
     str r1, [r10, #64]
@@ -2683,61 +2673,59 @@ cvm_rows_12:
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr r6, [r9], #4
-    smmulr r0, r6, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #20]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r6, r7}
-    smmlar r0, r6, r10, r0
-    smmulr r1, r7, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldrh r10, [r8, #4]
     ldrh lr, [r8, #18]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r6, r7, lr}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmulr r2, lr, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldrh r10, [r8, #6]
     ldrh lr, [r8, #16]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r6, r7, lr}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmlar r2, lr, r10, r2
-    ldr r6, [r9], #4
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
     smmulr r3, r6, r10
     ldrh r10, [r8, #8]
     ldrh lr, [r8, #14]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r6, r7, lr}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r6, r7}
-    smmlar r3, r6, r10, r3
-    smmulr r4, r7, r10
+    ldmia r9!, {r4, r5, r6, r7, lr}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmlar r3, r7, r10, r3
+    smmulr r4, lr, r10
     ldrh r10, [r8, #10]
     ldrh lr, [r8, #12]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r6, r7, lr}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r6, r7, lr}
-    smmlar r3, r6, r10, r3
-    smmlar r4, r7, r10, r4
-    smmulr r5, lr, r10
+    ldmia r9!, {r5, r6, r7, lr}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
+    smmlar r3, lr, r10, r3
+    ldmia r9!, {r5, r6}
+    smmlar r4, r5, r10, r4
+    smmulr r5, r6, r10
     ldr r10, [sp, #4]
     str r0, [r10, #384]
     str r1, [r10, #448]
@@ -2771,49 +2759,48 @@ cvm_cols_12:
     ldr r10, [r8, #0]
     ldr r11, [r8, #44]
     add r10, r10, r11
-    ldr r6, [r9], #4
-    smmulr r0, r6, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #40]
     add r10, r10, r11
-    ldmia r9!, {r6, r7}
-    smmlar r0, r6, r10, r0
-    smmulr r1, r7, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #36]
     add r10, r10, r11
-    ldmia r9!, {r6, r7, r11}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmulr r2, r11, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #32]
     add r10, r10, r11
-    ldmia r9!, {r6, r7, r11, r12}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmlar r2, r11, r10, r2
-    smmulr r3, r12, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldr r10, [r8, #16]
     ldr r11, [r8, #28]
     add r10, r10, r11
-    ldmia r9!, {r6, r7, r11, r12, lr}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmlar r2, r11, r10, r2
-    smmlar r3, r12, r10, r3
-    smmulr r4, lr, r10
+    ldmia r9!, {r4, r5, r6, r7, r11}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmlar r3, r7, r10, r3
+    smmulr r4, r11, r10
     ldr r10, [r8, #20]
     ldr r11, [r8, #24]
     add r10, r10, r11
-    ldmia r9!, {r6, r7, r11, r12, lr}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmlar r2, r11, r10, r2
-    smmlar r3, r12, r10, r3
-    smmlar r4, lr, r10, r4
-    ldr r6, [r9], #4
-    smmulr r5, r6, r10
+    ldmia r9!, {r5, r6, r7, r11, r12, lr}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
+    smmlar r3, r11, r10, r3
+    smmlar r4, r12, r10, r4
+    smmulr r5, lr, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1, r2, r3, r4, r5}
     str r10, [sp, #4]
@@ -2821,49 +2808,48 @@ cvm_cols_12:
     ldr r10, [r8, #0]
     ldr r11, [r8, #44]
     sub r10, r10, r11
-    ldr r6, [r9], #4
-    smmulr r0, r6, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #40]
     sub r10, r10, r11
-    ldmia r9!, {r6, r7}
-    smmlar r0, r6, r10, r0
-    smmulr r1, r7, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #36]
     sub r10, r10, r11
-    ldmia r9!, {r6, r7, r11}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmulr r2, r11, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #32]
     sub r10, r10, r11
-    ldmia r9!, {r6, r7, r11, r12}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmlar r2, r11, r10, r2
-    smmulr r3, r12, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldr r10, [r8, #16]
     ldr r11, [r8, #28]
     sub r10, r10, r11
-    ldmia r9!, {r6, r7, r11, r12, lr}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmlar r2, r11, r10, r2
-    smmlar r3, r12, r10, r3
-    smmulr r4, lr, r10
+    ldmia r9!, {r4, r5, r6, r7, r11}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmlar r3, r7, r10, r3
+    smmulr r4, r11, r10
     ldr r10, [r8, #20]
     ldr r11, [r8, #24]
     sub r10, r10, r11
-    ldmia r9!, {r6, r7, r11, r12, lr}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmlar r2, r11, r10, r2
-    smmlar r3, r12, r10, r3
-    smmlar r4, lr, r10, r4
-    ldr r6, [r9], #4
-    smmulr r5, r6, r10
+    ldmia r9!, {r5, r6, r7, r11, r12, lr}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
+    smmlar r3, r11, r10, r3
+    smmlar r4, r12, r10, r4
+    smmulr r5, lr, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1, r2, r3, r4, r5}
     str r10, [sp, #4]
@@ -2893,49 +2879,48 @@ cvm_cols_diff_12:
     ldr r10, [r8, #0]
     ldr r11, [r8, #44]
     add r10, r10, r11
-    ldr r6, [r9], #4
-    smmulr r0, r6, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #40]
     add r10, r10, r11
-    ldmia r9!, {r6, r7}
-    smmlar r0, r6, r10, r0
-    smmulr r1, r7, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #36]
     add r10, r10, r11
-    ldmia r9!, {r6, r7, r11}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmulr r2, r11, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #32]
     add r10, r10, r11
-    ldmia r9!, {r6, r7, r11, r12}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmlar r2, r11, r10, r2
-    smmulr r3, r12, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldr r10, [r8, #16]
     ldr r11, [r8, #28]
     add r10, r10, r11
-    ldmia r9!, {r6, r7, r11, r12, lr}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmlar r2, r11, r10, r2
-    smmlar r3, r12, r10, r3
-    smmulr r4, lr, r10
+    ldmia r9!, {r4, r5, r6, r7, r11}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmlar r3, r7, r10, r3
+    smmulr r4, r11, r10
     ldr r10, [r8, #20]
     ldr r11, [r8, #24]
     add r10, r10, r11
-    ldmia r9!, {r6, r7, r11, r12, lr}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmlar r2, r11, r10, r2
-    smmlar r3, r12, r10, r3
-    smmlar r4, lr, r10, r4
-    ldr r6, [r9], #4
-    smmulr r5, r6, r10
+    ldmia r9!, {r5, r6, r7, r11, r12, lr}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
+    smmlar r3, r11, r10, r3
+    smmlar r4, r12, r10, r4
+    smmulr r5, lr, r10
     ldr r9, [sp, #4]
     ldrd r11, r12, [sp, #24]
     ldrd r10, lr, [r9, #0]
@@ -2960,49 +2945,48 @@ cvm_cols_diff_12:
     ldr r10, [r8, #0]
     ldr r11, [r8, #44]
     sub r10, r10, r11
-    ldr r6, [r9], #4
-    smmulr r0, r6, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #40]
     sub r10, r10, r11
-    ldmia r9!, {r6, r7}
-    smmlar r0, r6, r10, r0
-    smmulr r1, r7, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #36]
     sub r10, r10, r11
-    ldmia r9!, {r6, r7, r11}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmulr r2, r11, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #32]
     sub r10, r10, r11
-    ldmia r9!, {r6, r7, r11, r12}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmlar r2, r11, r10, r2
-    smmulr r3, r12, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldr r10, [r8, #16]
     ldr r11, [r8, #28]
     sub r10, r10, r11
-    ldmia r9!, {r6, r7, r11, r12, lr}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmlar r2, r11, r10, r2
-    smmlar r3, r12, r10, r3
-    smmulr r4, lr, r10
+    ldmia r9!, {r4, r5, r6, r7, r11}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmlar r3, r7, r10, r3
+    smmulr r4, r11, r10
     ldr r10, [r8, #20]
     ldr r11, [r8, #24]
     sub r10, r10, r11
-    ldmia r9!, {r6, r7, r11, r12, lr}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmlar r2, r11, r10, r2
-    smmlar r3, r12, r10, r3
-    smmlar r4, lr, r10, r4
-    ldr r6, [r9], #4
-    smmulr r5, r6, r10
+    ldmia r9!, {r5, r6, r7, r11, r12, lr}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
+    smmlar r3, r11, r10, r3
+    smmlar r4, r12, r10, r4
+    smmulr r5, lr, r10
     ldr r9, [sp, #4]
     ldrd r11, r12, [sp, #24]
     ldrd r10, lr, [r9, #0]
@@ -3050,78 +3034,72 @@ cvm_rows_13:
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr r7, [r9], #4
-    smmulr r0, r7, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #22]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r7, lr}
-    smmlar r0, r7, r10, r0
-    smmulr r1, lr, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldrh r10, [r8, #4]
     ldrh lr, [r8, #20]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r7, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, lr, r10, r1
-    ldr r7, [r9], #4
-    smmulr r2, r7, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldrh r10, [r8, #6]
     ldrh lr, [r8, #18]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r7, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, lr, r10, r1
-    ldmia r9!, {r7, lr}
-    smmlar r2, r7, r10, r2
-    smmulr r3, lr, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldrh r10, [r8, #8]
     ldrh lr, [r8, #16]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r7, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, lr, r10, r1
-    ldmia r9!, {r7, lr}
-    smmlar r2, r7, r10, r2
-    smmlar r3, lr, r10, r3
-    ldr r7, [r9], #4
-    smmulr r4, r7, r10
+    ldmia r9!, {r4, r5, r6, r7, lr}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmlar r3, r7, r10, r3
+    smmulr r4, lr, r10
     ldrh r10, [r8, #10]
     ldrh lr, [r8, #14]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r7, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, lr, r10, r1
-    ldmia r9!, {r7, lr}
+    ldmia r9!, {r5, r6, r7, lr}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
     smmlar r2, r7, r10, r2
     smmlar r3, lr, r10, r3
-    ldmia r9!, {r7, lr}
-    smmlar r4, r7, r10, r4
-    smmulr r5, lr, r10
+    ldmia r9!, {r5, r6}
+    smmlar r4, r5, r10, r4
+    smmulr r5, r6, r10
     ldrh r10, [r8, #12]
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r7, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, lr, r10, r1
-    ldmia r9!, {r7, lr}
-    smmlar r2, r7, r10, r2
-    smmlar r3, lr, r10, r3
-    ldmia r9!, {r7, lr}
+    ldmia r9!, {r6, r7, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmlar r2, lr, r10, r2
+    ldmia r9!, {r6, r7, lr}
+    smmlar r3, r6, r10, r3
     smmlar r4, r7, r10, r4
     smmlar r5, lr, r10, r5
-    ldr r7, [r9], #4
-    smmulr r6, r7, r10
+    ldr r6, [r9], #4
+    smmulr r6, r6, r10
     ldr r10, [sp, #4]
     str r0, [r10, #0]
     str r1, [r10, #64]
@@ -3136,61 +3114,59 @@ cvm_rows_13:
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr r6, [r9], #4
-    smmulr r0, r6, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #22]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r6, r7}
-    smmlar r0, r6, r10, r0
-    smmulr r1, r7, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldrh r10, [r8, #4]
     ldrh lr, [r8, #20]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r6, r7, lr}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmulr r2, lr, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldrh r10, [r8, #6]
     ldrh lr, [r8, #18]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r6, r7, lr}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmlar r2, lr, r10, r2
-    ldr r6, [r9], #4
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
     smmulr r3, r6, r10
     ldrh r10, [r8, #8]
     ldrh lr, [r8, #16]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r6, r7, lr}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r6, r7}
-    smmlar r3, r6, r10, r3
-    smmulr r4, r7, r10
+    ldmia r9!, {r4, r5, r6, r7, lr}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmlar r3, r7, r10, r3
+    smmulr r4, lr, r10
     ldrh r10, [r8, #10]
     ldrh lr, [r8, #14]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r6, r7, lr}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r6, r7, lr}
-    smmlar r3, r6, r10, r3
-    smmlar r4, r7, r10, r4
-    smmulr r5, lr, r10
+    ldmia r9!, {r5, r6, r7, lr}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
+    smmlar r3, lr, r10, r3
+    ldmia r9!, {r5, r6}
+    smmlar r4, r5, r10, r4
+    smmulr r5, r6, r10
     ldr r10, [sp, #4]
     str r0, [r10, #448]
     str r1, [r10, #512]
@@ -3224,60 +3200,58 @@ cvm_cols_13:
     ldr r10, [r8, #0]
     ldr r11, [r8, #48]
     add r10, r10, r11
-    ldr r7, [r9], #4
-    smmulr r0, r7, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #44]
     add r10, r10, r11
-    ldmia r9!, {r7, r11}
-    smmlar r0, r7, r10, r0
-    smmulr r1, r11, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #40]
     add r10, r10, r11
-    ldmia r9!, {r7, r11, r12}
-    smmlar r0, r7, r10, r0
-    smmlar r1, r11, r10, r1
-    smmulr r2, r12, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #36]
     add r10, r10, r11
-    ldmia r9!, {r7, r11, r12, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, r11, r10, r1
-    smmlar r2, r12, r10, r2
-    smmulr r3, lr, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldr r10, [r8, #16]
     ldr r11, [r8, #32]
     add r10, r10, r11
-    ldmia r9!, {r7, r11, r12, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, r11, r10, r1
-    smmlar r2, r12, r10, r2
-    smmlar r3, lr, r10, r3
-    ldr r7, [r9], #4
-    smmulr r4, r7, r10
+    ldmia r9!, {r4, r5, r6, r7, r11}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmlar r3, r7, r10, r3
+    smmulr r4, r11, r10
     ldr r10, [r8, #20]
     ldr r11, [r8, #28]
     add r10, r10, r11
-    ldmia r9!, {r7, r11, r12, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, r11, r10, r1
-    smmlar r2, r12, r10, r2
-    smmlar r3, lr, r10, r3
-    ldmia r9!, {r7, r11}
-    smmlar r4, r7, r10, r4
-    smmulr r5, r11, r10
+    ldmia r9!, {r5, r6, r7, r11, r12, lr}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
+    smmlar r3, r11, r10, r3
+    smmlar r4, r12, r10, r4
+    smmulr r5, lr, r10
     ldr r10, [r8, #24]
-    ldmia r9!, {r7, r11, r12, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, r11, r10, r1
-    smmlar r2, r12, r10, r2
-    smmlar r3, lr, r10, r3
-    ldmia r9!, {r7, r11, r12}
-    smmlar r4, r7, r10, r4
-    smmlar r5, r11, r10, r5
-    smmulr r6, r12, r10
+    ldmia r9!, {r6, r7, r11, r12, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmlar r2, r11, r10, r2
+    smmlar r3, r12, r10, r3
+    smmlar r4, lr, r10, r4
+    ldmia r9!, {r6, r7}
+    smmlar r5, r6, r10, r5
+    smmulr r6, r7, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1, r2, r3, r4, r5, r6}
     str r10, [sp, #4]
@@ -3285,49 +3259,48 @@ cvm_cols_13:
     ldr r10, [r8, #0]
     ldr r11, [r8, #48]
     sub r10, r10, r11
-    ldr r6, [r9], #4
-    smmulr r0, r6, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #44]
     sub r10, r10, r11
-    ldmia r9!, {r6, r7}
-    smmlar r0, r6, r10, r0
-    smmulr r1, r7, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #40]
     sub r10, r10, r11
-    ldmia r9!, {r6, r7, r11}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmulr r2, r11, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #36]
     sub r10, r10, r11
-    ldmia r9!, {r6, r7, r11, r12}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmlar r2, r11, r10, r2
-    smmulr r3, r12, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldr r10, [r8, #16]
     ldr r11, [r8, #32]
     sub r10, r10, r11
-    ldmia r9!, {r6, r7, r11, r12, lr}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmlar r2, r11, r10, r2
-    smmlar r3, r12, r10, r3
-    smmulr r4, lr, r10
+    ldmia r9!, {r4, r5, r6, r7, r11}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmlar r3, r7, r10, r3
+    smmulr r4, r11, r10
     ldr r10, [r8, #20]
     ldr r11, [r8, #28]
     sub r10, r10, r11
-    ldmia r9!, {r6, r7, r11, r12, lr}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmlar r2, r11, r10, r2
-    smmlar r3, r12, r10, r3
-    smmlar r4, lr, r10, r4
-    ldr r6, [r9], #4
-    smmulr r5, r6, r10
+    ldmia r9!, {r5, r6, r7, r11, r12, lr}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
+    smmlar r3, r11, r10, r3
+    smmlar r4, r12, r10, r4
+    smmulr r5, lr, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1, r2, r3, r4, r5}
     str r10, [sp, #4]
@@ -3357,60 +3330,58 @@ cvm_cols_diff_13:
     ldr r10, [r8, #0]
     ldr r11, [r8, #48]
     add r10, r10, r11
-    ldr r7, [r9], #4
-    smmulr r0, r7, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #44]
     add r10, r10, r11
-    ldmia r9!, {r7, r11}
-    smmlar r0, r7, r10, r0
-    smmulr r1, r11, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #40]
     add r10, r10, r11
-    ldmia r9!, {r7, r11, r12}
-    smmlar r0, r7, r10, r0
-    smmlar r1, r11, r10, r1
-    smmulr r2, r12, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #36]
     add r10, r10, r11
-    ldmia r9!, {r7, r11, r12, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, r11, r10, r1
-    smmlar r2, r12, r10, r2
-    smmulr r3, lr, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldr r10, [r8, #16]
     ldr r11, [r8, #32]
     add r10, r10, r11
-    ldmia r9!, {r7, r11, r12, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, r11, r10, r1
-    smmlar r2, r12, r10, r2
-    smmlar r3, lr, r10, r3
-    ldr r7, [r9], #4
-    smmulr r4, r7, r10
+    ldmia r9!, {r4, r5, r6, r7, r11}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmlar r3, r7, r10, r3
+    smmulr r4, r11, r10
     ldr r10, [r8, #20]
     ldr r11, [r8, #28]
     add r10, r10, r11
-    ldmia r9!, {r7, r11, r12, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, r11, r10, r1
-    smmlar r2, r12, r10, r2
-    smmlar r3, lr, r10, r3
-    ldmia r9!, {r7, r11}
-    smmlar r4, r7, r10, r4
-    smmulr r5, r11, r10
+    ldmia r9!, {r5, r6, r7, r11, r12, lr}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
+    smmlar r3, r11, r10, r3
+    smmlar r4, r12, r10, r4
+    smmulr r5, lr, r10
     ldr r10, [r8, #24]
-    ldmia r9!, {r7, r11, r12, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, r11, r10, r1
-    smmlar r2, r12, r10, r2
-    smmlar r3, lr, r10, r3
-    ldmia r9!, {r7, r11, r12}
-    smmlar r4, r7, r10, r4
-    smmlar r5, r11, r10, r5
-    smmulr r6, r12, r10
+    ldmia r9!, {r6, r7, r11, r12, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmlar r2, r11, r10, r2
+    smmlar r3, r12, r10, r3
+    smmlar r4, lr, r10, r4
+    ldmia r9!, {r6, r7}
+    smmlar r5, r6, r10, r5
+    smmulr r6, r7, r10
     ldr r9, [sp, #4]
     ldrd r11, r12, [sp, #24]
     ldrd r10, lr, [r9, #0]
@@ -3438,49 +3409,48 @@ cvm_cols_diff_13:
     ldr r10, [r8, #0]
     ldr r11, [r8, #48]
     sub r10, r10, r11
-    ldr r6, [r9], #4
-    smmulr r0, r6, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #44]
     sub r10, r10, r11
-    ldmia r9!, {r6, r7}
-    smmlar r0, r6, r10, r0
-    smmulr r1, r7, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #40]
     sub r10, r10, r11
-    ldmia r9!, {r6, r7, r11}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmulr r2, r11, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #36]
     sub r10, r10, r11
-    ldmia r9!, {r6, r7, r11, r12}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmlar r2, r11, r10, r2
-    smmulr r3, r12, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldr r10, [r8, #16]
     ldr r11, [r8, #32]
     sub r10, r10, r11
-    ldmia r9!, {r6, r7, r11, r12, lr}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmlar r2, r11, r10, r2
-    smmlar r3, r12, r10, r3
-    smmulr r4, lr, r10
+    ldmia r9!, {r4, r5, r6, r7, r11}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmlar r3, r7, r10, r3
+    smmulr r4, r11, r10
     ldr r10, [r8, #20]
     ldr r11, [r8, #28]
     sub r10, r10, r11
-    ldmia r9!, {r6, r7, r11, r12, lr}
-    smmlar r0, r6, r10, r0
-    smmlar r1, r7, r10, r1
-    smmlar r2, r11, r10, r2
-    smmlar r3, r12, r10, r3
-    smmlar r4, lr, r10, r4
-    ldr r6, [r9], #4
-    smmulr r5, r6, r10
+    ldmia r9!, {r5, r6, r7, r11, r12, lr}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
+    smmlar r3, r11, r10, r3
+    smmlar r4, r12, r10, r4
+    smmulr r5, lr, r10
     ldr r9, [sp, #4]
     ldrd r11, r12, [sp, #24]
     ldrd r10, lr, [r9, #0]
@@ -3528,80 +3498,74 @@ cvm_rows_14:
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr r7, [r9], #4
-    smmulr r0, r7, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #24]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r7, lr}
-    smmlar r0, r7, r10, r0
-    smmulr r1, lr, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldrh r10, [r8, #4]
     ldrh lr, [r8, #22]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r7, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, lr, r10, r1
-    ldr r7, [r9], #4
-    smmulr r2, r7, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldrh r10, [r8, #6]
     ldrh lr, [r8, #20]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r7, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, lr, r10, r1
-    ldmia r9!, {r7, lr}
-    smmlar r2, r7, r10, r2
-    smmulr r3, lr, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldrh r10, [r8, #8]
     ldrh lr, [r8, #18]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r7, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, lr, r10, r1
-    ldmia r9!, {r7, lr}
-    smmlar r2, r7, r10, r2
-    smmlar r3, lr, r10, r3
-    ldr r7, [r9], #4
-    smmulr r4, r7, r10
+    ldmia r9!, {r4, r5, r6, r7, lr}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmlar r3, r7, r10, r3
+    smmulr r4, lr, r10
     ldrh r10, [r8, #10]
     ldrh lr, [r8, #16]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r7, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, lr, r10, r1
-    ldmia r9!, {r7, lr}
+    ldmia r9!, {r5, r6, r7, lr}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
     smmlar r2, r7, r10, r2
     smmlar r3, lr, r10, r3
-    ldmia r9!, {r7, lr}
-    smmlar r4, r7, r10, r4
-    smmulr r5, lr, r10
+    ldmia r9!, {r5, r6}
+    smmlar r4, r5, r10, r4
+    smmulr r5, r6, r10
     ldrh r10, [r8, #12]
     ldrh lr, [r8, #14]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r7, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, lr, r10, r1
-    ldmia r9!, {r7, lr}
-    smmlar r2, r7, r10, r2
-    smmlar r3, lr, r10, r3
-    ldmia r9!, {r7, lr}
+    ldmia r9!, {r6, r7, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmlar r2, lr, r10, r2
+    ldmia r9!, {r6, r7, lr}
+    smmlar r3, r6, r10, r3
     smmlar r4, r7, r10, r4
     smmlar r5, lr, r10, r5
-    ldr r7, [r9], #4
-    smmulr r6, r7, r10
+    ldr r6, [r9], #4
+    smmulr r6, r6, r10
     ldr r10, [sp, #4]
     str r0, [r10, #0]
     str r1, [r10, #64]
@@ -3616,80 +3580,74 @@ cvm_rows_14:
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr r7, [r9], #4
-    smmulr r0, r7, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #24]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r7, lr}
-    smmlar r0, r7, r10, r0
-    smmulr r1, lr, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldrh r10, [r8, #4]
     ldrh lr, [r8, #22]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r7, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, lr, r10, r1
-    ldr r7, [r9], #4
-    smmulr r2, r7, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldrh r10, [r8, #6]
     ldrh lr, [r8, #20]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r7, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, lr, r10, r1
-    ldmia r9!, {r7, lr}
-    smmlar r2, r7, r10, r2
-    smmulr r3, lr, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldrh r10, [r8, #8]
     ldrh lr, [r8, #18]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r7, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, lr, r10, r1
-    ldmia r9!, {r7, lr}
-    smmlar r2, r7, r10, r2
-    smmlar r3, lr, r10, r3
-    ldr r7, [r9], #4
-    smmulr r4, r7, r10
+    ldmia r9!, {r4, r5, r6, r7, lr}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmlar r3, r7, r10, r3
+    smmulr r4, lr, r10
     ldrh r10, [r8, #10]
     ldrh lr, [r8, #16]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r7, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, lr, r10, r1
-    ldmia r9!, {r7, lr}
+    ldmia r9!, {r5, r6, r7, lr}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
     smmlar r2, r7, r10, r2
     smmlar r3, lr, r10, r3
-    ldmia r9!, {r7, lr}
-    smmlar r4, r7, r10, r4
-    smmulr r5, lr, r10
+    ldmia r9!, {r5, r6}
+    smmlar r4, r5, r10, r4
+    smmulr r5, r6, r10
     ldrh r10, [r8, #12]
     ldrh lr, [r8, #14]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r7, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, lr, r10, r1
-    ldmia r9!, {r7, lr}
-    smmlar r2, r7, r10, r2
-    smmlar r3, lr, r10, r3
-    ldmia r9!, {r7, lr}
+    ldmia r9!, {r6, r7, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmlar r2, lr, r10, r2
+    ldmia r9!, {r6, r7, lr}
+    smmlar r3, r6, r10, r3
     smmlar r4, r7, r10, r4
     smmlar r5, lr, r10, r5
-    ldr r7, [r9], #4
-    smmulr r6, r7, r10
+    ldr r6, [r9], #4
+    smmulr r6, r6, r10
     ldr r10, [sp, #4]
     str r0, [r10, #448]
     str r1, [r10, #512]
@@ -3724,62 +3682,60 @@ cvm_cols_14:
     ldr r10, [r8, #0]
     ldr r11, [r8, #52]
     add r10, r10, r11
-    ldr r7, [r9], #4
-    smmulr r0, r7, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #48]
     add r10, r10, r11
-    ldmia r9!, {r7, r11}
-    smmlar r0, r7, r10, r0
-    smmulr r1, r11, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #44]
     add r10, r10, r11
-    ldmia r9!, {r7, r11, r12}
-    smmlar r0, r7, r10, r0
-    smmlar r1, r11, r10, r1
-    smmulr r2, r12, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #40]
     add r10, r10, r11
-    ldmia r9!, {r7, r11, r12, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, r11, r10, r1
-    smmlar r2, r12, r10, r2
-    smmulr r3, lr, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldr r10, [r8, #16]
     ldr r11, [r8, #36]
     add r10, r10, r11
-    ldmia r9!, {r7, r11, r12, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, r11, r10, r1
-    smmlar r2, r12, r10, r2
-    smmlar r3, lr, r10, r3
-    ldr r7, [r9], #4
-    smmulr r4, r7, r10
+    ldmia r9!, {r4, r5, r6, r7, r11}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmlar r3, r7, r10, r3
+    smmulr r4, r11, r10
     ldr r10, [r8, #20]
     ldr r11, [r8, #32]
     add r10, r10, r11
-    ldmia r9!, {r7, r11, r12, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, r11, r10, r1
-    smmlar r2, r12, r10, r2
-    smmlar r3, lr, r10, r3
-    ldmia r9!, {r7, r11}
-    smmlar r4, r7, r10, r4
-    smmulr r5, r11, r10
+    ldmia r9!, {r5, r6, r7, r11, r12, lr}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
+    smmlar r3, r11, r10, r3
+    smmlar r4, r12, r10, r4
+    smmulr r5, lr, r10
     ldr r10, [r8, #24]
     ldr r11, [r8, #28]
     add r10, r10, r11
-    ldmia r9!, {r7, r11, r12, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, r11, r10, r1
-    smmlar r2, r12, r10, r2
-    smmlar r3, lr, r10, r3
-    ldmia r9!, {r7, r11, r12}
-    smmlar r4, r7, r10, r4
-    smmlar r5, r11, r10, r5
-    smmulr r6, r12, r10
+    ldmia r9!, {r6, r7, r11, r12, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmlar r2, r11, r10, r2
+    smmlar r3, r12, r10, r3
+    smmlar r4, lr, r10, r4
+    ldmia r9!, {r6, r7}
+    smmlar r5, r6, r10, r5
+    smmulr r6, r7, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1, r2, r3, r4, r5, r6}
     str r10, [sp, #4]
@@ -3787,62 +3743,60 @@ cvm_cols_14:
     ldr r10, [r8, #0]
     ldr r11, [r8, #52]
     sub r10, r10, r11
-    ldr r7, [r9], #4
-    smmulr r0, r7, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #48]
     sub r10, r10, r11
-    ldmia r9!, {r7, r11}
-    smmlar r0, r7, r10, r0
-    smmulr r1, r11, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #44]
     sub r10, r10, r11
-    ldmia r9!, {r7, r11, r12}
-    smmlar r0, r7, r10, r0
-    smmlar r1, r11, r10, r1
-    smmulr r2, r12, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #40]
     sub r10, r10, r11
-    ldmia r9!, {r7, r11, r12, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, r11, r10, r1
-    smmlar r2, r12, r10, r2
-    smmulr r3, lr, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldr r10, [r8, #16]
     ldr r11, [r8, #36]
     sub r10, r10, r11
-    ldmia r9!, {r7, r11, r12, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, r11, r10, r1
-    smmlar r2, r12, r10, r2
-    smmlar r3, lr, r10, r3
-    ldr r7, [r9], #4
-    smmulr r4, r7, r10
+    ldmia r9!, {r4, r5, r6, r7, r11}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmlar r3, r7, r10, r3
+    smmulr r4, r11, r10
     ldr r10, [r8, #20]
     ldr r11, [r8, #32]
     sub r10, r10, r11
-    ldmia r9!, {r7, r11, r12, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, r11, r10, r1
-    smmlar r2, r12, r10, r2
-    smmlar r3, lr, r10, r3
-    ldmia r9!, {r7, r11}
-    smmlar r4, r7, r10, r4
-    smmulr r5, r11, r10
+    ldmia r9!, {r5, r6, r7, r11, r12, lr}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
+    smmlar r3, r11, r10, r3
+    smmlar r4, r12, r10, r4
+    smmulr r5, lr, r10
     ldr r10, [r8, #24]
     ldr r11, [r8, #28]
     sub r10, r10, r11
-    ldmia r9!, {r7, r11, r12, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, r11, r10, r1
-    smmlar r2, r12, r10, r2
-    smmlar r3, lr, r10, r3
-    ldmia r9!, {r7, r11, r12}
-    smmlar r4, r7, r10, r4
-    smmlar r5, r11, r10, r5
-    smmulr r6, r12, r10
+    ldmia r9!, {r6, r7, r11, r12, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmlar r2, r11, r10, r2
+    smmlar r3, r12, r10, r3
+    smmlar r4, lr, r10, r4
+    ldmia r9!, {r6, r7}
+    smmlar r5, r6, r10, r5
+    smmulr r6, r7, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1, r2, r3, r4, r5, r6}
     str r10, [sp, #4]
@@ -3872,62 +3826,60 @@ cvm_cols_diff_14:
     ldr r10, [r8, #0]
     ldr r11, [r8, #52]
     add r10, r10, r11
-    ldr r7, [r9], #4
-    smmulr r0, r7, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #48]
     add r10, r10, r11
-    ldmia r9!, {r7, r11}
-    smmlar r0, r7, r10, r0
-    smmulr r1, r11, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #44]
     add r10, r10, r11
-    ldmia r9!, {r7, r11, r12}
-    smmlar r0, r7, r10, r0
-    smmlar r1, r11, r10, r1
-    smmulr r2, r12, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #40]
     add r10, r10, r11
-    ldmia r9!, {r7, r11, r12, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, r11, r10, r1
-    smmlar r2, r12, r10, r2
-    smmulr r3, lr, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldr r10, [r8, #16]
     ldr r11, [r8, #36]
     add r10, r10, r11
-    ldmia r9!, {r7, r11, r12, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, r11, r10, r1
-    smmlar r2, r12, r10, r2
-    smmlar r3, lr, r10, r3
-    ldr r7, [r9], #4
-    smmulr r4, r7, r10
+    ldmia r9!, {r4, r5, r6, r7, r11}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmlar r3, r7, r10, r3
+    smmulr r4, r11, r10
     ldr r10, [r8, #20]
     ldr r11, [r8, #32]
     add r10, r10, r11
-    ldmia r9!, {r7, r11, r12, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, r11, r10, r1
-    smmlar r2, r12, r10, r2
-    smmlar r3, lr, r10, r3
-    ldmia r9!, {r7, r11}
-    smmlar r4, r7, r10, r4
-    smmulr r5, r11, r10
+    ldmia r9!, {r5, r6, r7, r11, r12, lr}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
+    smmlar r3, r11, r10, r3
+    smmlar r4, r12, r10, r4
+    smmulr r5, lr, r10
     ldr r10, [r8, #24]
     ldr r11, [r8, #28]
     add r10, r10, r11
-    ldmia r9!, {r7, r11, r12, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, r11, r10, r1
-    smmlar r2, r12, r10, r2
-    smmlar r3, lr, r10, r3
-    ldmia r9!, {r7, r11, r12}
-    smmlar r4, r7, r10, r4
-    smmlar r5, r11, r10, r5
-    smmulr r6, r12, r10
+    ldmia r9!, {r6, r7, r11, r12, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmlar r2, r11, r10, r2
+    smmlar r3, r12, r10, r3
+    smmlar r4, lr, r10, r4
+    ldmia r9!, {r6, r7}
+    smmlar r5, r6, r10, r5
+    smmulr r6, r7, r10
     ldr r9, [sp, #4]
     ldrd r11, r12, [sp, #24]
     ldrd r10, lr, [r9, #0]
@@ -3955,62 +3907,60 @@ cvm_cols_diff_14:
     ldr r10, [r8, #0]
     ldr r11, [r8, #52]
     sub r10, r10, r11
-    ldr r7, [r9], #4
-    smmulr r0, r7, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #48]
     sub r10, r10, r11
-    ldmia r9!, {r7, r11}
-    smmlar r0, r7, r10, r0
-    smmulr r1, r11, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #44]
     sub r10, r10, r11
-    ldmia r9!, {r7, r11, r12}
-    smmlar r0, r7, r10, r0
-    smmlar r1, r11, r10, r1
-    smmulr r2, r12, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #40]
     sub r10, r10, r11
-    ldmia r9!, {r7, r11, r12, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, r11, r10, r1
-    smmlar r2, r12, r10, r2
-    smmulr r3, lr, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldr r10, [r8, #16]
     ldr r11, [r8, #36]
     sub r10, r10, r11
-    ldmia r9!, {r7, r11, r12, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, r11, r10, r1
-    smmlar r2, r12, r10, r2
-    smmlar r3, lr, r10, r3
-    ldr r7, [r9], #4
-    smmulr r4, r7, r10
+    ldmia r9!, {r4, r5, r6, r7, r11}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmlar r3, r7, r10, r3
+    smmulr r4, r11, r10
     ldr r10, [r8, #20]
     ldr r11, [r8, #32]
     sub r10, r10, r11
-    ldmia r9!, {r7, r11, r12, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, r11, r10, r1
-    smmlar r2, r12, r10, r2
-    smmlar r3, lr, r10, r3
-    ldmia r9!, {r7, r11}
-    smmlar r4, r7, r10, r4
-    smmulr r5, r11, r10
+    ldmia r9!, {r5, r6, r7, r11, r12, lr}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
+    smmlar r3, r11, r10, r3
+    smmlar r4, r12, r10, r4
+    smmulr r5, lr, r10
     ldr r10, [r8, #24]
     ldr r11, [r8, #28]
     sub r10, r10, r11
-    ldmia r9!, {r7, r11, r12, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, r11, r10, r1
-    smmlar r2, r12, r10, r2
-    smmlar r3, lr, r10, r3
-    ldmia r9!, {r7, r11, r12}
-    smmlar r4, r7, r10, r4
-    smmlar r5, r11, r10, r5
-    smmulr r6, r12, r10
+    ldmia r9!, {r6, r7, r11, r12, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmlar r2, r11, r10, r2
+    smmlar r3, r12, r10, r3
+    smmlar r4, lr, r10, r4
+    ldmia r9!, {r6, r7}
+    smmlar r5, r6, r10, r5
+    smmulr r6, r7, r10
     ldr r9, [sp, #4]
     ldrd r11, r12, [sp, #24]
     ldrd r10, lr, [r9, #0]
@@ -4061,110 +4011,88 @@ cvm_rows_15:
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmulr r0, lr, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #26]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmulr r1, lr, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldrh r10, [r8, #4]
     ldrh lr, [r8, #24]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmulr r2, lr, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldrh r10, [r8, #6]
     ldrh lr, [r8, #22]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
-    smmulr r3, lr, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldrh r10, [r8, #8]
     ldrh lr, [r8, #20]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
-    smmlar r3, lr, r10, r3
-    ldr lr, [r9], #4
+    ldmia r9!, {r4, r5, r6, r7, lr}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmlar r3, r7, r10, r3
     smmulr r4, lr, r10
     ldrh r10, [r8, #10]
     ldrh lr, [r8, #18]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
+    ldmia r9!, {r5, r6, r7, lr}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
     smmlar r3, lr, r10, r3
-    ldr lr, [r9], #4
-    smmlar r4, lr, r10, r4
-    ldr lr, [r9], #4
-    smmulr r5, lr, r10
+    ldmia r9!, {r5, r6}
+    smmlar r4, r5, r10, r4
+    smmulr r5, r6, r10
     ldrh r10, [r8, #12]
     ldrh lr, [r8, #16]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
+    ldmia r9!, {r6, r7, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
     smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
-    smmlar r3, lr, r10, r3
-    ldr lr, [r9], #4
-    smmlar r4, lr, r10, r4
-    ldr lr, [r9], #4
+    ldmia r9!, {r6, r7, lr}
+    smmlar r3, r6, r10, r3
+    smmlar r4, r7, r10, r4
     smmlar r5, lr, r10, r5
-    ldr lr, [r9], #4
-    smmulr r6, lr, r10
+    ldr r6, [r9], #4
+    smmulr r6, r6, r10
     ldrh r10, [r8, #14]
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r0, r7, r10, r0
     smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r2, r7, r10, r2
     smmlar r3, lr, r10, r3
-    ldr lr, [r9], #4
-    smmlar r4, lr, r10, r4
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r4, r7, r10, r4
     smmlar r5, lr, r10, r5
-    ldr lr, [r9], #4
-    smmlar r6, lr, r10, r6
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r6, r7, r10, r6
     smmulr r7, lr, r10
     ldr r10, [sp, #4]
     str r0, [r10, #0]
@@ -4181,80 +4109,74 @@ cvm_rows_15:
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr r7, [r9], #4
-    smmulr r0, r7, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #26]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r7, lr}
-    smmlar r0, r7, r10, r0
-    smmulr r1, lr, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldrh r10, [r8, #4]
     ldrh lr, [r8, #24]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r7, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, lr, r10, r1
-    ldr r7, [r9], #4
-    smmulr r2, r7, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldrh r10, [r8, #6]
     ldrh lr, [r8, #22]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r7, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, lr, r10, r1
-    ldmia r9!, {r7, lr}
-    smmlar r2, r7, r10, r2
-    smmulr r3, lr, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldrh r10, [r8, #8]
     ldrh lr, [r8, #20]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r7, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, lr, r10, r1
-    ldmia r9!, {r7, lr}
-    smmlar r2, r7, r10, r2
-    smmlar r3, lr, r10, r3
-    ldr r7, [r9], #4
-    smmulr r4, r7, r10
+    ldmia r9!, {r4, r5, r6, r7, lr}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmlar r3, r7, r10, r3
+    smmulr r4, lr, r10
     ldrh r10, [r8, #10]
     ldrh lr, [r8, #18]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r7, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, lr, r10, r1
-    ldmia r9!, {r7, lr}
+    ldmia r9!, {r5, r6, r7, lr}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
     smmlar r2, r7, r10, r2
     smmlar r3, lr, r10, r3
-    ldmia r9!, {r7, lr}
-    smmlar r4, r7, r10, r4
-    smmulr r5, lr, r10
+    ldmia r9!, {r5, r6}
+    smmlar r4, r5, r10, r4
+    smmulr r5, r6, r10
     ldrh r10, [r8, #12]
     ldrh lr, [r8, #16]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldmia r9!, {r7, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, lr, r10, r1
-    ldmia r9!, {r7, lr}
-    smmlar r2, r7, r10, r2
-    smmlar r3, lr, r10, r3
-    ldmia r9!, {r7, lr}
+    ldmia r9!, {r6, r7, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmlar r2, lr, r10, r2
+    ldmia r9!, {r6, r7, lr}
+    smmlar r3, r6, r10, r3
     smmlar r4, r7, r10, r4
     smmlar r5, lr, r10, r5
-    ldr r7, [r9], #4
-    smmulr r6, r7, r10
+    ldr r6, [r9], #4
+    smmulr r6, r6, r10
     ldr r10, [sp, #4]
     str r0, [r10, #512]
     str r1, [r10, #576]
@@ -4289,76 +4211,71 @@ cvm_cols_15:
     ldr r10, [r8, #0]
     ldr r11, [r8, #56]
     add r10, r10, r11
-    ldr r11, [r9], #4
-    smmulr r0, r11, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #52]
     add r10, r10, r11
-    ldmia r9!, {r11, r12}
-    smmlar r0, r11, r10, r0
-    smmulr r1, r12, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #48]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmulr r2, lr, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #44]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldr r11, [r9], #4
-    smmulr r3, r11, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldr r10, [r8, #16]
     ldr r11, [r8, #40]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12}
-    smmlar r3, r11, r10, r3
-    smmulr r4, r12, r10
+    ldmia r9!, {r4, r5, r6, r7, r11}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmlar r3, r7, r10, r3
+    smmulr r4, r11, r10
     ldr r10, [r8, #20]
     ldr r11, [r8, #36]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12, lr}
+    ldmia r9!, {r5, r6, r7, r11, r12, lr}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
     smmlar r3, r11, r10, r3
     smmlar r4, r12, r10, r4
     smmulr r5, lr, r10
     ldr r10, [r8, #24]
     ldr r11, [r8, #32]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12, lr}
-    smmlar r3, r11, r10, r3
-    smmlar r4, r12, r10, r4
-    smmlar r5, lr, r10, r5
-    ldr r11, [r9], #4
-    smmulr r6, r11, r10
+    ldmia r9!, {r6, r7, r11, r12, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmlar r2, r11, r10, r2
+    smmlar r3, r12, r10, r3
+    smmlar r4, lr, r10, r4
+    ldmia r9!, {r6, r7}
+    smmlar r5, r6, r10, r5
+    smmulr r6, r7, r10
     ldr r10, [r8, #28]
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12, lr}
-    smmlar r3, r11, r10, r3
-    smmlar r4, r12, r10, r4
-    smmlar r5, lr, r10, r5
-    ldmia r9!, {r11, r12}
-    smmlar r6, r11, r10, r6
-    smmulr r7, r12, r10
+    ldmia r9!, {r7, r11, r12, lr}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmlar r2, r12, r10, r2
+    smmlar r3, lr, r10, r3
+    ldmia r9!, {r7, r11, r12, lr}
+    smmlar r4, r7, r10, r4
+    smmlar r5, r11, r10, r5
+    smmlar r6, r12, r10, r6
+    smmulr r7, lr, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1, r2, r3, r4, r5, r6, r7}
     str r10, [sp, #4]
@@ -4366,62 +4283,60 @@ cvm_cols_15:
     ldr r10, [r8, #0]
     ldr r11, [r8, #56]
     sub r10, r10, r11
-    ldr r7, [r9], #4
-    smmulr r0, r7, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #52]
     sub r10, r10, r11
-    ldmia r9!, {r7, r11}
-    smmlar r0, r7, r10, r0
-    smmulr r1, r11, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #48]
     sub r10, r10, r11
-    ldmia r9!, {r7, r11, r12}
-    smmlar r0, r7, r10, r0
-    smmlar r1, r11, r10, r1
-    smmulr r2, r12, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #44]
     sub r10, r10, r11
-    ldmia r9!, {r7, r11, r12, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, r11, r10, r1
-    smmlar r2, r12, r10, r2
-    smmulr r3, lr, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldr r10, [r8, #16]
     ldr r11, [r8, #40]
     sub r10, r10, r11
-    ldmia r9!, {r7, r11, r12, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, r11, r10, r1
-    smmlar r2, r12, r10, r2
-    smmlar r3, lr, r10, r3
-    ldr r7, [r9], #4
-    smmulr r4, r7, r10
+    ldmia r9!, {r4, r5, r6, r7, r11}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmlar r3, r7, r10, r3
+    smmulr r4, r11, r10
     ldr r10, [r8, #20]
     ldr r11, [r8, #36]
     sub r10, r10, r11
-    ldmia r9!, {r7, r11, r12, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, r11, r10, r1
-    smmlar r2, r12, r10, r2
-    smmlar r3, lr, r10, r3
-    ldmia r9!, {r7, r11}
-    smmlar r4, r7, r10, r4
-    smmulr r5, r11, r10
+    ldmia r9!, {r5, r6, r7, r11, r12, lr}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
+    smmlar r3, r11, r10, r3
+    smmlar r4, r12, r10, r4
+    smmulr r5, lr, r10
     ldr r10, [r8, #24]
     ldr r11, [r8, #32]
     sub r10, r10, r11
-    ldmia r9!, {r7, r11, r12, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, r11, r10, r1
-    smmlar r2, r12, r10, r2
-    smmlar r3, lr, r10, r3
-    ldmia r9!, {r7, r11, r12}
-    smmlar r4, r7, r10, r4
-    smmlar r5, r11, r10, r5
-    smmulr r6, r12, r10
+    ldmia r9!, {r6, r7, r11, r12, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmlar r2, r11, r10, r2
+    smmlar r3, r12, r10, r3
+    smmlar r4, lr, r10, r4
+    ldmia r9!, {r6, r7}
+    smmlar r5, r6, r10, r5
+    smmulr r6, r7, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1, r2, r3, r4, r5, r6}
     str r10, [sp, #4]
@@ -4451,76 +4366,71 @@ cvm_cols_diff_15:
     ldr r10, [r8, #0]
     ldr r11, [r8, #56]
     add r10, r10, r11
-    ldr r11, [r9], #4
-    smmulr r0, r11, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #52]
     add r10, r10, r11
-    ldmia r9!, {r11, r12}
-    smmlar r0, r11, r10, r0
-    smmulr r1, r12, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #48]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmulr r2, lr, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #44]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldr r11, [r9], #4
-    smmulr r3, r11, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldr r10, [r8, #16]
     ldr r11, [r8, #40]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12}
-    smmlar r3, r11, r10, r3
-    smmulr r4, r12, r10
+    ldmia r9!, {r4, r5, r6, r7, r11}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmlar r3, r7, r10, r3
+    smmulr r4, r11, r10
     ldr r10, [r8, #20]
     ldr r11, [r8, #36]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12, lr}
+    ldmia r9!, {r5, r6, r7, r11, r12, lr}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
     smmlar r3, r11, r10, r3
     smmlar r4, r12, r10, r4
     smmulr r5, lr, r10
     ldr r10, [r8, #24]
     ldr r11, [r8, #32]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12, lr}
-    smmlar r3, r11, r10, r3
-    smmlar r4, r12, r10, r4
-    smmlar r5, lr, r10, r5
-    ldr r11, [r9], #4
-    smmulr r6, r11, r10
+    ldmia r9!, {r6, r7, r11, r12, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmlar r2, r11, r10, r2
+    smmlar r3, r12, r10, r3
+    smmlar r4, lr, r10, r4
+    ldmia r9!, {r6, r7}
+    smmlar r5, r6, r10, r5
+    smmulr r6, r7, r10
     ldr r10, [r8, #28]
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12, lr}
-    smmlar r3, r11, r10, r3
-    smmlar r4, r12, r10, r4
-    smmlar r5, lr, r10, r5
-    ldmia r9!, {r11, r12}
-    smmlar r6, r11, r10, r6
-    smmulr r7, r12, r10
+    ldmia r9!, {r7, r11, r12, lr}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmlar r2, r12, r10, r2
+    smmlar r3, lr, r10, r3
+    ldmia r9!, {r7, r11, r12, lr}
+    smmlar r4, r7, r10, r4
+    smmlar r5, r11, r10, r5
+    smmlar r6, r12, r10, r6
+    smmulr r7, lr, r10
     ldr r9, [sp, #4]
     ldrd r11, r12, [sp, #24]
     ldrd r10, lr, [r9, #0]
@@ -4550,62 +4460,60 @@ cvm_cols_diff_15:
     ldr r10, [r8, #0]
     ldr r11, [r8, #56]
     sub r10, r10, r11
-    ldr r7, [r9], #4
-    smmulr r0, r7, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #52]
     sub r10, r10, r11
-    ldmia r9!, {r7, r11}
-    smmlar r0, r7, r10, r0
-    smmulr r1, r11, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #48]
     sub r10, r10, r11
-    ldmia r9!, {r7, r11, r12}
-    smmlar r0, r7, r10, r0
-    smmlar r1, r11, r10, r1
-    smmulr r2, r12, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #44]
     sub r10, r10, r11
-    ldmia r9!, {r7, r11, r12, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, r11, r10, r1
-    smmlar r2, r12, r10, r2
-    smmulr r3, lr, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldr r10, [r8, #16]
     ldr r11, [r8, #40]
     sub r10, r10, r11
-    ldmia r9!, {r7, r11, r12, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, r11, r10, r1
-    smmlar r2, r12, r10, r2
-    smmlar r3, lr, r10, r3
-    ldr r7, [r9], #4
-    smmulr r4, r7, r10
+    ldmia r9!, {r4, r5, r6, r7, r11}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmlar r3, r7, r10, r3
+    smmulr r4, r11, r10
     ldr r10, [r8, #20]
     ldr r11, [r8, #36]
     sub r10, r10, r11
-    ldmia r9!, {r7, r11, r12, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, r11, r10, r1
-    smmlar r2, r12, r10, r2
-    smmlar r3, lr, r10, r3
-    ldmia r9!, {r7, r11}
-    smmlar r4, r7, r10, r4
-    smmulr r5, r11, r10
+    ldmia r9!, {r5, r6, r7, r11, r12, lr}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
+    smmlar r3, r11, r10, r3
+    smmlar r4, r12, r10, r4
+    smmulr r5, lr, r10
     ldr r10, [r8, #24]
     ldr r11, [r8, #32]
     sub r10, r10, r11
-    ldmia r9!, {r7, r11, r12, lr}
-    smmlar r0, r7, r10, r0
-    smmlar r1, r11, r10, r1
-    smmlar r2, r12, r10, r2
-    smmlar r3, lr, r10, r3
-    ldmia r9!, {r7, r11, r12}
-    smmlar r4, r7, r10, r4
-    smmlar r5, r11, r10, r5
-    smmulr r6, r12, r10
+    ldmia r9!, {r6, r7, r11, r12, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmlar r2, r11, r10, r2
+    smmlar r3, r12, r10, r3
+    smmlar r4, lr, r10, r4
+    ldmia r9!, {r6, r7}
+    smmlar r5, r6, r10, r5
+    smmulr r6, r7, r10
     ldr r9, [sp, #4]
     ldrd r11, r12, [sp, #24]
     ldrd r10, lr, [r9, #0]
@@ -4656,112 +4564,90 @@ cvm_rows_16:
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmulr r0, lr, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #28]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmulr r1, lr, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldrh r10, [r8, #4]
     ldrh lr, [r8, #26]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmulr r2, lr, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldrh r10, [r8, #6]
     ldrh lr, [r8, #24]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
-    smmulr r3, lr, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldrh r10, [r8, #8]
     ldrh lr, [r8, #22]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
-    smmlar r3, lr, r10, r3
-    ldr lr, [r9], #4
+    ldmia r9!, {r4, r5, r6, r7, lr}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmlar r3, r7, r10, r3
     smmulr r4, lr, r10
     ldrh r10, [r8, #10]
     ldrh lr, [r8, #20]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
+    ldmia r9!, {r5, r6, r7, lr}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
     smmlar r3, lr, r10, r3
-    ldr lr, [r9], #4
-    smmlar r4, lr, r10, r4
-    ldr lr, [r9], #4
-    smmulr r5, lr, r10
+    ldmia r9!, {r5, r6}
+    smmlar r4, r5, r10, r4
+    smmulr r5, r6, r10
     ldrh r10, [r8, #12]
     ldrh lr, [r8, #18]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
+    ldmia r9!, {r6, r7, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
     smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
-    smmlar r3, lr, r10, r3
-    ldr lr, [r9], #4
-    smmlar r4, lr, r10, r4
-    ldr lr, [r9], #4
+    ldmia r9!, {r6, r7, lr}
+    smmlar r3, r6, r10, r3
+    smmlar r4, r7, r10, r4
     smmlar r5, lr, r10, r5
-    ldr lr, [r9], #4
-    smmulr r6, lr, r10
+    ldr r6, [r9], #4
+    smmulr r6, r6, r10
     ldrh r10, [r8, #14]
     ldrh lr, [r8, #16]
     add r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r0, r7, r10, r0
     smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r2, r7, r10, r2
     smmlar r3, lr, r10, r3
-    ldr lr, [r9], #4
-    smmlar r4, lr, r10, r4
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r4, r7, r10, r4
     smmlar r5, lr, r10, r5
-    ldr lr, [r9], #4
-    smmlar r6, lr, r10, r6
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r6, r7, r10, r6
     smmulr r7, lr, r10
     ldr r10, [sp, #4]
     str r0, [r10, #0]
@@ -4778,112 +4664,90 @@ cvm_rows_16:
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmulr r0, lr, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldrh r10, [r8, #2]
     ldrh lr, [r8, #28]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmulr r1, lr, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldrh r10, [r8, #4]
     ldrh lr, [r8, #26]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmulr r2, lr, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldrh r10, [r8, #6]
     ldrh lr, [r8, #24]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
-    smmulr r3, lr, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldrh r10, [r8, #8]
     ldrh lr, [r8, #22]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
-    smmlar r3, lr, r10, r3
-    ldr lr, [r9], #4
+    ldmia r9!, {r4, r5, r6, r7, lr}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmlar r3, r7, r10, r3
     smmulr r4, lr, r10
     ldrh r10, [r8, #10]
     ldrh lr, [r8, #20]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
+    ldmia r9!, {r5, r6, r7, lr}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
     smmlar r3, lr, r10, r3
-    ldr lr, [r9], #4
-    smmlar r4, lr, r10, r4
-    ldr lr, [r9], #4
-    smmulr r5, lr, r10
+    ldmia r9!, {r5, r6}
+    smmlar r4, r5, r10, r4
+    smmulr r5, r6, r10
     ldrh r10, [r8, #12]
     ldrh lr, [r8, #18]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
-    smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
+    ldmia r9!, {r6, r7, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
     smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
-    smmlar r3, lr, r10, r3
-    ldr lr, [r9], #4
-    smmlar r4, lr, r10, r4
-    ldr lr, [r9], #4
+    ldmia r9!, {r6, r7, lr}
+    smmlar r3, r6, r10, r3
+    smmlar r4, r7, r10, r4
     smmlar r5, lr, r10, r5
-    ldr lr, [r9], #4
-    smmulr r6, lr, r10
+    ldr r6, [r9], #4
+    smmulr r6, r6, r10
     ldrh r10, [r8, #14]
     ldrh lr, [r8, #16]
     sub r10, r10, lr
     lsl r10, r10, r12
     smmulr r10, r10, r11
-    ldr lr, [r9], #4
-    smmlar r0, lr, r10, r0
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r0, r7, r10, r0
     smmlar r1, lr, r10, r1
-    ldr lr, [r9], #4
-    smmlar r2, lr, r10, r2
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r2, r7, r10, r2
     smmlar r3, lr, r10, r3
-    ldr lr, [r9], #4
-    smmlar r4, lr, r10, r4
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r4, r7, r10, r4
     smmlar r5, lr, r10, r5
-    ldr lr, [r9], #4
-    smmlar r6, lr, r10, r6
-    ldr lr, [r9], #4
+    ldmia r9!, {r7, lr}
+    smmlar r6, r7, r10, r6
     smmulr r7, lr, r10
     ldr r10, [sp, #4]
     str r0, [r10, #512]
@@ -4920,78 +4784,73 @@ cvm_cols_16:
     ldr r10, [r8, #0]
     ldr r11, [r8, #60]
     add r10, r10, r11
-    ldr r11, [r9], #4
-    smmulr r0, r11, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #56]
     add r10, r10, r11
-    ldmia r9!, {r11, r12}
-    smmlar r0, r11, r10, r0
-    smmulr r1, r12, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #52]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmulr r2, lr, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #48]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldr r11, [r9], #4
-    smmulr r3, r11, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldr r10, [r8, #16]
     ldr r11, [r8, #44]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12}
-    smmlar r3, r11, r10, r3
-    smmulr r4, r12, r10
+    ldmia r9!, {r4, r5, r6, r7, r11}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmlar r3, r7, r10, r3
+    smmulr r4, r11, r10
     ldr r10, [r8, #20]
     ldr r11, [r8, #40]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12, lr}
+    ldmia r9!, {r5, r6, r7, r11, r12, lr}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
     smmlar r3, r11, r10, r3
     smmlar r4, r12, r10, r4
     smmulr r5, lr, r10
     ldr r10, [r8, #24]
     ldr r11, [r8, #36]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12, lr}
-    smmlar r3, r11, r10, r3
-    smmlar r4, r12, r10, r4
-    smmlar r5, lr, r10, r5
-    ldr r11, [r9], #4
-    smmulr r6, r11, r10
+    ldmia r9!, {r6, r7, r11, r12, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmlar r2, r11, r10, r2
+    smmlar r3, r12, r10, r3
+    smmlar r4, lr, r10, r4
+    ldmia r9!, {r6, r7}
+    smmlar r5, r6, r10, r5
+    smmulr r6, r7, r10
     ldr r10, [r8, #28]
     ldr r11, [r8, #32]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12, lr}
-    smmlar r3, r11, r10, r3
-    smmlar r4, r12, r10, r4
-    smmlar r5, lr, r10, r5
-    ldmia r9!, {r11, r12}
-    smmlar r6, r11, r10, r6
-    smmulr r7, r12, r10
+    ldmia r9!, {r7, r11, r12, lr}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmlar r2, r12, r10, r2
+    smmlar r3, lr, r10, r3
+    ldmia r9!, {r7, r11, r12, lr}
+    smmlar r4, r7, r10, r4
+    smmlar r5, r11, r10, r5
+    smmlar r6, r12, r10, r6
+    smmulr r7, lr, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1, r2, r3, r4, r5, r6, r7}
     str r10, [sp, #4]
@@ -4999,78 +4858,73 @@ cvm_cols_16:
     ldr r10, [r8, #0]
     ldr r11, [r8, #60]
     sub r10, r10, r11
-    ldr r11, [r9], #4
-    smmulr r0, r11, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #56]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12}
-    smmlar r0, r11, r10, r0
-    smmulr r1, r12, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #52]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmulr r2, lr, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #48]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldr r11, [r9], #4
-    smmulr r3, r11, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldr r10, [r8, #16]
     ldr r11, [r8, #44]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12}
-    smmlar r3, r11, r10, r3
-    smmulr r4, r12, r10
+    ldmia r9!, {r4, r5, r6, r7, r11}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmlar r3, r7, r10, r3
+    smmulr r4, r11, r10
     ldr r10, [r8, #20]
     ldr r11, [r8, #40]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12, lr}
+    ldmia r9!, {r5, r6, r7, r11, r12, lr}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
     smmlar r3, r11, r10, r3
     smmlar r4, r12, r10, r4
     smmulr r5, lr, r10
     ldr r10, [r8, #24]
     ldr r11, [r8, #36]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12, lr}
-    smmlar r3, r11, r10, r3
-    smmlar r4, r12, r10, r4
-    smmlar r5, lr, r10, r5
-    ldr r11, [r9], #4
-    smmulr r6, r11, r10
+    ldmia r9!, {r6, r7, r11, r12, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmlar r2, r11, r10, r2
+    smmlar r3, r12, r10, r3
+    smmlar r4, lr, r10, r4
+    ldmia r9!, {r6, r7}
+    smmlar r5, r6, r10, r5
+    smmulr r6, r7, r10
     ldr r10, [r8, #28]
     ldr r11, [r8, #32]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12, lr}
-    smmlar r3, r11, r10, r3
-    smmlar r4, r12, r10, r4
-    smmlar r5, lr, r10, r5
-    ldmia r9!, {r11, r12}
-    smmlar r6, r11, r10, r6
-    smmulr r7, r12, r10
+    ldmia r9!, {r7, r11, r12, lr}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmlar r2, r12, r10, r2
+    smmlar r3, lr, r10, r3
+    ldmia r9!, {r7, r11, r12, lr}
+    smmlar r4, r7, r10, r4
+    smmlar r5, r11, r10, r5
+    smmlar r6, r12, r10, r6
+    smmulr r7, lr, r10
     ldr r10, [sp, #4]
     stmia r10!, {r0, r1, r2, r3, r4, r5, r6, r7}
     str r10, [sp, #4]
@@ -5100,78 +4954,73 @@ cvm_cols_diff_16:
     ldr r10, [r8, #0]
     ldr r11, [r8, #60]
     add r10, r10, r11
-    ldr r11, [r9], #4
-    smmulr r0, r11, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #56]
     add r10, r10, r11
-    ldmia r9!, {r11, r12}
-    smmlar r0, r11, r10, r0
-    smmulr r1, r12, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #52]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmulr r2, lr, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #48]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldr r11, [r9], #4
-    smmulr r3, r11, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldr r10, [r8, #16]
     ldr r11, [r8, #44]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12}
-    smmlar r3, r11, r10, r3
-    smmulr r4, r12, r10
+    ldmia r9!, {r4, r5, r6, r7, r11}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmlar r3, r7, r10, r3
+    smmulr r4, r11, r10
     ldr r10, [r8, #20]
     ldr r11, [r8, #40]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12, lr}
+    ldmia r9!, {r5, r6, r7, r11, r12, lr}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
     smmlar r3, r11, r10, r3
     smmlar r4, r12, r10, r4
     smmulr r5, lr, r10
     ldr r10, [r8, #24]
     ldr r11, [r8, #36]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12, lr}
-    smmlar r3, r11, r10, r3
-    smmlar r4, r12, r10, r4
-    smmlar r5, lr, r10, r5
-    ldr r11, [r9], #4
-    smmulr r6, r11, r10
+    ldmia r9!, {r6, r7, r11, r12, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmlar r2, r11, r10, r2
+    smmlar r3, r12, r10, r3
+    smmlar r4, lr, r10, r4
+    ldmia r9!, {r6, r7}
+    smmlar r5, r6, r10, r5
+    smmulr r6, r7, r10
     ldr r10, [r8, #28]
     ldr r11, [r8, #32]
     add r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12, lr}
-    smmlar r3, r11, r10, r3
-    smmlar r4, r12, r10, r4
-    smmlar r5, lr, r10, r5
-    ldmia r9!, {r11, r12}
-    smmlar r6, r11, r10, r6
-    smmulr r7, r12, r10
+    ldmia r9!, {r7, r11, r12, lr}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmlar r2, r12, r10, r2
+    smmlar r3, lr, r10, r3
+    ldmia r9!, {r7, r11, r12, lr}
+    smmlar r4, r7, r10, r4
+    smmlar r5, r11, r10, r5
+    smmlar r6, r12, r10, r6
+    smmulr r7, lr, r10
     ldr r9, [sp, #4]
     ldrd r11, r12, [sp, #24]
     ldrd r10, lr, [r9, #0]
@@ -5201,78 +5050,73 @@ cvm_cols_diff_16:
     ldr r10, [r8, #0]
     ldr r11, [r8, #60]
     sub r10, r10, r11
-    ldr r11, [r9], #4
-    smmulr r0, r11, r10
+    ldr r0, [r9], #4
+    smmulr r0, r0, r10
     ldr r10, [r8, #4]
     ldr r11, [r8, #56]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12}
-    smmlar r0, r11, r10, r0
-    smmulr r1, r12, r10
+    ldmia r9!, {r1, r2}
+    smmlar r0, r1, r10, r0
+    smmulr r1, r2, r10
     ldr r10, [r8, #8]
     ldr r11, [r8, #52]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmulr r2, lr, r10
+    ldmia r9!, {r2, r3, r4}
+    smmlar r0, r2, r10, r0
+    smmlar r1, r3, r10, r1
+    smmulr r2, r4, r10
     ldr r10, [r8, #12]
     ldr r11, [r8, #48]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldr r11, [r9], #4
-    smmulr r3, r11, r10
+    ldmia r9!, {r3, r4, r5, r6}
+    smmlar r0, r3, r10, r0
+    smmlar r1, r4, r10, r1
+    smmlar r2, r5, r10, r2
+    smmulr r3, r6, r10
     ldr r10, [r8, #16]
     ldr r11, [r8, #44]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12}
-    smmlar r3, r11, r10, r3
-    smmulr r4, r12, r10
+    ldmia r9!, {r4, r5, r6, r7, r11}
+    smmlar r0, r4, r10, r0
+    smmlar r1, r5, r10, r1
+    smmlar r2, r6, r10, r2
+    smmlar r3, r7, r10, r3
+    smmulr r4, r11, r10
     ldr r10, [r8, #20]
     ldr r11, [r8, #40]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12, lr}
+    ldmia r9!, {r5, r6, r7, r11, r12, lr}
+    smmlar r0, r5, r10, r0
+    smmlar r1, r6, r10, r1
+    smmlar r2, r7, r10, r2
     smmlar r3, r11, r10, r3
     smmlar r4, r12, r10, r4
     smmulr r5, lr, r10
     ldr r10, [r8, #24]
     ldr r11, [r8, #36]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12, lr}
-    smmlar r3, r11, r10, r3
-    smmlar r4, r12, r10, r4
-    smmlar r5, lr, r10, r5
-    ldr r11, [r9], #4
-    smmulr r6, r11, r10
+    ldmia r9!, {r6, r7, r11, r12, lr}
+    smmlar r0, r6, r10, r0
+    smmlar r1, r7, r10, r1
+    smmlar r2, r11, r10, r2
+    smmlar r3, r12, r10, r3
+    smmlar r4, lr, r10, r4
+    ldmia r9!, {r6, r7}
+    smmlar r5, r6, r10, r5
+    smmulr r6, r7, r10
     ldr r10, [r8, #28]
     ldr r11, [r8, #32]
     sub r10, r10, r11
-    ldmia r9!, {r11, r12, lr}
-    smmlar r0, r11, r10, r0
-    smmlar r1, r12, r10, r1
-    smmlar r2, lr, r10, r2
-    ldmia r9!, {r11, r12, lr}
-    smmlar r3, r11, r10, r3
-    smmlar r4, r12, r10, r4
-    smmlar r5, lr, r10, r5
-    ldmia r9!, {r11, r12}
-    smmlar r6, r11, r10, r6
-    smmulr r7, r12, r10
+    ldmia r9!, {r7, r11, r12, lr}
+    smmlar r0, r7, r10, r0
+    smmlar r1, r11, r10, r1
+    smmlar r2, r12, r10, r2
+    smmlar r3, lr, r10, r3
+    ldmia r9!, {r7, r11, r12, lr}
+    smmlar r4, r7, r10, r4
+    smmlar r5, r11, r10, r5
+    smmlar r6, r12, r10, r6
+    smmulr r7, lr, r10
     ldr r9, [sp, #4]
     ldrd r11, r12, [sp, #24]
     ldrd r10, lr, [r9, #0]

@@ -30,27 +30,27 @@ fn halves(j: usize) -> (usize, usize) {
 
 /// Applies the packed upper-triangular block (column by column, `r[0..=l][l]`)
 /// at `cptr` to the inputs that `input(l, out)` leaves in `r10`, into the
-/// accumulators `r0..r{n-1}`. `temps` are the registers free for streamed
-/// coefficients besides the accumulators a block of fewer than 8 leaves
-/// (all ascending, so that `LDM` fills them in memory order).
+/// accumulators `r0..r{n-1}`. The coefficients of input `l` stream through
+/// the registers that hold no live sum yet: the accumulators `r{l}..r7`
+/// (accumulator `l` starts with this input's last term, after its register
+/// has served) and `temps` (all ascending, so that `LDM` fills them in
+/// memory order), as many per `LDM` as there are.
 fn block(s: &mut String, n: usize, temps: &[&str], input: &dyn Fn(usize, &mut String)) {
-    let spare: Vec<String> = (n..8).map(|k| format!("r{k}")).collect();
-    let temps: Vec<&str> = spare
-        .iter()
-        .map(String::as_str)
-        .chain(temps.iter().copied())
-        .collect();
     for l in 0..n {
         input(l, s);
+        let free: Vec<String> = (l..8)
+            .map(|k| format!("r{k}"))
+            .chain(temps.iter().map(|t| t.to_string()))
+            .collect();
         let mut k = 0;
         while k <= l {
-            let c = temps.len().min(l + 1 - k);
+            let c = free.len().min(l + 1 - k);
             if c == 1 {
-                writeln!(s, "    ldr {}, [r9], #4", temps[0]).unwrap();
+                writeln!(s, "    ldr {}, [r9], #4", free[0]).unwrap();
             } else {
-                writeln!(s, "    ldmia r9!, {{{}}}", temps[..c].join(", ")).unwrap();
+                writeln!(s, "    ldmia r9!, {{{}}}", free[..c].join(", ")).unwrap();
             }
-            for t in &temps[..c] {
+            for t in &free[..c] {
                 if k == l {
                     // The first term of accumulator `l`: 0 + round(r u).
                     writeln!(s, "    smmulr r{k}, {t}, r10").unwrap();
