@@ -15,9 +15,8 @@
 #
 # Passes (each its own cargo-mutants run and output directory):
 #   fw-app    fw-app/src/sequence.rs and queue.rs, against fw-app-tests
-#   acquire   fw-app/src/acquire.rs, decode.rs and driver.rs (frame
-#             acquisition, SPI frame decoding, the scan driver), against
-#             fw-app-tests
+#   acquire   fw-app/src/acquire.rs and driver.rs (frame acquisition,
+#             the scan driver), against fw-app-tests
 #   stream    cvm-core/src/stream.rs (gradient, border rule, flags,
 #             decisions, row summaries), against core-tests and
 #             fw-app-tests
@@ -136,7 +135,7 @@ for pass in "${passes[@]}"; do
     fw-app) args=(--timeout "${MUTANTS_TIMEOUT:-30}" --package cvm-fw-app --test-package cvm-fw-app-tests
         --file fw-app/src/sequence.rs --file fw-app/src/queue.rs) ;;
     acquire) args=(--timeout "${MUTANTS_TIMEOUT:-30}" --package cvm-fw-app --test-package cvm-fw-app-tests
-        --file fw-app/src/acquire.rs --file fw-app/src/decode.rs --file fw-app/src/driver.rs) ;;
+        --file fw-app/src/acquire.rs --file fw-app/src/driver.rs) ;;
     stream) args=(--package cvm-core "${core_tests[@]}" --file cvm-core/src/stream.rs) ;;
     embed) args=(--package cvm-core "${core_tests[@]}" --file cvm-core/src/scorer/embed.rs
         --re "$(fn_re "$embed_fns")") ;;

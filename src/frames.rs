@@ -9,76 +9,18 @@
 use core::cell::UnsafeCell;
 
 use cvm_core::MAX_CELLS;
-#[cfg(feature = "emulated")]
-use cvm_fw_app::decode::{decode_frame, frame_bytes};
 use cvm_fw_app::driver::FrameStore;
 
-/// Bytes of one frame buffer: the largest detector's frame.
-#[cfg(feature = "emulated")]
-pub const FRAME_BYTES: usize = frame_bytes(MAX_CELLS);
-
-/// `N` frame buffers in bus byte order (the emulated board's file reads).
-#[cfg(feature = "emulated")]
-#[repr(C, align(32))]
-pub struct FrameBuffers<const N: usize>(UnsafeCell<[[u8; FRAME_BYTES]; N]>);
-
-// SAFETY: see the module docs; each buffer has one owner at a time.
-#[cfg(feature = "emulated")]
-unsafe impl<const N: usize> Sync for FrameBuffers<N> {}
-
-#[cfg(feature = "emulated")]
-impl<const N: usize> FrameBuffers<N> {
-    pub const fn new() -> Self {
-        FrameBuffers(UnsafeCell::new([[0; FRAME_BYTES]; N]))
-    }
-
-    /// # Safety
-    /// The caller must own buffer `k` (it is `Filling`, or the scoring side
-    /// holds its record) and hold no other reference to it.
-    #[allow(clippy::mut_from_ref)]
-    pub unsafe fn buffer(&self, k: usize) -> &mut [u8; FRAME_BYTES] {
-        // SAFETY: the caller upholds exclusive ownership of buffer `k`.
-        unsafe { &mut (*self.0.get())[k % N] }
-    }
-}
-
-/// The scoring side's view: decodes a buffer into samples on demand.
-#[cfg(feature = "emulated")]
-pub struct Decoder<'b, const N: usize, R: FnMut(usize)> {
-    pub bufs: &'b FrameBuffers<N>,
-    pub cells: usize,
-    pub samples: [u16; MAX_CELLS],
-    /// Hands a buffer back to the acquisition side.
-    pub release: R,
-}
-
-#[cfg(feature = "emulated")]
-impl<const N: usize, R: FnMut(usize)> FrameStore for Decoder<'_, N, R> {
-    fn frame(&mut self, buf: usize) -> Option<&[u16]> {
-        // SAFETY: the scoring side holds `buf`'s record (FrameStore contract).
-        let bytes = unsafe { self.bufs.buffer(buf) };
-        let out = self.samples.get_mut(..self.cells)?;
-        let n = frame_bytes(out.len());
-        decode_frame(bytes.get(..n)?, out).ok()?;
-        Some(out)
-    }
-
-    fn release(&mut self, buf: usize) {
-        (self.release)(buf);
-    }
-}
-
-/// `N` frame buffers of native `u16` samples, for a bus that delivers
-/// samples (16-bit SPI frames with DMA): nothing to decode.
-#[cfg(feature = "h743")]
+/// `N` frame buffers of native `u16` samples, as a bus that delivers
+/// samples leaves them (the H743's 16-bit SPI frames with DMA; the
+/// emulated board's scan file holds them in that order too): nothing to
+/// decode.
 #[repr(C, align(32))]
 pub struct SampleBuffers<const N: usize>(UnsafeCell<[[u16; MAX_CELLS]; N]>);
 
 // SAFETY: see the module docs; each buffer has one owner at a time.
-#[cfg(feature = "h743")]
 unsafe impl<const N: usize> Sync for SampleBuffers<N> {}
 
-#[cfg(feature = "h743")]
 impl<const N: usize> SampleBuffers<N> {
     pub const fn new() -> Self {
         SampleBuffers(UnsafeCell::new([[0; MAX_CELLS]; N]))
@@ -92,10 +34,24 @@ impl<const N: usize> SampleBuffers<N> {
         // SAFETY: the caller upholds exclusive ownership of buffer `k`.
         unsafe { &mut (*self.0.get())[k % N] }
     }
+
+    /// Buffer `k`'s first `cells` samples as bytes, in memory order, for a
+    /// source that writes bytes (the emulated board's file reads).
+    ///
+    /// # Safety
+    /// As for [`SampleBuffers::buffer`].
+    #[cfg(feature = "emulated")]
+    #[allow(clippy::mut_from_ref)]
+    pub unsafe fn bytes(&self, k: usize, cells: usize) -> &mut [u8] {
+        // SAFETY: the caller owns buffer `k`; a `u16` array is valid as
+        // twice as many bytes, and any byte values make valid `u16`s.
+        let samples = unsafe { self.buffer(k) };
+        let n = cells.min(MAX_CELLS);
+        unsafe { core::slice::from_raw_parts_mut(samples.as_mut_ptr().cast::<u8>(), 2 * n) }
+    }
 }
 
 /// The scoring side's view of [`SampleBuffers`].
-#[cfg(feature = "h743")]
 pub struct Samples<'b, const N: usize, R: FnMut(usize)> {
     pub bufs: &'b SampleBuffers<N>,
     pub cells: usize,
@@ -103,7 +59,6 @@ pub struct Samples<'b, const N: usize, R: FnMut(usize)> {
     pub release: R,
 }
 
-#[cfg(feature = "h743")]
 impl<const N: usize, R: FnMut(usize)> FrameStore for Samples<'_, N, R> {
     fn frame(&mut self, buf: usize) -> Option<&[u16]> {
         // SAFETY: the scoring side holds `buf`'s record (FrameStore contract).

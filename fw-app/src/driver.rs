@@ -15,7 +15,7 @@ use crate::sequence::{Action, Payload, SequenceCounts, Sequencer};
 
 /// Where the frames behind beam records live (buffer indices on a board).
 pub trait FrameStore {
-    /// The decoded samples of buffer `buf`, or `None` if it cannot be read
+    /// The samples of buffer `buf`, or `None` if it cannot be read
     /// (its position is then reported missing).
     fn frame(&mut self, buf: usize) -> Option<&[u16]>;
     /// The buffer may be reused.

@@ -1,10 +1,13 @@
 //! The scan file the emulated board reads over semihosting (written by
-//! `dmap emulate`). Little-endian header, then the frames exactly as the
-//! detector would put them on the SPI bus.
+//! `dmap emulate`). Little-endian header, then the frames as the H743's
+//! 16-bit SPI frames leave them in memory: native (little-endian) `u16`
+//! samples, so that the board reads them into its frame buffers and scores
+//! them without decoding, as the H743 does. (Version 2 of the format held
+//! the bytes in bus order, most significant first; its magic is refused.)
 //!
 //! | offset | size | field |
 //! |-------:|-----:|-------|
-//! | 0 | 8 | magic `CVMSCAN1` |
+//! | 0 | 8 | magic `CVMSCAN3` |
 //! | 8 | 2 | header length in bytes ([`HEADER_LEN`]) |
 //! | 10 | 1+1 | `J1`, `J2` |
 //! | 12 | 1+1 | kernels (0 paper, 1 square), size (`bmax`, 0 = all / `kmax`) |
@@ -18,7 +21,7 @@
 //! | 40 | 24 | firmware version text, zero padded |
 //! | 64 | 128+128 | separable weights `w1[16]`, `w2[16]` (f64; zero otherwise) |
 //! | 320 | 8 | power threshold, a contrast (f64; infinite = the channel off) |
-//! | 328 | | frames: `J1*J2` samples each, big-endian (bus order), raster order, until end of file |
+//! | 328 | | frames: `J1*J2` samples each, little-endian `u16`, raster order, until end of file |
 //!
 //! The board synthesises LINE_SYNC on every `cols`-th beam, as a scanner
 //! would drive it.
@@ -26,7 +29,7 @@
 use cvm_core::config::{Config, Geometry, Kernels, MAX_J, Weights};
 use cvm_core::protocol::MAX_FW;
 
-pub const MAGIC: [u8; 8] = *b"CVMSCAN2";
+pub const MAGIC: [u8; 8] = *b"CVMSCAN3";
 pub const HEADER_LEN: usize = 328;
 
 /// Everything the header says.
@@ -69,7 +72,7 @@ impl HeaderError {
     pub fn message(self) -> &'static str {
         match self {
             HeaderError::Short => "scan file shorter than its header",
-            HeaderError::Magic => "not a CVMSCAN1 scan file",
+            HeaderError::Magic => "not a CVMSCAN3 scan file (older dmap versions wrote CVMSCAN1/2)",
             HeaderError::Length => "unsupported header length",
             HeaderError::Geometry => "detector geometry outside 1..=16 per axis",
             HeaderError::Kernels => "unknown kernel set",

@@ -1,7 +1,7 @@
 //! Link-time proof that nothing reachable from the per-beam path can panic.
 //!
 //! `_start` runs that path the way the firmware does, every input hidden
-//! from the optimiser behind `black_box`: SPI bytes → `decode_frame` →
+//! from the optimiser behind `black_box`: a frame buffer's samples →
 //! `Pipeline::push` (normalise → embed → window → gradient → decision →
 //! encode) or `mark_missing`, `begin` and `finish`, for paper and square
 //! kernels, normalised or raw; and around it the scoring side's own
@@ -21,7 +21,6 @@ use cvm_core::pipeline::{Pipeline, Settings};
 use cvm_core::protocol::{LineSink, MAX_LINE, Priority};
 use cvm_core::stream::{Position, row_words};
 use cvm_fw_app::acquire::{Acquisition, BeamRecord};
-use cvm_fw_app::decode::{decode_frame, frame_bytes};
 use cvm_fw_app::driver::{CountingSink, FrameStore, ScanDriver};
 use cvm_fw_app::queue::LineQueue;
 
@@ -71,7 +70,7 @@ static mut ROW_B: [i32; WORDS] = [0; WORDS];
 /// optimiser cannot tell, so both ways are linked.
 static mut NEAR: [i32; 3 * 15 * CELLS] = [0; 3 * 15 * CELLS];
 static mut QUEUE: LineQueue<8192> = LineQueue::new(4096);
-static mut BUS: [[u8; frame_bytes(CELLS)]; 2] = [[0; frame_bytes(CELLS)]; 2];
+static mut BUS: [[u16; CELLS]; 2] = [[0; CELLS]; 2];
 
 /// The output queue as the line sink, as on the boards.
 struct Sink<'q>(&'q mut LineQueue<8192>);
@@ -88,19 +87,15 @@ impl CountingSink for Sink<'_> {
     }
 }
 
-/// Frame buffers holding bus bytes, decoded when the driver asks.
+/// Frame buffers of samples, as both boards' acquisition fills them.
 struct Frames<'b> {
-    bus: &'b [[u8; frame_bytes(CELLS)]; 2],
+    bus: &'b [[u16; CELLS]; 2],
     cells: usize,
-    samples: [u16; CELLS],
 }
 
 impl FrameStore for Frames<'_> {
     fn frame(&mut self, buf: usize) -> Option<&[u16]> {
-        let bytes = self.bus.get(buf)?.get(..frame_bytes(self.cells))?;
-        let out = self.samples.get_mut(..self.cells)?;
-        decode_frame(bytes, out).ok()?;
-        Some(out)
+        self.bus.get(buf)?.get(..self.cells)
     }
 
     fn release(&mut self, buf: usize) {
@@ -139,12 +134,11 @@ pub extern "C" fn _start() -> ! {
         }
     };
     let mut sink = Sink(queue);
-    let mut samples = [0u16; CELLS];
     let mut line = [0u8; MAX_LINE];
 
     // The per-beam path on its own.
     loop {
-        let bytes: &[u8] = black_box(&bus[0][..]);
+        let samples: &[u16] = black_box(&bus[0][..]);
         let n = black_box(scorer.cells());
         let pos = Position {
             row: black_box(0),
@@ -152,10 +146,8 @@ pub extern "C" fn _start() -> ! {
         };
         match black_box(0u8) {
             0 => {
-                if let Some(out) = samples.get_mut(..n)
-                    && decode_frame(bytes, out).is_ok()
-                {
-                    black_box(pipeline.push(pos, out, &mut sink));
+                if let Some(frame) = samples.get(..n) {
+                    black_box(pipeline.push(pos, frame, &mut sink));
                 } else {
                     black_box(pipeline.mark_missing(pos, &mut sink));
                 }
@@ -177,7 +169,6 @@ pub extern "C" fn _start() -> ! {
     let mut frames = Frames {
         bus: black_box(&*bus),
         cells: black_box(CELLS),
-        samples: [0; CELLS],
     };
     loop {
         match black_box(0u8) {

@@ -25,7 +25,6 @@ use cvm_core::protocol::{MAX_LINE, ResetCause};
 use cvm_core::stream::{row_words, row_words_for};
 use cvm_core::{MAX_J, Scorer};
 use cvm_fw_app::acquire::Acquisition;
-use cvm_fw_app::decode::frame_bytes;
 use cvm_fw_app::driver::ScanDriver;
 use cvm_fw_app::emufile::{HEADER_LEN, ScanHeader};
 use cvm_fw_app::queue::LineQueue;
@@ -37,7 +36,7 @@ use static_cell::{ConstStaticCell, StaticCell};
 
 use crate::config::emulated::{KEEP_RESERVE, MAX_COLS, QUEUE_BYTES};
 use crate::config::{BEAM_LOG, FIRMWARE_VERSION, FRAME_BUFFERS};
-use crate::frames::{Decoder, FrameBuffers};
+use crate::frames::{SampleBuffers, Samples};
 use crate::sink::{QueueSink, SharedQueue};
 use cycles::Stopwatch;
 use host::{eprint, exit};
@@ -58,7 +57,7 @@ static QUEUE: SharedQueue<QUEUE_BYTES> = Mutex::new(RefCell::new(Queue::new(KEEP
 static KICK: Signal<ThreadModeRawMutex, ()> = Signal::new();
 /// The queue ran empty (UART task -> scoring).
 static DRAINED: Signal<ThreadModeRawMutex, ()> = Signal::new();
-static FRAMES: FrameBuffers<FRAME_BUFFERS> = FrameBuffers::new();
+static FRAMES: SampleBuffers<FRAME_BUFFERS> = SampleBuffers::new();
 static ROW_A: ConstStaticCell<[i32; ROW_WORDS]> = ConstStaticCell::new([0; ROW_WORDS]);
 static ROW_B: ConstStaticCell<[i32; ROW_WORDS]> = ConstStaticCell::new([0; ROW_WORDS]);
 static SCORER: StaticCell<Scorer> = StaticCell::new();
@@ -173,15 +172,12 @@ async fn scan_task(syst: cortex_m::peripheral::SYST) {
     let mut driver = ScanDriver::new(pipeline, header.cols, header.rows);
 
     let cells = scorer.cells();
-    let n = frame_bytes(cells);
+    let n = 2 * cells;
     let mut acq: Acquisition<FRAME_BUFFERS, BEAM_LOG> = Acquisition::new();
     let released: [core::cell::Cell<bool>; FRAME_BUFFERS] = Default::default();
-    // One decoder for the whole scan: built per beam, its 512-byte sample
-    // buffer was cleared for every beam (about 220 instructions).
-    let mut frames = Decoder {
+    let mut frames = Samples {
         bufs: &FRAMES,
         cells,
-        samples: [0; cvm_core::MAX_CELLS],
         release: |b: usize| {
             if let Some(r) = released.get(b) {
                 r.set(true);
@@ -211,8 +207,8 @@ async fn scan_task(syst: cortex_m::peripheral::SYST) {
             );
         };
         // SAFETY: `buf` is Filling: the acquisition side owns it.
-        let bytes = unsafe { FRAMES.buffer(buf) };
-        if file.read_exact(&mut bytes[..n]).is_err() {
+        let bytes = unsafe { FRAMES.bytes(buf, cells) };
+        if file.read_exact(bytes).is_err() {
             fail(EXIT_INPUT, "reading the scan file failed");
         }
         acq.read_done(buf, true);

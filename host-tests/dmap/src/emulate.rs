@@ -120,8 +120,9 @@ pub fn scan_file_and_warnings(args: &EmulateArgs) -> Result<(Vec<u8>, Vec<String
         .with_context(|| format!("{}", args.scan.display()))?;
     let mut out = Vec::with_capacity(cvm_fw_app::emufile::HEADER_LEN + 2 * data.len());
     out.extend_from_slice(&header.encode());
+    // Native samples, as the H743's 16-bit SPI frames leave them in memory.
     for s in data {
-        out.extend_from_slice(&s.to_be_bytes());
+        out.extend_from_slice(&s.to_le_bytes());
     }
     Ok((out, warnings))
 }

@@ -141,7 +141,7 @@ pub fn h743_config(h: &ScanHeader) -> Result<String> {
 /// The model's scan file (`Scan.read_raw` in detector.py): `CVMTWIN1`,
 /// rows, cols, J1, J2 as little-endian u32, then the samples as
 /// little-endian u16 in raster order, each map in (J1, J2) order, from an
-/// emulated-board scan file (the same samples, big-endian).
+/// emulated-board scan file (the same samples in the same order).
 pub fn twin_file(h: &ScanHeader, emufile: &[u8]) -> Result<Vec<u8>> {
     let g = h.config.geometry;
     let samples = emufile
@@ -159,9 +159,7 @@ pub fn twin_file(h: &ScanHeader, emufile: &[u8]) -> Result<Vec<u8>> {
     for v in [h.rows, h.cols, u32::from(g.j1), u32::from(g.j2)] {
         out.extend_from_slice(&v.to_le_bytes());
     }
-    for s in samples.chunks_exact(2) {
-        out.extend_from_slice(&[s[1], s[0]]);
-    }
+    out.extend_from_slice(samples);
     Ok(out)
 }
 

@@ -9,7 +9,6 @@ use cvm_core::protocol::{LineSink, Priority};
 use cvm_core::stream::{Position, row_words};
 use cvm_core::{Config, Geometry, Scorer};
 use cvm_fw_app::acquire::Acquisition;
-use cvm_fw_app::decode::{decode_frame, frame_bytes};
 use cvm_fw_app::driver::{CountingSink, FrameStore, ScanDriver};
 use cvm_fw_app::queue::LineQueue;
 
@@ -167,17 +166,15 @@ fn replay(
     out.text()
 }
 
-/// Frame buffers holding bus bytes, decoded on demand.
-pub struct BusFrames {
-    pub bufs: [Vec<u8>; 2],
-    samples: Vec<u16>,
+/// Frame buffers of samples, as both boards' acquisition fills them.
+pub struct SampleFrames {
+    pub bufs: [Vec<u16>; 2],
     pub released: Vec<usize>,
 }
 
-impl FrameStore for BusFrames {
+impl FrameStore for SampleFrames {
     fn frame(&mut self, buf: usize) -> Option<&[u16]> {
-        decode_frame(&self.bufs[buf], &mut self.samples).ok()?;
-        Some(&self.samples)
+        self.bufs.get(buf).map(Vec::as_slice)
     }
     fn release(&mut self, buf: usize) {
         self.released.push(buf);
@@ -221,7 +218,7 @@ impl<const CAP: usize> Uart<CAP> {
 /// the UART, stepped by the test.
 pub struct Board<'a, const CAP: usize> {
     pub acq: Acquisition<2, 16>,
-    pub frames: BusFrames,
+    pub frames: SampleFrames,
     pub driver: ScanDriver<'a, MAX_COLS>,
     pub uart: Uart<CAP>,
     /// Scans the driver said it finished (the H743 logs each one then).
@@ -236,14 +233,13 @@ impl<'a, const CAP: usize> Board<'a, CAP> {
         rows: (&'a mut [i32], &'a mut [i32]),
         reserve: usize,
     ) -> Self {
-        let n = frame_bytes(scorer.cells());
+        let n = scorer.cells();
         let pipeline =
             Pipeline::new(scorer, scan.settings(scorer, scores), rows.0, rows.1).unwrap();
         Board {
             acq: Acquisition::new(),
-            frames: BusFrames {
+            frames: SampleFrames {
                 bufs: [vec![0; n], vec![0; n]],
-                samples: vec![0; scorer.cells()],
                 released: vec![],
             },
             driver: ScanDriver::new(pipeline, scan.cols, scan.rows),
@@ -260,8 +256,7 @@ impl<'a, const CAP: usize> Board<'a, CAP> {
     pub fn drdy(&mut self, sync: bool, frame: &[u16], ok: bool) -> bool {
         match self.acq.drdy(sync) {
             Some(buf) => {
-                let bytes: Vec<u8> = frame.iter().flat_map(|s| s.to_be_bytes()).collect();
-                self.frames.bufs[buf].copy_from_slice(&bytes);
+                self.frames.bufs[buf].copy_from_slice(frame);
                 self.acq.read_done(buf, ok);
                 true
             }

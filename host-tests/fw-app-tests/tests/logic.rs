@@ -4,7 +4,6 @@
 use cvm_core::protocol::{Line, Priority, parse};
 use cvm_core::stream::Position;
 use cvm_fw_app::acquire::{Acquisition, BeamRecord, LostCause};
-use cvm_fw_app::decode::{FrameSizeError, decode_frame, frame_bytes};
 use cvm_fw_app::emufile::{HeaderError, ScanHeader};
 use cvm_fw_app::queue::LineQueue;
 use cvm_fw_app::sequence::{Action, Payload, Sequencer};
@@ -36,21 +35,6 @@ fn rows_from(lines: &[String], from: u32) -> Vec<String> {
         })
         .cloned()
         .collect()
-}
-
-#[test]
-fn decode_is_big_endian_row_major() {
-    let bytes = [0x12, 0x34, 0x00, 0xFF, 0xAB, 0x00];
-    let mut out = [0u16; 3];
-    decode_frame(&bytes, &mut out).unwrap();
-    assert_eq!(out, [0x1234, 0x00FF, 0xAB00]);
-    assert_eq!(
-        decode_frame(&bytes[..5], &mut out),
-        Err(FrameSizeError {
-            bytes: 5,
-            samples: 3
-        })
-    );
 }
 
 #[test]
@@ -479,6 +463,13 @@ fn scan_file_header_round_trips_and_rejects_garbage() {
     let mut bad = bytes;
     bad[0] = b'X';
     assert_eq!(ScanHeader::parse(&bad), Err(HeaderError::Magic));
+    // Version 2 held the frames in bus order (most significant byte
+    // first): read as native samples they would be byte-swapped, so its
+    // files are refused, not misread.
+    let mut v2 = bytes;
+    v2[..8].copy_from_slice(b"CVMSCAN2");
+    assert_eq!(ScanHeader::parse(&v2), Err(HeaderError::Magic));
+    assert!(HeaderError::Magic.message().contains("CVMSCAN3"));
     let mut bad = bytes;
     bad[10] = 17;
     assert_eq!(ScanHeader::parse(&bad), Err(HeaderError::Geometry));
@@ -526,7 +517,6 @@ fn drdy_faster_than_the_spi_loses_the_frames_it_cannot_read_in_place() {
     let scorer = scan.scorer();
     let (mut a, mut b) = scan.row_buffers();
     let mut board = Board::<BIG>::new(&scan, &scorer, true, (&mut a, &mut b), 4096);
-    let n = frame_bytes(scorer.cells());
     let mut reading: Option<usize> = None;
     let mut lost = vec![];
     for beam in 0..scan.frames.len() {
@@ -539,12 +529,7 @@ fn drdy_faster_than_the_spi_loses_the_frames_it_cannot_read_in_place() {
         }
         match board.acq.drdy(pos.col == 0) {
             Some(buf) => {
-                let bytes: Vec<u8> = scan
-                    .frame(beam)
-                    .iter()
-                    .flat_map(|s| s.to_be_bytes())
-                    .collect();
-                board.frames.bufs[buf][..n].copy_from_slice(&bytes);
+                board.frames.bufs[buf].copy_from_slice(scan.frame(beam));
                 if storm {
                     if let Some(prev) = reading.replace(buf) {
                         board.acq.read_done(prev, true);
