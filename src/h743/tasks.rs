@@ -82,7 +82,11 @@ pub async fn score_task(
             if driver.step(rec, &mut frames, &mut sink) {
                 report_scan(driver);
             }
-            KICK.signal(());
+            // Most beams queue no line (lines come per row): waking the
+            // UART task then would only have it find the queue empty.
+            if !QUEUE.lock(|q| q.borrow().is_empty()) {
+                KICK.signal(());
+            }
             // A backlog of beams must not keep the UART task and the
             // watchdog feed waiting: yield every SCORE_BURST steps.
             burst += 1;
