@@ -447,18 +447,41 @@ fn rows<const H: usize, const G: usize>(
     {
         let j2 = H + G;
         let n = n_rows.min(MAX_J).min(frame.len() / j2.max(1));
-        if n > 0 {
-            let ctx = [
+        // Two calls: the top half of the rows into the even words of each
+        // row of `t`, the bottom half, from the last row up, into the odd
+        // words, so that the rows the column pass folds together are
+        // adjacent (one `LDRD`).
+        let top = n.div_ceil(2);
+        let stride = 2 * j2 as u32;
+        let ctx = |stride: u32| {
+            [
                 f2.even.as_ptr() as u32,
                 f2.odd.as_ptr() as u32,
                 m as u32,
                 sh,
-            ];
-            // SAFETY: the generated pass for `j2` reads `n * j2` samples
-            // of `frame` and the factor's `TRI`-word blocks, and writes
-            // `t[k][i]` for `k < j2 <= MAX_J`, `i < n <= MAX_J`; it
+                stride,
+            ]
+        };
+        let pass = arm::rows(j2);
+        if top > 0 {
+            // SAFETY: the generated pass for `j2` reads `top * j2` samples
+            // of `frame` from its first row down and the factor's
+            // `TRI`-word blocks, and writes word `2 i` of `t[k]` for
+            // `k < j2 <= MAX_J`, `i < top`, `2 i < n <= MAX_J`; it
             // preserves the callee-saved registers (AAPCS).
-            unsafe { (arm::rows(j2))(frame.as_ptr(), t.as_mut_ptr().cast(), n, &ctx) };
+            unsafe { pass(frame.as_ptr(), t.as_mut_ptr().cast(), top, &ctx(stride)) };
+        }
+        if n > top {
+            // SAFETY: as above, from row `n - 1` up (a negative stride) for
+            // `n - top` rows, each to word `2 i + 1 < n` of `t[k]`.
+            unsafe {
+                pass(
+                    frame.as_ptr().add((n - 1) * j2),
+                    t.as_mut_ptr().cast::<i32>().add(1),
+                    n - top,
+                    &ctx(stride.wrapping_neg()),
+                )
+            };
         }
     }
     #[cfg(not(target_arch = "arm"))]
@@ -667,8 +690,8 @@ fn cols_model<const H: usize, const G: usize, const DIFF: bool, const NEAR: bool
 mod arm {
     core::arch::global_asm!(include_str!("passes_arm.s"), options(raw));
 
-    /// `(frame, t, rows, [even, odd, m, sh])`.
-    pub type RowsPass = unsafe extern "C" fn(*const u16, *mut i32, usize, *const [u32; 4]);
+    /// `(frame, t, rows, [even, odd, m, sh, stride])`.
+    pub type RowsPass = unsafe extern "C" fn(*const u16, *mut i32, usize, *const [u32; 5]);
     /// `(t, out, rows, [even, odd])`.
     pub type ColsPass = unsafe extern "C" fn(*const i32, *mut i32, usize, *const [u32; 2]);
     /// `(t, e, rows, [even, odd]) -> distance`.
@@ -679,7 +702,7 @@ mod arm {
         ($($j:literal => $rows:ident, $cols:ident, $diff:ident;)*) => {
             unsafe extern "C" {
                 $(
-                    fn $rows(frame: *const u16, t: *mut i32, n: usize, ctx: *const [u32; 4]);
+                    fn $rows(frame: *const u16, t: *mut i32, n: usize, ctx: *const [u32; 5]);
                     fn $cols(t: *const i32, out: *mut i32, n: usize, ctx: *const [u32; 2]);
                     fn $diff(t: *const i32, e: *mut i32, n: usize, ctx: *const [u32; 2]) -> u64;
                 )*

@@ -22,7 +22,8 @@
 cvm_rows_1:
     push {r4, r5, r6, r7, r8, r9, r10, r11, lr}
     ldm r3, {r4, r5, r11, r12}
-    push {r0, r1, r2, r3, r4, r5}
+    ldr r6, [r3, #16]
+    push {r0, r1, r2, r3, r4, r5, r6}
     mov r8, r0
 1:
     ldr r9, [sp, #16]
@@ -33,14 +34,15 @@ cvm_rows_1:
     smmulr r0, r0, r10
     ldr r10, [sp, #4]
     str r0, [r10, #0]
-    add r10, r10, #4
+    add r10, r10, #8
     str r10, [sp, #4]
-    add r8, r8, #2
+    ldr r10, [sp, #24]
+    add r8, r8, r10
     ldr r10, [sp, #8]
     subs r10, r10, #1
     str r10, [sp, #8]
     bne 1b
-    add sp, sp, #24
+    add sp, sp, #28
     pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
     .size cvm_rows_1, . - cvm_rows_1
 
@@ -114,7 +116,8 @@ cvm_cols_diff_1:
 cvm_rows_2:
     push {r4, r5, r6, r7, r8, r9, r10, r11, lr}
     ldm r3, {r4, r5, r11, r12}
-    push {r0, r1, r2, r3, r4, r5}
+    ldr r6, [r3, #16]
+    push {r0, r1, r2, r3, r4, r5, r6}
     mov r8, r0
 1:
     ldr r9, [sp, #16]
@@ -137,14 +140,15 @@ cvm_rows_2:
     smmulr r0, r0, r10
     ldr r10, [sp, #4]
     str r0, [r10, #64]
-    add r10, r10, #4
+    add r10, r10, #8
     str r10, [sp, #4]
-    add r8, r8, #4
+    ldr r10, [sp, #24]
+    add r8, r8, r10
     ldr r10, [sp, #8]
     subs r10, r10, #1
     str r10, [sp, #8]
     bne 1b
-    add sp, sp, #24
+    add sp, sp, #28
     pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
     .size cvm_rows_2, . - cvm_rows_2
 
@@ -160,8 +164,7 @@ cvm_cols_2:
     mov r8, r0
 1:
     ldr r9, [sp, #16]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #4]
+    ldrd r10, r11, [r8, #0]
     add r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
@@ -169,8 +172,7 @@ cvm_cols_2:
     str r0, [r10], #4
     str r10, [sp, #4]
     ldr r9, [sp, #20]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #4]
+    ldrd r10, r11, [r8, #0]
     sub r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
@@ -200,8 +202,7 @@ cvm_cols_diff_2:
     mov r8, r0
 1:
     ldr r9, [sp, #16]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #4]
+    ldrd r10, r11, [r8, #0]
     add r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
@@ -214,8 +215,7 @@ cvm_cols_diff_2:
     str r0, [r9], #4
     str r9, [sp, #4]
     ldr r9, [sp, #20]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #4]
+    ldrd r10, r11, [r8, #0]
     sub r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
@@ -245,7 +245,8 @@ cvm_cols_diff_2:
 cvm_rows_3:
     push {r4, r5, r6, r7, r8, r9, r10, r11, lr}
     ldm r3, {r4, r5, r11, r12}
-    push {r0, r1, r2, r3, r4, r5}
+    ldr r6, [r3, #16]
+    push {r0, r1, r2, r3, r4, r5, r6}
     mov r8, r0
 1:
     ldr r9, [sp, #16]
@@ -275,14 +276,15 @@ cvm_rows_3:
     smmulr r0, r0, r10
     ldr r10, [sp, #4]
     str r0, [r10, #128]
-    add r10, r10, #4
+    add r10, r10, #8
     str r10, [sp, #4]
-    add r8, r8, #6
+    ldr r10, [sp, #24]
+    add r8, r8, r10
     ldr r10, [sp, #8]
     subs r10, r10, #1
     str r10, [sp, #8]
     bne 1b
-    add sp, sp, #24
+    add sp, sp, #28
     pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
     .size cvm_rows_3, . - cvm_rows_3
 
@@ -298,12 +300,11 @@ cvm_cols_3:
     mov r8, r0
 1:
     ldr r9, [sp, #16]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #8]
+    ldrd r10, r11, [r8, #0]
     add r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
+    ldr r10, [r8, #8]
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
@@ -311,8 +312,7 @@ cvm_cols_3:
     stmia r10!, {r0, r1}
     str r10, [sp, #4]
     ldr r9, [sp, #20]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #8]
+    ldrd r10, r11, [r8, #0]
     sub r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
@@ -342,12 +342,11 @@ cvm_cols_diff_3:
     mov r8, r0
 1:
     ldr r9, [sp, #16]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #8]
+    ldrd r10, r11, [r8, #0]
     add r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
+    ldr r10, [r8, #8]
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
@@ -362,8 +361,7 @@ cvm_cols_diff_3:
     stmia r9!, {r0, r1}
     str r9, [sp, #4]
     ldr r9, [sp, #20]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #8]
+    ldrd r10, r11, [r8, #0]
     sub r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
@@ -393,7 +391,8 @@ cvm_cols_diff_3:
 cvm_rows_4:
     push {r4, r5, r6, r7, r8, r9, r10, r11, lr}
     ldm r3, {r4, r5, r11, r12}
-    push {r0, r1, r2, r3, r4, r5}
+    ldr r6, [r3, #16]
+    push {r0, r1, r2, r3, r4, r5, r6}
     mov r8, r0
 1:
     ldr r9, [sp, #16]
@@ -434,14 +433,15 @@ cvm_rows_4:
     ldr r10, [sp, #4]
     str r0, [r10, #128]
     str r1, [r10, #192]
-    add r10, r10, #4
+    add r10, r10, #8
     str r10, [sp, #4]
-    add r8, r8, #8
+    ldr r10, [sp, #24]
+    add r8, r8, r10
     ldr r10, [sp, #8]
     subs r10, r10, #1
     str r10, [sp, #8]
     bne 1b
-    add sp, sp, #24
+    add sp, sp, #28
     pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
     .size cvm_rows_4, . - cvm_rows_4
 
@@ -457,13 +457,11 @@ cvm_cols_4:
     mov r8, r0
 1:
     ldr r9, [sp, #16]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #12]
+    ldrd r10, r11, [r8, #0]
     add r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #8]
+    ldrd r10, r11, [r8, #8]
     add r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
@@ -472,13 +470,11 @@ cvm_cols_4:
     stmia r10!, {r0, r1}
     str r10, [sp, #4]
     ldr r9, [sp, #20]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #12]
+    ldrd r10, r11, [r8, #0]
     sub r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #8]
+    ldrd r10, r11, [r8, #8]
     sub r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
@@ -509,13 +505,11 @@ cvm_cols_diff_4:
     mov r8, r0
 1:
     ldr r9, [sp, #16]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #12]
+    ldrd r10, r11, [r8, #0]
     add r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #8]
+    ldrd r10, r11, [r8, #8]
     add r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
@@ -531,13 +525,11 @@ cvm_cols_diff_4:
     stmia r9!, {r0, r1}
     str r9, [sp, #4]
     ldr r9, [sp, #20]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #12]
+    ldrd r10, r11, [r8, #0]
     sub r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #8]
+    ldrd r10, r11, [r8, #8]
     sub r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
@@ -570,7 +562,8 @@ cvm_cols_diff_4:
 cvm_rows_5:
     push {r4, r5, r6, r7, r8, r9, r10, r11, lr}
     ldm r3, {r4, r5, r11, r12}
-    push {r0, r1, r2, r3, r4, r5}
+    ldr r6, [r3, #16]
+    push {r0, r1, r2, r3, r4, r5, r6}
     mov r8, r0
 1:
     ldr r9, [sp, #16]
@@ -619,14 +612,15 @@ cvm_rows_5:
     ldr r10, [sp, #4]
     str r0, [r10, #192]
     str r1, [r10, #256]
-    add r10, r10, #4
+    add r10, r10, #8
     str r10, [sp, #4]
-    add r8, r8, #10
+    ldr r10, [sp, #24]
+    add r8, r8, r10
     ldr r10, [sp, #8]
     subs r10, r10, #1
     str r10, [sp, #8]
     bne 1b
-    add sp, sp, #24
+    add sp, sp, #28
     pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
     .size cvm_rows_5, . - cvm_rows_5
 
@@ -642,18 +636,16 @@ cvm_cols_5:
     mov r8, r0
 1:
     ldr r9, [sp, #16]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #16]
+    ldrd r10, r11, [r8, #0]
     add r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #12]
+    ldrd r10, r11, [r8, #8]
     add r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
+    ldr r10, [r8, #16]
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
     smmlar r1, r3, r10, r1
@@ -662,13 +654,11 @@ cvm_cols_5:
     stmia r10!, {r0, r1, r2}
     str r10, [sp, #4]
     ldr r9, [sp, #20]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #16]
+    ldrd r10, r11, [r8, #0]
     sub r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #12]
+    ldrd r10, r11, [r8, #8]
     sub r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
@@ -699,18 +689,16 @@ cvm_cols_diff_5:
     mov r8, r0
 1:
     ldr r9, [sp, #16]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #16]
+    ldrd r10, r11, [r8, #0]
     add r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #12]
+    ldrd r10, r11, [r8, #8]
     add r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
+    ldr r10, [r8, #16]
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
     smmlar r1, r3, r10, r1
@@ -729,13 +717,11 @@ cvm_cols_diff_5:
     stmia r9!, {r0, r1, r2}
     str r9, [sp, #4]
     ldr r9, [sp, #20]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #16]
+    ldrd r10, r11, [r8, #0]
     sub r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #12]
+    ldrd r10, r11, [r8, #8]
     sub r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
@@ -768,7 +754,8 @@ cvm_cols_diff_5:
 cvm_rows_6:
     push {r4, r5, r6, r7, r8, r9, r10, r11, lr}
     ldm r3, {r4, r5, r11, r12}
-    push {r0, r1, r2, r3, r4, r5}
+    ldr r6, [r3, #16]
+    push {r0, r1, r2, r3, r4, r5, r6}
     mov r8, r0
 1:
     ldr r9, [sp, #16]
@@ -829,14 +816,15 @@ cvm_rows_6:
     str r0, [r10, #192]
     str r1, [r10, #256]
     str r2, [r10, #320]
-    add r10, r10, #4
+    add r10, r10, #8
     str r10, [sp, #4]
-    add r8, r8, #12
+    ldr r10, [sp, #24]
+    add r8, r8, r10
     ldr r10, [sp, #8]
     subs r10, r10, #1
     str r10, [sp, #8]
     bne 1b
-    add sp, sp, #24
+    add sp, sp, #28
     pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
     .size cvm_rows_6, . - cvm_rows_6
 
@@ -852,19 +840,16 @@ cvm_cols_6:
     mov r8, r0
 1:
     ldr r9, [sp, #16]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #20]
+    ldrd r10, r11, [r8, #0]
     add r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #16]
+    ldrd r10, r11, [r8, #8]
     add r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
-    ldr r11, [r8, #12]
+    ldrd r10, r11, [r8, #16]
     add r10, r10, r11
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
@@ -874,19 +859,16 @@ cvm_cols_6:
     stmia r10!, {r0, r1, r2}
     str r10, [sp, #4]
     ldr r9, [sp, #20]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #20]
+    ldrd r10, r11, [r8, #0]
     sub r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #16]
+    ldrd r10, r11, [r8, #8]
     sub r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
-    ldr r11, [r8, #12]
+    ldrd r10, r11, [r8, #16]
     sub r10, r10, r11
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
@@ -918,19 +900,16 @@ cvm_cols_diff_6:
     mov r8, r0
 1:
     ldr r9, [sp, #16]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #20]
+    ldrd r10, r11, [r8, #0]
     add r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #16]
+    ldrd r10, r11, [r8, #8]
     add r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
-    ldr r11, [r8, #12]
+    ldrd r10, r11, [r8, #16]
     add r10, r10, r11
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
@@ -950,19 +929,16 @@ cvm_cols_diff_6:
     stmia r9!, {r0, r1, r2}
     str r9, [sp, #4]
     ldr r9, [sp, #20]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #20]
+    ldrd r10, r11, [r8, #0]
     sub r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #16]
+    ldrd r10, r11, [r8, #8]
     sub r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
-    ldr r11, [r8, #12]
+    ldrd r10, r11, [r8, #16]
     sub r10, r10, r11
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
@@ -999,7 +975,8 @@ cvm_cols_diff_6:
 cvm_rows_7:
     push {r4, r5, r6, r7, r8, r9, r10, r11, lr}
     ldm r3, {r4, r5, r11, r12}
-    push {r0, r1, r2, r3, r4, r5}
+    ldr r6, [r3, #16]
+    push {r0, r1, r2, r3, r4, r5, r6}
     mov r8, r0
 1:
     ldr r9, [sp, #16]
@@ -1069,14 +1046,15 @@ cvm_rows_7:
     str r0, [r10, #256]
     str r1, [r10, #320]
     str r2, [r10, #384]
-    add r10, r10, #4
+    add r10, r10, #8
     str r10, [sp, #4]
-    add r8, r8, #14
+    ldr r10, [sp, #24]
+    add r8, r8, r10
     ldr r10, [sp, #8]
     subs r10, r10, #1
     str r10, [sp, #8]
     bne 1b
-    add sp, sp, #24
+    add sp, sp, #28
     pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
     .size cvm_rows_7, . - cvm_rows_7
 
@@ -1092,25 +1070,22 @@ cvm_cols_7:
     mov r8, r0
 1:
     ldr r9, [sp, #16]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #24]
+    ldrd r10, r11, [r8, #0]
     add r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #20]
+    ldrd r10, r11, [r8, #8]
     add r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
-    ldr r11, [r8, #16]
+    ldrd r10, r11, [r8, #16]
     add r10, r10, r11
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
     smmlar r1, r3, r10, r1
     smmulr r2, r4, r10
-    ldr r10, [r8, #12]
+    ldr r10, [r8, #24]
     ldmia r9!, {r3, r4, r5, r6}
     smmlar r0, r3, r10, r0
     smmlar r1, r4, r10, r1
@@ -1120,19 +1095,16 @@ cvm_cols_7:
     stmia r10!, {r0, r1, r2, r3}
     str r10, [sp, #4]
     ldr r9, [sp, #20]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #24]
+    ldrd r10, r11, [r8, #0]
     sub r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #20]
+    ldrd r10, r11, [r8, #8]
     sub r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
-    ldr r11, [r8, #16]
+    ldrd r10, r11, [r8, #16]
     sub r10, r10, r11
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
@@ -1164,25 +1136,22 @@ cvm_cols_diff_7:
     mov r8, r0
 1:
     ldr r9, [sp, #16]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #24]
+    ldrd r10, r11, [r8, #0]
     add r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #20]
+    ldrd r10, r11, [r8, #8]
     add r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
-    ldr r11, [r8, #16]
+    ldrd r10, r11, [r8, #16]
     add r10, r10, r11
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
     smmlar r1, r3, r10, r1
     smmulr r2, r4, r10
-    ldr r10, [r8, #12]
+    ldr r10, [r8, #24]
     ldmia r9!, {r3, r4, r5, r6}
     smmlar r0, r3, r10, r0
     smmlar r1, r4, r10, r1
@@ -1204,19 +1173,16 @@ cvm_cols_diff_7:
     stmia r9!, {r0, r1, r2, r3}
     str r9, [sp, #4]
     ldr r9, [sp, #20]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #24]
+    ldrd r10, r11, [r8, #0]
     sub r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #20]
+    ldrd r10, r11, [r8, #8]
     sub r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
-    ldr r11, [r8, #16]
+    ldrd r10, r11, [r8, #16]
     sub r10, r10, r11
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
@@ -1253,7 +1219,8 @@ cvm_cols_diff_7:
 cvm_rows_8:
     push {r4, r5, r6, r7, r8, r9, r10, r11, lr}
     ldm r3, {r4, r5, r11, r12}
-    push {r0, r1, r2, r3, r4, r5}
+    ldr r6, [r3, #16]
+    push {r0, r1, r2, r3, r4, r5, r6}
     mov r8, r0
 1:
     ldr r9, [sp, #16]
@@ -1336,14 +1303,15 @@ cvm_rows_8:
     str r1, [r10, #320]
     str r2, [r10, #384]
     str r3, [r10, #448]
-    add r10, r10, #4
+    add r10, r10, #8
     str r10, [sp, #4]
-    add r8, r8, #16
+    ldr r10, [sp, #24]
+    add r8, r8, r10
     ldr r10, [sp, #8]
     subs r10, r10, #1
     str r10, [sp, #8]
     bne 1b
-    add sp, sp, #24
+    add sp, sp, #28
     pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
     .size cvm_rows_8, . - cvm_rows_8
 
@@ -1359,26 +1327,22 @@ cvm_cols_8:
     mov r8, r0
 1:
     ldr r9, [sp, #16]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #28]
+    ldrd r10, r11, [r8, #0]
     add r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #24]
+    ldrd r10, r11, [r8, #8]
     add r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
-    ldr r11, [r8, #20]
+    ldrd r10, r11, [r8, #16]
     add r10, r10, r11
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
     smmlar r1, r3, r10, r1
     smmulr r2, r4, r10
-    ldr r10, [r8, #12]
-    ldr r11, [r8, #16]
+    ldrd r10, r11, [r8, #24]
     add r10, r10, r11
     ldmia r9!, {r3, r4, r5, r6}
     smmlar r0, r3, r10, r0
@@ -1389,26 +1353,22 @@ cvm_cols_8:
     stmia r10!, {r0, r1, r2, r3}
     str r10, [sp, #4]
     ldr r9, [sp, #20]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #28]
+    ldrd r10, r11, [r8, #0]
     sub r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #24]
+    ldrd r10, r11, [r8, #8]
     sub r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
-    ldr r11, [r8, #20]
+    ldrd r10, r11, [r8, #16]
     sub r10, r10, r11
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
     smmlar r1, r3, r10, r1
     smmulr r2, r4, r10
-    ldr r10, [r8, #12]
-    ldr r11, [r8, #16]
+    ldrd r10, r11, [r8, #24]
     sub r10, r10, r11
     ldmia r9!, {r3, r4, r5, r6}
     smmlar r0, r3, r10, r0
@@ -1441,26 +1401,22 @@ cvm_cols_diff_8:
     mov r8, r0
 1:
     ldr r9, [sp, #16]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #28]
+    ldrd r10, r11, [r8, #0]
     add r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #24]
+    ldrd r10, r11, [r8, #8]
     add r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
-    ldr r11, [r8, #20]
+    ldrd r10, r11, [r8, #16]
     add r10, r10, r11
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
     smmlar r1, r3, r10, r1
     smmulr r2, r4, r10
-    ldr r10, [r8, #12]
-    ldr r11, [r8, #16]
+    ldrd r10, r11, [r8, #24]
     add r10, r10, r11
     ldmia r9!, {r3, r4, r5, r6}
     smmlar r0, r3, r10, r0
@@ -1483,26 +1439,22 @@ cvm_cols_diff_8:
     stmia r9!, {r0, r1, r2, r3}
     str r9, [sp, #4]
     ldr r9, [sp, #20]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #28]
+    ldrd r10, r11, [r8, #0]
     sub r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #24]
+    ldrd r10, r11, [r8, #8]
     sub r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
-    ldr r11, [r8, #20]
+    ldrd r10, r11, [r8, #16]
     sub r10, r10, r11
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
     smmlar r1, r3, r10, r1
     smmulr r2, r4, r10
-    ldr r10, [r8, #12]
-    ldr r11, [r8, #16]
+    ldrd r10, r11, [r8, #24]
     sub r10, r10, r11
     ldmia r9!, {r3, r4, r5, r6}
     smmlar r0, r3, r10, r0
@@ -1542,7 +1494,8 @@ cvm_cols_diff_8:
 cvm_rows_9:
     push {r4, r5, r6, r7, r8, r9, r10, r11, lr}
     ldm r3, {r4, r5, r11, r12}
-    push {r0, r1, r2, r3, r4, r5}
+    ldr r6, [r3, #16]
+    push {r0, r1, r2, r3, r4, r5, r6}
     mov r8, r0
 1:
     ldr r9, [sp, #16]
@@ -1635,14 +1588,15 @@ cvm_rows_9:
     str r1, [r10, #384]
     str r2, [r10, #448]
     str r3, [r10, #512]
-    add r10, r10, #4
+    add r10, r10, #8
     str r10, [sp, #4]
-    add r8, r8, #18
+    ldr r10, [sp, #24]
+    add r8, r8, r10
     ldr r10, [sp, #8]
     subs r10, r10, #1
     str r10, [sp, #8]
     bne 1b
-    add sp, sp, #24
+    add sp, sp, #28
     pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
     .size cvm_rows_9, . - cvm_rows_9
 
@@ -1658,33 +1612,29 @@ cvm_cols_9:
     mov r8, r0
 1:
     ldr r9, [sp, #16]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #32]
+    ldrd r10, r11, [r8, #0]
     add r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #28]
+    ldrd r10, r11, [r8, #8]
     add r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
-    ldr r11, [r8, #24]
+    ldrd r10, r11, [r8, #16]
     add r10, r10, r11
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
     smmlar r1, r3, r10, r1
     smmulr r2, r4, r10
-    ldr r10, [r8, #12]
-    ldr r11, [r8, #20]
+    ldrd r10, r11, [r8, #24]
     add r10, r10, r11
     ldmia r9!, {r3, r4, r5, r6}
     smmlar r0, r3, r10, r0
     smmlar r1, r4, r10, r1
     smmlar r2, r5, r10, r2
     smmulr r3, r6, r10
-    ldr r10, [r8, #16]
+    ldr r10, [r8, #32]
     ldmia r9!, {r4, r5, r6, r7, r11}
     smmlar r0, r4, r10, r0
     smmlar r1, r5, r10, r1
@@ -1695,26 +1645,22 @@ cvm_cols_9:
     stmia r10!, {r0, r1, r2, r3, r4}
     str r10, [sp, #4]
     ldr r9, [sp, #20]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #32]
+    ldrd r10, r11, [r8, #0]
     sub r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #28]
+    ldrd r10, r11, [r8, #8]
     sub r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
-    ldr r11, [r8, #24]
+    ldrd r10, r11, [r8, #16]
     sub r10, r10, r11
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
     smmlar r1, r3, r10, r1
     smmulr r2, r4, r10
-    ldr r10, [r8, #12]
-    ldr r11, [r8, #20]
+    ldrd r10, r11, [r8, #24]
     sub r10, r10, r11
     ldmia r9!, {r3, r4, r5, r6}
     smmlar r0, r3, r10, r0
@@ -1747,33 +1693,29 @@ cvm_cols_diff_9:
     mov r8, r0
 1:
     ldr r9, [sp, #16]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #32]
+    ldrd r10, r11, [r8, #0]
     add r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #28]
+    ldrd r10, r11, [r8, #8]
     add r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
-    ldr r11, [r8, #24]
+    ldrd r10, r11, [r8, #16]
     add r10, r10, r11
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
     smmlar r1, r3, r10, r1
     smmulr r2, r4, r10
-    ldr r10, [r8, #12]
-    ldr r11, [r8, #20]
+    ldrd r10, r11, [r8, #24]
     add r10, r10, r11
     ldmia r9!, {r3, r4, r5, r6}
     smmlar r0, r3, r10, r0
     smmlar r1, r4, r10, r1
     smmlar r2, r5, r10, r2
     smmulr r3, r6, r10
-    ldr r10, [r8, #16]
+    ldr r10, [r8, #32]
     ldmia r9!, {r4, r5, r6, r7, r11}
     smmlar r0, r4, r10, r0
     smmlar r1, r5, r10, r1
@@ -1799,26 +1741,22 @@ cvm_cols_diff_9:
     stmia r9!, {r0, r1, r2, r3, r4}
     str r9, [sp, #4]
     ldr r9, [sp, #20]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #32]
+    ldrd r10, r11, [r8, #0]
     sub r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #28]
+    ldrd r10, r11, [r8, #8]
     sub r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
-    ldr r11, [r8, #24]
+    ldrd r10, r11, [r8, #16]
     sub r10, r10, r11
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
     smmlar r1, r3, r10, r1
     smmulr r2, r4, r10
-    ldr r10, [r8, #12]
-    ldr r11, [r8, #20]
+    ldrd r10, r11, [r8, #24]
     sub r10, r10, r11
     ldmia r9!, {r3, r4, r5, r6}
     smmlar r0, r3, r10, r0
@@ -1858,7 +1796,8 @@ cvm_cols_diff_9:
 cvm_rows_10:
     push {r4, r5, r6, r7, r8, r9, r10, r11, lr}
     ldm r3, {r4, r5, r11, r12}
-    push {r0, r1, r2, r3, r4, r5}
+    ldr r6, [r3, #16]
+    push {r0, r1, r2, r3, r4, r5, r6}
     mov r8, r0
 1:
     ldr r9, [sp, #16]
@@ -1965,14 +1904,15 @@ cvm_rows_10:
     str r2, [r10, #448]
     str r3, [r10, #512]
     str r4, [r10, #576]
-    add r10, r10, #4
+    add r10, r10, #8
     str r10, [sp, #4]
-    add r8, r8, #20
+    ldr r10, [sp, #24]
+    add r8, r8, r10
     ldr r10, [sp, #8]
     subs r10, r10, #1
     str r10, [sp, #8]
     bne 1b
-    add sp, sp, #24
+    add sp, sp, #28
     pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
     .size cvm_rows_10, . - cvm_rows_10
 
@@ -1988,34 +1928,29 @@ cvm_cols_10:
     mov r8, r0
 1:
     ldr r9, [sp, #16]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #36]
+    ldrd r10, r11, [r8, #0]
     add r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #32]
+    ldrd r10, r11, [r8, #8]
     add r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
-    ldr r11, [r8, #28]
+    ldrd r10, r11, [r8, #16]
     add r10, r10, r11
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
     smmlar r1, r3, r10, r1
     smmulr r2, r4, r10
-    ldr r10, [r8, #12]
-    ldr r11, [r8, #24]
+    ldrd r10, r11, [r8, #24]
     add r10, r10, r11
     ldmia r9!, {r3, r4, r5, r6}
     smmlar r0, r3, r10, r0
     smmlar r1, r4, r10, r1
     smmlar r2, r5, r10, r2
     smmulr r3, r6, r10
-    ldr r10, [r8, #16]
-    ldr r11, [r8, #20]
+    ldrd r10, r11, [r8, #32]
     add r10, r10, r11
     ldmia r9!, {r4, r5, r6, r7, r11}
     smmlar r0, r4, r10, r0
@@ -2027,34 +1962,29 @@ cvm_cols_10:
     stmia r10!, {r0, r1, r2, r3, r4}
     str r10, [sp, #4]
     ldr r9, [sp, #20]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #36]
+    ldrd r10, r11, [r8, #0]
     sub r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #32]
+    ldrd r10, r11, [r8, #8]
     sub r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
-    ldr r11, [r8, #28]
+    ldrd r10, r11, [r8, #16]
     sub r10, r10, r11
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
     smmlar r1, r3, r10, r1
     smmulr r2, r4, r10
-    ldr r10, [r8, #12]
-    ldr r11, [r8, #24]
+    ldrd r10, r11, [r8, #24]
     sub r10, r10, r11
     ldmia r9!, {r3, r4, r5, r6}
     smmlar r0, r3, r10, r0
     smmlar r1, r4, r10, r1
     smmlar r2, r5, r10, r2
     smmulr r3, r6, r10
-    ldr r10, [r8, #16]
-    ldr r11, [r8, #20]
+    ldrd r10, r11, [r8, #32]
     sub r10, r10, r11
     ldmia r9!, {r4, r5, r6, r7, r11}
     smmlar r0, r4, r10, r0
@@ -2088,34 +2018,29 @@ cvm_cols_diff_10:
     mov r8, r0
 1:
     ldr r9, [sp, #16]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #36]
+    ldrd r10, r11, [r8, #0]
     add r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #32]
+    ldrd r10, r11, [r8, #8]
     add r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
-    ldr r11, [r8, #28]
+    ldrd r10, r11, [r8, #16]
     add r10, r10, r11
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
     smmlar r1, r3, r10, r1
     smmulr r2, r4, r10
-    ldr r10, [r8, #12]
-    ldr r11, [r8, #24]
+    ldrd r10, r11, [r8, #24]
     add r10, r10, r11
     ldmia r9!, {r3, r4, r5, r6}
     smmlar r0, r3, r10, r0
     smmlar r1, r4, r10, r1
     smmlar r2, r5, r10, r2
     smmulr r3, r6, r10
-    ldr r10, [r8, #16]
-    ldr r11, [r8, #20]
+    ldrd r10, r11, [r8, #32]
     add r10, r10, r11
     ldmia r9!, {r4, r5, r6, r7, r11}
     smmlar r0, r4, r10, r0
@@ -2142,34 +2067,29 @@ cvm_cols_diff_10:
     stmia r9!, {r0, r1, r2, r3, r4}
     str r9, [sp, #4]
     ldr r9, [sp, #20]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #36]
+    ldrd r10, r11, [r8, #0]
     sub r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #32]
+    ldrd r10, r11, [r8, #8]
     sub r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
-    ldr r11, [r8, #28]
+    ldrd r10, r11, [r8, #16]
     sub r10, r10, r11
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
     smmlar r1, r3, r10, r1
     smmulr r2, r4, r10
-    ldr r10, [r8, #12]
-    ldr r11, [r8, #24]
+    ldrd r10, r11, [r8, #24]
     sub r10, r10, r11
     ldmia r9!, {r3, r4, r5, r6}
     smmlar r0, r3, r10, r0
     smmlar r1, r4, r10, r1
     smmlar r2, r5, r10, r2
     smmulr r3, r6, r10
-    ldr r10, [r8, #16]
-    ldr r11, [r8, #20]
+    ldrd r10, r11, [r8, #32]
     sub r10, r10, r11
     ldmia r9!, {r4, r5, r6, r7, r11}
     smmlar r0, r4, r10, r0
@@ -2213,7 +2133,8 @@ cvm_cols_diff_10:
 cvm_rows_11:
     push {r4, r5, r6, r7, r8, r9, r10, r11, lr}
     ldm r3, {r4, r5, r11, r12}
-    push {r0, r1, r2, r3, r4, r5}
+    ldr r6, [r3, #16]
+    push {r0, r1, r2, r3, r4, r5, r6}
     mov r8, r0
 1:
     ldr r9, [sp, #16]
@@ -2332,14 +2253,15 @@ cvm_rows_11:
     str r2, [r10, #512]
     str r3, [r10, #576]
     str r4, [r10, #640]
-    add r10, r10, #4
+    add r10, r10, #8
     str r10, [sp, #4]
-    add r8, r8, #22
+    ldr r10, [sp, #24]
+    add r8, r8, r10
     ldr r10, [sp, #8]
     subs r10, r10, #1
     str r10, [sp, #8]
     bne 1b
-    add sp, sp, #24
+    add sp, sp, #28
     pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
     .size cvm_rows_11, . - cvm_rows_11
 
@@ -2355,34 +2277,29 @@ cvm_cols_11:
     mov r8, r0
 1:
     ldr r9, [sp, #16]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #40]
+    ldrd r10, r11, [r8, #0]
     add r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #36]
+    ldrd r10, r11, [r8, #8]
     add r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
-    ldr r11, [r8, #32]
+    ldrd r10, r11, [r8, #16]
     add r10, r10, r11
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
     smmlar r1, r3, r10, r1
     smmulr r2, r4, r10
-    ldr r10, [r8, #12]
-    ldr r11, [r8, #28]
+    ldrd r10, r11, [r8, #24]
     add r10, r10, r11
     ldmia r9!, {r3, r4, r5, r6}
     smmlar r0, r3, r10, r0
     smmlar r1, r4, r10, r1
     smmlar r2, r5, r10, r2
     smmulr r3, r6, r10
-    ldr r10, [r8, #16]
-    ldr r11, [r8, #24]
+    ldrd r10, r11, [r8, #32]
     add r10, r10, r11
     ldmia r9!, {r4, r5, r6, r7, r11}
     smmlar r0, r4, r10, r0
@@ -2390,7 +2307,7 @@ cvm_cols_11:
     smmlar r2, r6, r10, r2
     smmlar r3, r7, r10, r3
     smmulr r4, r11, r10
-    ldr r10, [r8, #20]
+    ldr r10, [r8, #40]
     ldmia r9!, {r5, r6, r7, r11, r12, lr}
     smmlar r0, r5, r10, r0
     smmlar r1, r6, r10, r1
@@ -2402,34 +2319,29 @@ cvm_cols_11:
     stmia r10!, {r0, r1, r2, r3, r4, r5}
     str r10, [sp, #4]
     ldr r9, [sp, #20]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #40]
+    ldrd r10, r11, [r8, #0]
     sub r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #36]
+    ldrd r10, r11, [r8, #8]
     sub r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
-    ldr r11, [r8, #32]
+    ldrd r10, r11, [r8, #16]
     sub r10, r10, r11
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
     smmlar r1, r3, r10, r1
     smmulr r2, r4, r10
-    ldr r10, [r8, #12]
-    ldr r11, [r8, #28]
+    ldrd r10, r11, [r8, #24]
     sub r10, r10, r11
     ldmia r9!, {r3, r4, r5, r6}
     smmlar r0, r3, r10, r0
     smmlar r1, r4, r10, r1
     smmlar r2, r5, r10, r2
     smmulr r3, r6, r10
-    ldr r10, [r8, #16]
-    ldr r11, [r8, #24]
+    ldrd r10, r11, [r8, #32]
     sub r10, r10, r11
     ldmia r9!, {r4, r5, r6, r7, r11}
     smmlar r0, r4, r10, r0
@@ -2463,34 +2375,29 @@ cvm_cols_diff_11:
     mov r8, r0
 1:
     ldr r9, [sp, #16]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #40]
+    ldrd r10, r11, [r8, #0]
     add r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #36]
+    ldrd r10, r11, [r8, #8]
     add r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
-    ldr r11, [r8, #32]
+    ldrd r10, r11, [r8, #16]
     add r10, r10, r11
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
     smmlar r1, r3, r10, r1
     smmulr r2, r4, r10
-    ldr r10, [r8, #12]
-    ldr r11, [r8, #28]
+    ldrd r10, r11, [r8, #24]
     add r10, r10, r11
     ldmia r9!, {r3, r4, r5, r6}
     smmlar r0, r3, r10, r0
     smmlar r1, r4, r10, r1
     smmlar r2, r5, r10, r2
     smmulr r3, r6, r10
-    ldr r10, [r8, #16]
-    ldr r11, [r8, #24]
+    ldrd r10, r11, [r8, #32]
     add r10, r10, r11
     ldmia r9!, {r4, r5, r6, r7, r11}
     smmlar r0, r4, r10, r0
@@ -2498,7 +2405,7 @@ cvm_cols_diff_11:
     smmlar r2, r6, r10, r2
     smmlar r3, r7, r10, r3
     smmulr r4, r11, r10
-    ldr r10, [r8, #20]
+    ldr r10, [r8, #40]
     ldmia r9!, {r5, r6, r7, r11, r12, lr}
     smmlar r0, r5, r10, r0
     smmlar r1, r6, r10, r1
@@ -2527,34 +2434,29 @@ cvm_cols_diff_11:
     stmia r9!, {r0, r1, r2, r3, r4, r5}
     str r9, [sp, #4]
     ldr r9, [sp, #20]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #40]
+    ldrd r10, r11, [r8, #0]
     sub r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #36]
+    ldrd r10, r11, [r8, #8]
     sub r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
-    ldr r11, [r8, #32]
+    ldrd r10, r11, [r8, #16]
     sub r10, r10, r11
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
     smmlar r1, r3, r10, r1
     smmulr r2, r4, r10
-    ldr r10, [r8, #12]
-    ldr r11, [r8, #28]
+    ldrd r10, r11, [r8, #24]
     sub r10, r10, r11
     ldmia r9!, {r3, r4, r5, r6}
     smmlar r0, r3, r10, r0
     smmlar r1, r4, r10, r1
     smmlar r2, r5, r10, r2
     smmulr r3, r6, r10
-    ldr r10, [r8, #16]
-    ldr r11, [r8, #24]
+    ldrd r10, r11, [r8, #32]
     sub r10, r10, r11
     ldmia r9!, {r4, r5, r6, r7, r11}
     smmlar r0, r4, r10, r0
@@ -2598,7 +2500,8 @@ cvm_cols_diff_11:
 cvm_rows_12:
     push {r4, r5, r6, r7, r8, r9, r10, r11, lr}
     ldm r3, {r4, r5, r11, r12}
-    push {r0, r1, r2, r3, r4, r5}
+    ldr r6, [r3, #16]
+    push {r0, r1, r2, r3, r4, r5, r6}
     mov r8, r0
 1:
     ldr r9, [sp, #16]
@@ -2733,14 +2636,15 @@ cvm_rows_12:
     str r3, [r10, #576]
     str r4, [r10, #640]
     str r5, [r10, #704]
-    add r10, r10, #4
+    add r10, r10, #8
     str r10, [sp, #4]
-    add r8, r8, #24
+    ldr r10, [sp, #24]
+    add r8, r8, r10
     ldr r10, [sp, #8]
     subs r10, r10, #1
     str r10, [sp, #8]
     bne 1b
-    add sp, sp, #24
+    add sp, sp, #28
     pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
     .size cvm_rows_12, . - cvm_rows_12
 
@@ -2756,34 +2660,29 @@ cvm_cols_12:
     mov r8, r0
 1:
     ldr r9, [sp, #16]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #44]
+    ldrd r10, r11, [r8, #0]
     add r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #40]
+    ldrd r10, r11, [r8, #8]
     add r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
-    ldr r11, [r8, #36]
+    ldrd r10, r11, [r8, #16]
     add r10, r10, r11
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
     smmlar r1, r3, r10, r1
     smmulr r2, r4, r10
-    ldr r10, [r8, #12]
-    ldr r11, [r8, #32]
+    ldrd r10, r11, [r8, #24]
     add r10, r10, r11
     ldmia r9!, {r3, r4, r5, r6}
     smmlar r0, r3, r10, r0
     smmlar r1, r4, r10, r1
     smmlar r2, r5, r10, r2
     smmulr r3, r6, r10
-    ldr r10, [r8, #16]
-    ldr r11, [r8, #28]
+    ldrd r10, r11, [r8, #32]
     add r10, r10, r11
     ldmia r9!, {r4, r5, r6, r7, r11}
     smmlar r0, r4, r10, r0
@@ -2791,8 +2690,7 @@ cvm_cols_12:
     smmlar r2, r6, r10, r2
     smmlar r3, r7, r10, r3
     smmulr r4, r11, r10
-    ldr r10, [r8, #20]
-    ldr r11, [r8, #24]
+    ldrd r10, r11, [r8, #40]
     add r10, r10, r11
     ldmia r9!, {r5, r6, r7, r11, r12, lr}
     smmlar r0, r5, r10, r0
@@ -2805,34 +2703,29 @@ cvm_cols_12:
     stmia r10!, {r0, r1, r2, r3, r4, r5}
     str r10, [sp, #4]
     ldr r9, [sp, #20]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #44]
+    ldrd r10, r11, [r8, #0]
     sub r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #40]
+    ldrd r10, r11, [r8, #8]
     sub r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
-    ldr r11, [r8, #36]
+    ldrd r10, r11, [r8, #16]
     sub r10, r10, r11
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
     smmlar r1, r3, r10, r1
     smmulr r2, r4, r10
-    ldr r10, [r8, #12]
-    ldr r11, [r8, #32]
+    ldrd r10, r11, [r8, #24]
     sub r10, r10, r11
     ldmia r9!, {r3, r4, r5, r6}
     smmlar r0, r3, r10, r0
     smmlar r1, r4, r10, r1
     smmlar r2, r5, r10, r2
     smmulr r3, r6, r10
-    ldr r10, [r8, #16]
-    ldr r11, [r8, #28]
+    ldrd r10, r11, [r8, #32]
     sub r10, r10, r11
     ldmia r9!, {r4, r5, r6, r7, r11}
     smmlar r0, r4, r10, r0
@@ -2840,8 +2733,7 @@ cvm_cols_12:
     smmlar r2, r6, r10, r2
     smmlar r3, r7, r10, r3
     smmulr r4, r11, r10
-    ldr r10, [r8, #20]
-    ldr r11, [r8, #24]
+    ldrd r10, r11, [r8, #40]
     sub r10, r10, r11
     ldmia r9!, {r5, r6, r7, r11, r12, lr}
     smmlar r0, r5, r10, r0
@@ -2876,34 +2768,29 @@ cvm_cols_diff_12:
     mov r8, r0
 1:
     ldr r9, [sp, #16]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #44]
+    ldrd r10, r11, [r8, #0]
     add r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #40]
+    ldrd r10, r11, [r8, #8]
     add r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
-    ldr r11, [r8, #36]
+    ldrd r10, r11, [r8, #16]
     add r10, r10, r11
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
     smmlar r1, r3, r10, r1
     smmulr r2, r4, r10
-    ldr r10, [r8, #12]
-    ldr r11, [r8, #32]
+    ldrd r10, r11, [r8, #24]
     add r10, r10, r11
     ldmia r9!, {r3, r4, r5, r6}
     smmlar r0, r3, r10, r0
     smmlar r1, r4, r10, r1
     smmlar r2, r5, r10, r2
     smmulr r3, r6, r10
-    ldr r10, [r8, #16]
-    ldr r11, [r8, #28]
+    ldrd r10, r11, [r8, #32]
     add r10, r10, r11
     ldmia r9!, {r4, r5, r6, r7, r11}
     smmlar r0, r4, r10, r0
@@ -2911,8 +2798,7 @@ cvm_cols_diff_12:
     smmlar r2, r6, r10, r2
     smmlar r3, r7, r10, r3
     smmulr r4, r11, r10
-    ldr r10, [r8, #20]
-    ldr r11, [r8, #24]
+    ldrd r10, r11, [r8, #40]
     add r10, r10, r11
     ldmia r9!, {r5, r6, r7, r11, r12, lr}
     smmlar r0, r5, r10, r0
@@ -2942,34 +2828,29 @@ cvm_cols_diff_12:
     stmia r9!, {r0, r1, r2, r3, r4, r5}
     str r9, [sp, #4]
     ldr r9, [sp, #20]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #44]
+    ldrd r10, r11, [r8, #0]
     sub r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #40]
+    ldrd r10, r11, [r8, #8]
     sub r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
-    ldr r11, [r8, #36]
+    ldrd r10, r11, [r8, #16]
     sub r10, r10, r11
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
     smmlar r1, r3, r10, r1
     smmulr r2, r4, r10
-    ldr r10, [r8, #12]
-    ldr r11, [r8, #32]
+    ldrd r10, r11, [r8, #24]
     sub r10, r10, r11
     ldmia r9!, {r3, r4, r5, r6}
     smmlar r0, r3, r10, r0
     smmlar r1, r4, r10, r1
     smmlar r2, r5, r10, r2
     smmulr r3, r6, r10
-    ldr r10, [r8, #16]
-    ldr r11, [r8, #28]
+    ldrd r10, r11, [r8, #32]
     sub r10, r10, r11
     ldmia r9!, {r4, r5, r6, r7, r11}
     smmlar r0, r4, r10, r0
@@ -2977,8 +2858,7 @@ cvm_cols_diff_12:
     smmlar r2, r6, r10, r2
     smmlar r3, r7, r10, r3
     smmulr r4, r11, r10
-    ldr r10, [r8, #20]
-    ldr r11, [r8, #24]
+    ldrd r10, r11, [r8, #40]
     sub r10, r10, r11
     ldmia r9!, {r5, r6, r7, r11, r12, lr}
     smmlar r0, r5, r10, r0
@@ -3025,7 +2905,8 @@ cvm_cols_diff_12:
 cvm_rows_13:
     push {r4, r5, r6, r7, r8, r9, r10, r11, lr}
     ldm r3, {r4, r5, r11, r12}
-    push {r0, r1, r2, r3, r4, r5}
+    ldr r6, [r3, #16]
+    push {r0, r1, r2, r3, r4, r5, r6}
     mov r8, r0
 1:
     ldr r9, [sp, #16]
@@ -3174,14 +3055,15 @@ cvm_rows_13:
     str r3, [r10, #640]
     str r4, [r10, #704]
     str r5, [r10, #768]
-    add r10, r10, #4
+    add r10, r10, #8
     str r10, [sp, #4]
-    add r8, r8, #26
+    ldr r10, [sp, #24]
+    add r8, r8, r10
     ldr r10, [sp, #8]
     subs r10, r10, #1
     str r10, [sp, #8]
     bne 1b
-    add sp, sp, #24
+    add sp, sp, #28
     pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
     .size cvm_rows_13, . - cvm_rows_13
 
@@ -3197,34 +3079,29 @@ cvm_cols_13:
     mov r8, r0
 1:
     ldr r9, [sp, #16]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #48]
+    ldrd r10, r11, [r8, #0]
     add r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #44]
+    ldrd r10, r11, [r8, #8]
     add r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
-    ldr r11, [r8, #40]
+    ldrd r10, r11, [r8, #16]
     add r10, r10, r11
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
     smmlar r1, r3, r10, r1
     smmulr r2, r4, r10
-    ldr r10, [r8, #12]
-    ldr r11, [r8, #36]
+    ldrd r10, r11, [r8, #24]
     add r10, r10, r11
     ldmia r9!, {r3, r4, r5, r6}
     smmlar r0, r3, r10, r0
     smmlar r1, r4, r10, r1
     smmlar r2, r5, r10, r2
     smmulr r3, r6, r10
-    ldr r10, [r8, #16]
-    ldr r11, [r8, #32]
+    ldrd r10, r11, [r8, #32]
     add r10, r10, r11
     ldmia r9!, {r4, r5, r6, r7, r11}
     smmlar r0, r4, r10, r0
@@ -3232,8 +3109,7 @@ cvm_cols_13:
     smmlar r2, r6, r10, r2
     smmlar r3, r7, r10, r3
     smmulr r4, r11, r10
-    ldr r10, [r8, #20]
-    ldr r11, [r8, #28]
+    ldrd r10, r11, [r8, #40]
     add r10, r10, r11
     ldmia r9!, {r5, r6, r7, r11, r12, lr}
     smmlar r0, r5, r10, r0
@@ -3242,7 +3118,7 @@ cvm_cols_13:
     smmlar r3, r11, r10, r3
     smmlar r4, r12, r10, r4
     smmulr r5, lr, r10
-    ldr r10, [r8, #24]
+    ldr r10, [r8, #48]
     ldmia r9!, {r6, r7, r11, r12, lr}
     smmlar r0, r6, r10, r0
     smmlar r1, r7, r10, r1
@@ -3256,34 +3132,29 @@ cvm_cols_13:
     stmia r10!, {r0, r1, r2, r3, r4, r5, r6}
     str r10, [sp, #4]
     ldr r9, [sp, #20]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #48]
+    ldrd r10, r11, [r8, #0]
     sub r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #44]
+    ldrd r10, r11, [r8, #8]
     sub r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
-    ldr r11, [r8, #40]
+    ldrd r10, r11, [r8, #16]
     sub r10, r10, r11
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
     smmlar r1, r3, r10, r1
     smmulr r2, r4, r10
-    ldr r10, [r8, #12]
-    ldr r11, [r8, #36]
+    ldrd r10, r11, [r8, #24]
     sub r10, r10, r11
     ldmia r9!, {r3, r4, r5, r6}
     smmlar r0, r3, r10, r0
     smmlar r1, r4, r10, r1
     smmlar r2, r5, r10, r2
     smmulr r3, r6, r10
-    ldr r10, [r8, #16]
-    ldr r11, [r8, #32]
+    ldrd r10, r11, [r8, #32]
     sub r10, r10, r11
     ldmia r9!, {r4, r5, r6, r7, r11}
     smmlar r0, r4, r10, r0
@@ -3291,8 +3162,7 @@ cvm_cols_13:
     smmlar r2, r6, r10, r2
     smmlar r3, r7, r10, r3
     smmulr r4, r11, r10
-    ldr r10, [r8, #20]
-    ldr r11, [r8, #28]
+    ldrd r10, r11, [r8, #40]
     sub r10, r10, r11
     ldmia r9!, {r5, r6, r7, r11, r12, lr}
     smmlar r0, r5, r10, r0
@@ -3327,34 +3197,29 @@ cvm_cols_diff_13:
     mov r8, r0
 1:
     ldr r9, [sp, #16]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #48]
+    ldrd r10, r11, [r8, #0]
     add r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #44]
+    ldrd r10, r11, [r8, #8]
     add r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
-    ldr r11, [r8, #40]
+    ldrd r10, r11, [r8, #16]
     add r10, r10, r11
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
     smmlar r1, r3, r10, r1
     smmulr r2, r4, r10
-    ldr r10, [r8, #12]
-    ldr r11, [r8, #36]
+    ldrd r10, r11, [r8, #24]
     add r10, r10, r11
     ldmia r9!, {r3, r4, r5, r6}
     smmlar r0, r3, r10, r0
     smmlar r1, r4, r10, r1
     smmlar r2, r5, r10, r2
     smmulr r3, r6, r10
-    ldr r10, [r8, #16]
-    ldr r11, [r8, #32]
+    ldrd r10, r11, [r8, #32]
     add r10, r10, r11
     ldmia r9!, {r4, r5, r6, r7, r11}
     smmlar r0, r4, r10, r0
@@ -3362,8 +3227,7 @@ cvm_cols_diff_13:
     smmlar r2, r6, r10, r2
     smmlar r3, r7, r10, r3
     smmulr r4, r11, r10
-    ldr r10, [r8, #20]
-    ldr r11, [r8, #28]
+    ldrd r10, r11, [r8, #40]
     add r10, r10, r11
     ldmia r9!, {r5, r6, r7, r11, r12, lr}
     smmlar r0, r5, r10, r0
@@ -3372,7 +3236,7 @@ cvm_cols_diff_13:
     smmlar r3, r11, r10, r3
     smmlar r4, r12, r10, r4
     smmulr r5, lr, r10
-    ldr r10, [r8, #24]
+    ldr r10, [r8, #48]
     ldmia r9!, {r6, r7, r11, r12, lr}
     smmlar r0, r6, r10, r0
     smmlar r1, r7, r10, r1
@@ -3406,34 +3270,29 @@ cvm_cols_diff_13:
     stmia r9!, {r0, r1, r2, r3, r4, r5, r6}
     str r9, [sp, #4]
     ldr r9, [sp, #20]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #48]
+    ldrd r10, r11, [r8, #0]
     sub r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #44]
+    ldrd r10, r11, [r8, #8]
     sub r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
-    ldr r11, [r8, #40]
+    ldrd r10, r11, [r8, #16]
     sub r10, r10, r11
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
     smmlar r1, r3, r10, r1
     smmulr r2, r4, r10
-    ldr r10, [r8, #12]
-    ldr r11, [r8, #36]
+    ldrd r10, r11, [r8, #24]
     sub r10, r10, r11
     ldmia r9!, {r3, r4, r5, r6}
     smmlar r0, r3, r10, r0
     smmlar r1, r4, r10, r1
     smmlar r2, r5, r10, r2
     smmulr r3, r6, r10
-    ldr r10, [r8, #16]
-    ldr r11, [r8, #32]
+    ldrd r10, r11, [r8, #32]
     sub r10, r10, r11
     ldmia r9!, {r4, r5, r6, r7, r11}
     smmlar r0, r4, r10, r0
@@ -3441,8 +3300,7 @@ cvm_cols_diff_13:
     smmlar r2, r6, r10, r2
     smmlar r3, r7, r10, r3
     smmulr r4, r11, r10
-    ldr r10, [r8, #20]
-    ldr r11, [r8, #28]
+    ldrd r10, r11, [r8, #40]
     sub r10, r10, r11
     ldmia r9!, {r5, r6, r7, r11, r12, lr}
     smmlar r0, r5, r10, r0
@@ -3489,7 +3347,8 @@ cvm_cols_diff_13:
 cvm_rows_14:
     push {r4, r5, r6, r7, r8, r9, r10, r11, lr}
     ldm r3, {r4, r5, r11, r12}
-    push {r0, r1, r2, r3, r4, r5}
+    ldr r6, [r3, #16]
+    push {r0, r1, r2, r3, r4, r5, r6}
     mov r8, r0
 1:
     ldr r9, [sp, #16]
@@ -3656,14 +3515,15 @@ cvm_rows_14:
     str r4, [r10, #704]
     str r5, [r10, #768]
     str r6, [r10, #832]
-    add r10, r10, #4
+    add r10, r10, #8
     str r10, [sp, #4]
-    add r8, r8, #28
+    ldr r10, [sp, #24]
+    add r8, r8, r10
     ldr r10, [sp, #8]
     subs r10, r10, #1
     str r10, [sp, #8]
     bne 1b
-    add sp, sp, #24
+    add sp, sp, #28
     pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
     .size cvm_rows_14, . - cvm_rows_14
 
@@ -3679,34 +3539,29 @@ cvm_cols_14:
     mov r8, r0
 1:
     ldr r9, [sp, #16]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #52]
+    ldrd r10, r11, [r8, #0]
     add r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #48]
+    ldrd r10, r11, [r8, #8]
     add r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
-    ldr r11, [r8, #44]
+    ldrd r10, r11, [r8, #16]
     add r10, r10, r11
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
     smmlar r1, r3, r10, r1
     smmulr r2, r4, r10
-    ldr r10, [r8, #12]
-    ldr r11, [r8, #40]
+    ldrd r10, r11, [r8, #24]
     add r10, r10, r11
     ldmia r9!, {r3, r4, r5, r6}
     smmlar r0, r3, r10, r0
     smmlar r1, r4, r10, r1
     smmlar r2, r5, r10, r2
     smmulr r3, r6, r10
-    ldr r10, [r8, #16]
-    ldr r11, [r8, #36]
+    ldrd r10, r11, [r8, #32]
     add r10, r10, r11
     ldmia r9!, {r4, r5, r6, r7, r11}
     smmlar r0, r4, r10, r0
@@ -3714,8 +3569,7 @@ cvm_cols_14:
     smmlar r2, r6, r10, r2
     smmlar r3, r7, r10, r3
     smmulr r4, r11, r10
-    ldr r10, [r8, #20]
-    ldr r11, [r8, #32]
+    ldrd r10, r11, [r8, #40]
     add r10, r10, r11
     ldmia r9!, {r5, r6, r7, r11, r12, lr}
     smmlar r0, r5, r10, r0
@@ -3724,8 +3578,7 @@ cvm_cols_14:
     smmlar r3, r11, r10, r3
     smmlar r4, r12, r10, r4
     smmulr r5, lr, r10
-    ldr r10, [r8, #24]
-    ldr r11, [r8, #28]
+    ldrd r10, r11, [r8, #48]
     add r10, r10, r11
     ldmia r9!, {r6, r7, r11, r12, lr}
     smmlar r0, r6, r10, r0
@@ -3740,34 +3593,29 @@ cvm_cols_14:
     stmia r10!, {r0, r1, r2, r3, r4, r5, r6}
     str r10, [sp, #4]
     ldr r9, [sp, #20]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #52]
+    ldrd r10, r11, [r8, #0]
     sub r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #48]
+    ldrd r10, r11, [r8, #8]
     sub r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
-    ldr r11, [r8, #44]
+    ldrd r10, r11, [r8, #16]
     sub r10, r10, r11
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
     smmlar r1, r3, r10, r1
     smmulr r2, r4, r10
-    ldr r10, [r8, #12]
-    ldr r11, [r8, #40]
+    ldrd r10, r11, [r8, #24]
     sub r10, r10, r11
     ldmia r9!, {r3, r4, r5, r6}
     smmlar r0, r3, r10, r0
     smmlar r1, r4, r10, r1
     smmlar r2, r5, r10, r2
     smmulr r3, r6, r10
-    ldr r10, [r8, #16]
-    ldr r11, [r8, #36]
+    ldrd r10, r11, [r8, #32]
     sub r10, r10, r11
     ldmia r9!, {r4, r5, r6, r7, r11}
     smmlar r0, r4, r10, r0
@@ -3775,8 +3623,7 @@ cvm_cols_14:
     smmlar r2, r6, r10, r2
     smmlar r3, r7, r10, r3
     smmulr r4, r11, r10
-    ldr r10, [r8, #20]
-    ldr r11, [r8, #32]
+    ldrd r10, r11, [r8, #40]
     sub r10, r10, r11
     ldmia r9!, {r5, r6, r7, r11, r12, lr}
     smmlar r0, r5, r10, r0
@@ -3785,8 +3632,7 @@ cvm_cols_14:
     smmlar r3, r11, r10, r3
     smmlar r4, r12, r10, r4
     smmulr r5, lr, r10
-    ldr r10, [r8, #24]
-    ldr r11, [r8, #28]
+    ldrd r10, r11, [r8, #48]
     sub r10, r10, r11
     ldmia r9!, {r6, r7, r11, r12, lr}
     smmlar r0, r6, r10, r0
@@ -3823,34 +3669,29 @@ cvm_cols_diff_14:
     mov r8, r0
 1:
     ldr r9, [sp, #16]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #52]
+    ldrd r10, r11, [r8, #0]
     add r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #48]
+    ldrd r10, r11, [r8, #8]
     add r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
-    ldr r11, [r8, #44]
+    ldrd r10, r11, [r8, #16]
     add r10, r10, r11
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
     smmlar r1, r3, r10, r1
     smmulr r2, r4, r10
-    ldr r10, [r8, #12]
-    ldr r11, [r8, #40]
+    ldrd r10, r11, [r8, #24]
     add r10, r10, r11
     ldmia r9!, {r3, r4, r5, r6}
     smmlar r0, r3, r10, r0
     smmlar r1, r4, r10, r1
     smmlar r2, r5, r10, r2
     smmulr r3, r6, r10
-    ldr r10, [r8, #16]
-    ldr r11, [r8, #36]
+    ldrd r10, r11, [r8, #32]
     add r10, r10, r11
     ldmia r9!, {r4, r5, r6, r7, r11}
     smmlar r0, r4, r10, r0
@@ -3858,8 +3699,7 @@ cvm_cols_diff_14:
     smmlar r2, r6, r10, r2
     smmlar r3, r7, r10, r3
     smmulr r4, r11, r10
-    ldr r10, [r8, #20]
-    ldr r11, [r8, #32]
+    ldrd r10, r11, [r8, #40]
     add r10, r10, r11
     ldmia r9!, {r5, r6, r7, r11, r12, lr}
     smmlar r0, r5, r10, r0
@@ -3868,8 +3708,7 @@ cvm_cols_diff_14:
     smmlar r3, r11, r10, r3
     smmlar r4, r12, r10, r4
     smmulr r5, lr, r10
-    ldr r10, [r8, #24]
-    ldr r11, [r8, #28]
+    ldrd r10, r11, [r8, #48]
     add r10, r10, r11
     ldmia r9!, {r6, r7, r11, r12, lr}
     smmlar r0, r6, r10, r0
@@ -3904,34 +3743,29 @@ cvm_cols_diff_14:
     stmia r9!, {r0, r1, r2, r3, r4, r5, r6}
     str r9, [sp, #4]
     ldr r9, [sp, #20]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #52]
+    ldrd r10, r11, [r8, #0]
     sub r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #48]
+    ldrd r10, r11, [r8, #8]
     sub r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
-    ldr r11, [r8, #44]
+    ldrd r10, r11, [r8, #16]
     sub r10, r10, r11
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
     smmlar r1, r3, r10, r1
     smmulr r2, r4, r10
-    ldr r10, [r8, #12]
-    ldr r11, [r8, #40]
+    ldrd r10, r11, [r8, #24]
     sub r10, r10, r11
     ldmia r9!, {r3, r4, r5, r6}
     smmlar r0, r3, r10, r0
     smmlar r1, r4, r10, r1
     smmlar r2, r5, r10, r2
     smmulr r3, r6, r10
-    ldr r10, [r8, #16]
-    ldr r11, [r8, #36]
+    ldrd r10, r11, [r8, #32]
     sub r10, r10, r11
     ldmia r9!, {r4, r5, r6, r7, r11}
     smmlar r0, r4, r10, r0
@@ -3939,8 +3773,7 @@ cvm_cols_diff_14:
     smmlar r2, r6, r10, r2
     smmlar r3, r7, r10, r3
     smmulr r4, r11, r10
-    ldr r10, [r8, #20]
-    ldr r11, [r8, #32]
+    ldrd r10, r11, [r8, #40]
     sub r10, r10, r11
     ldmia r9!, {r5, r6, r7, r11, r12, lr}
     smmlar r0, r5, r10, r0
@@ -3949,8 +3782,7 @@ cvm_cols_diff_14:
     smmlar r3, r11, r10, r3
     smmlar r4, r12, r10, r4
     smmulr r5, lr, r10
-    ldr r10, [r8, #24]
-    ldr r11, [r8, #28]
+    ldrd r10, r11, [r8, #48]
     sub r10, r10, r11
     ldmia r9!, {r6, r7, r11, r12, lr}
     smmlar r0, r6, r10, r0
@@ -4002,7 +3834,8 @@ cvm_cols_diff_14:
 cvm_rows_15:
     push {r4, r5, r6, r7, r8, r9, r10, r11, lr}
     ldm r3, {r4, r5, r11, r12}
-    push {r0, r1, r2, r3, r4, r5}
+    ldr r6, [r3, #16]
+    push {r0, r1, r2, r3, r4, r5, r6}
     mov r8, r0
 1:
     ldr r9, [sp, #16]
@@ -4185,14 +4018,15 @@ cvm_rows_15:
     str r4, [r10, #768]
     str r5, [r10, #832]
     str r6, [r10, #896]
-    add r10, r10, #4
+    add r10, r10, #8
     str r10, [sp, #4]
-    add r8, r8, #30
+    ldr r10, [sp, #24]
+    add r8, r8, r10
     ldr r10, [sp, #8]
     subs r10, r10, #1
     str r10, [sp, #8]
     bne 1b
-    add sp, sp, #24
+    add sp, sp, #28
     pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
     .size cvm_rows_15, . - cvm_rows_15
 
@@ -4208,34 +4042,29 @@ cvm_cols_15:
     mov r8, r0
 1:
     ldr r9, [sp, #16]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #56]
+    ldrd r10, r11, [r8, #0]
     add r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #52]
+    ldrd r10, r11, [r8, #8]
     add r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
-    ldr r11, [r8, #48]
+    ldrd r10, r11, [r8, #16]
     add r10, r10, r11
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
     smmlar r1, r3, r10, r1
     smmulr r2, r4, r10
-    ldr r10, [r8, #12]
-    ldr r11, [r8, #44]
+    ldrd r10, r11, [r8, #24]
     add r10, r10, r11
     ldmia r9!, {r3, r4, r5, r6}
     smmlar r0, r3, r10, r0
     smmlar r1, r4, r10, r1
     smmlar r2, r5, r10, r2
     smmulr r3, r6, r10
-    ldr r10, [r8, #16]
-    ldr r11, [r8, #40]
+    ldrd r10, r11, [r8, #32]
     add r10, r10, r11
     ldmia r9!, {r4, r5, r6, r7, r11}
     smmlar r0, r4, r10, r0
@@ -4243,8 +4072,7 @@ cvm_cols_15:
     smmlar r2, r6, r10, r2
     smmlar r3, r7, r10, r3
     smmulr r4, r11, r10
-    ldr r10, [r8, #20]
-    ldr r11, [r8, #36]
+    ldrd r10, r11, [r8, #40]
     add r10, r10, r11
     ldmia r9!, {r5, r6, r7, r11, r12, lr}
     smmlar r0, r5, r10, r0
@@ -4253,8 +4081,7 @@ cvm_cols_15:
     smmlar r3, r11, r10, r3
     smmlar r4, r12, r10, r4
     smmulr r5, lr, r10
-    ldr r10, [r8, #24]
-    ldr r11, [r8, #32]
+    ldrd r10, r11, [r8, #48]
     add r10, r10, r11
     ldmia r9!, {r6, r7, r11, r12, lr}
     smmlar r0, r6, r10, r0
@@ -4265,7 +4092,7 @@ cvm_cols_15:
     ldmia r9!, {r6, r7}
     smmlar r5, r6, r10, r5
     smmulr r6, r7, r10
-    ldr r10, [r8, #28]
+    ldr r10, [r8, #56]
     ldmia r9!, {r7, r11, r12, lr}
     smmlar r0, r7, r10, r0
     smmlar r1, r11, r10, r1
@@ -4280,34 +4107,29 @@ cvm_cols_15:
     stmia r10!, {r0, r1, r2, r3, r4, r5, r6, r7}
     str r10, [sp, #4]
     ldr r9, [sp, #20]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #56]
+    ldrd r10, r11, [r8, #0]
     sub r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #52]
+    ldrd r10, r11, [r8, #8]
     sub r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
-    ldr r11, [r8, #48]
+    ldrd r10, r11, [r8, #16]
     sub r10, r10, r11
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
     smmlar r1, r3, r10, r1
     smmulr r2, r4, r10
-    ldr r10, [r8, #12]
-    ldr r11, [r8, #44]
+    ldrd r10, r11, [r8, #24]
     sub r10, r10, r11
     ldmia r9!, {r3, r4, r5, r6}
     smmlar r0, r3, r10, r0
     smmlar r1, r4, r10, r1
     smmlar r2, r5, r10, r2
     smmulr r3, r6, r10
-    ldr r10, [r8, #16]
-    ldr r11, [r8, #40]
+    ldrd r10, r11, [r8, #32]
     sub r10, r10, r11
     ldmia r9!, {r4, r5, r6, r7, r11}
     smmlar r0, r4, r10, r0
@@ -4315,8 +4137,7 @@ cvm_cols_15:
     smmlar r2, r6, r10, r2
     smmlar r3, r7, r10, r3
     smmulr r4, r11, r10
-    ldr r10, [r8, #20]
-    ldr r11, [r8, #36]
+    ldrd r10, r11, [r8, #40]
     sub r10, r10, r11
     ldmia r9!, {r5, r6, r7, r11, r12, lr}
     smmlar r0, r5, r10, r0
@@ -4325,8 +4146,7 @@ cvm_cols_15:
     smmlar r3, r11, r10, r3
     smmlar r4, r12, r10, r4
     smmulr r5, lr, r10
-    ldr r10, [r8, #24]
-    ldr r11, [r8, #32]
+    ldrd r10, r11, [r8, #48]
     sub r10, r10, r11
     ldmia r9!, {r6, r7, r11, r12, lr}
     smmlar r0, r6, r10, r0
@@ -4363,34 +4183,29 @@ cvm_cols_diff_15:
     mov r8, r0
 1:
     ldr r9, [sp, #16]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #56]
+    ldrd r10, r11, [r8, #0]
     add r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #52]
+    ldrd r10, r11, [r8, #8]
     add r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
-    ldr r11, [r8, #48]
+    ldrd r10, r11, [r8, #16]
     add r10, r10, r11
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
     smmlar r1, r3, r10, r1
     smmulr r2, r4, r10
-    ldr r10, [r8, #12]
-    ldr r11, [r8, #44]
+    ldrd r10, r11, [r8, #24]
     add r10, r10, r11
     ldmia r9!, {r3, r4, r5, r6}
     smmlar r0, r3, r10, r0
     smmlar r1, r4, r10, r1
     smmlar r2, r5, r10, r2
     smmulr r3, r6, r10
-    ldr r10, [r8, #16]
-    ldr r11, [r8, #40]
+    ldrd r10, r11, [r8, #32]
     add r10, r10, r11
     ldmia r9!, {r4, r5, r6, r7, r11}
     smmlar r0, r4, r10, r0
@@ -4398,8 +4213,7 @@ cvm_cols_diff_15:
     smmlar r2, r6, r10, r2
     smmlar r3, r7, r10, r3
     smmulr r4, r11, r10
-    ldr r10, [r8, #20]
-    ldr r11, [r8, #36]
+    ldrd r10, r11, [r8, #40]
     add r10, r10, r11
     ldmia r9!, {r5, r6, r7, r11, r12, lr}
     smmlar r0, r5, r10, r0
@@ -4408,8 +4222,7 @@ cvm_cols_diff_15:
     smmlar r3, r11, r10, r3
     smmlar r4, r12, r10, r4
     smmulr r5, lr, r10
-    ldr r10, [r8, #24]
-    ldr r11, [r8, #32]
+    ldrd r10, r11, [r8, #48]
     add r10, r10, r11
     ldmia r9!, {r6, r7, r11, r12, lr}
     smmlar r0, r6, r10, r0
@@ -4420,7 +4233,7 @@ cvm_cols_diff_15:
     ldmia r9!, {r6, r7}
     smmlar r5, r6, r10, r5
     smmulr r6, r7, r10
-    ldr r10, [r8, #28]
+    ldr r10, [r8, #56]
     ldmia r9!, {r7, r11, r12, lr}
     smmlar r0, r7, r10, r0
     smmlar r1, r11, r10, r1
@@ -4457,34 +4270,29 @@ cvm_cols_diff_15:
     stmia r9!, {r0, r1, r2, r3, r4, r5, r6, r7}
     str r9, [sp, #4]
     ldr r9, [sp, #20]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #56]
+    ldrd r10, r11, [r8, #0]
     sub r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #52]
+    ldrd r10, r11, [r8, #8]
     sub r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
-    ldr r11, [r8, #48]
+    ldrd r10, r11, [r8, #16]
     sub r10, r10, r11
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
     smmlar r1, r3, r10, r1
     smmulr r2, r4, r10
-    ldr r10, [r8, #12]
-    ldr r11, [r8, #44]
+    ldrd r10, r11, [r8, #24]
     sub r10, r10, r11
     ldmia r9!, {r3, r4, r5, r6}
     smmlar r0, r3, r10, r0
     smmlar r1, r4, r10, r1
     smmlar r2, r5, r10, r2
     smmulr r3, r6, r10
-    ldr r10, [r8, #16]
-    ldr r11, [r8, #40]
+    ldrd r10, r11, [r8, #32]
     sub r10, r10, r11
     ldmia r9!, {r4, r5, r6, r7, r11}
     smmlar r0, r4, r10, r0
@@ -4492,8 +4300,7 @@ cvm_cols_diff_15:
     smmlar r2, r6, r10, r2
     smmlar r3, r7, r10, r3
     smmulr r4, r11, r10
-    ldr r10, [r8, #20]
-    ldr r11, [r8, #36]
+    ldrd r10, r11, [r8, #40]
     sub r10, r10, r11
     ldmia r9!, {r5, r6, r7, r11, r12, lr}
     smmlar r0, r5, r10, r0
@@ -4502,8 +4309,7 @@ cvm_cols_diff_15:
     smmlar r3, r11, r10, r3
     smmlar r4, r12, r10, r4
     smmulr r5, lr, r10
-    ldr r10, [r8, #24]
-    ldr r11, [r8, #32]
+    ldrd r10, r11, [r8, #48]
     sub r10, r10, r11
     ldmia r9!, {r6, r7, r11, r12, lr}
     smmlar r0, r6, r10, r0
@@ -4555,7 +4361,8 @@ cvm_cols_diff_15:
 cvm_rows_16:
     push {r4, r5, r6, r7, r8, r9, r10, r11, lr}
     ldm r3, {r4, r5, r11, r12}
-    push {r0, r1, r2, r3, r4, r5}
+    ldr r6, [r3, #16]
+    push {r0, r1, r2, r3, r4, r5, r6}
     mov r8, r0
 1:
     ldr r9, [sp, #16]
@@ -4758,14 +4565,15 @@ cvm_rows_16:
     str r5, [r10, #832]
     str r6, [r10, #896]
     str r7, [r10, #960]
-    add r10, r10, #4
+    add r10, r10, #8
     str r10, [sp, #4]
-    add r8, r8, #32
+    ldr r10, [sp, #24]
+    add r8, r8, r10
     ldr r10, [sp, #8]
     subs r10, r10, #1
     str r10, [sp, #8]
     bne 1b
-    add sp, sp, #24
+    add sp, sp, #28
     pop {r4, r5, r6, r7, r8, r9, r10, r11, pc}
     .size cvm_rows_16, . - cvm_rows_16
 
@@ -4781,34 +4589,29 @@ cvm_cols_16:
     mov r8, r0
 1:
     ldr r9, [sp, #16]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #60]
+    ldrd r10, r11, [r8, #0]
     add r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #56]
+    ldrd r10, r11, [r8, #8]
     add r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
-    ldr r11, [r8, #52]
+    ldrd r10, r11, [r8, #16]
     add r10, r10, r11
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
     smmlar r1, r3, r10, r1
     smmulr r2, r4, r10
-    ldr r10, [r8, #12]
-    ldr r11, [r8, #48]
+    ldrd r10, r11, [r8, #24]
     add r10, r10, r11
     ldmia r9!, {r3, r4, r5, r6}
     smmlar r0, r3, r10, r0
     smmlar r1, r4, r10, r1
     smmlar r2, r5, r10, r2
     smmulr r3, r6, r10
-    ldr r10, [r8, #16]
-    ldr r11, [r8, #44]
+    ldrd r10, r11, [r8, #32]
     add r10, r10, r11
     ldmia r9!, {r4, r5, r6, r7, r11}
     smmlar r0, r4, r10, r0
@@ -4816,8 +4619,7 @@ cvm_cols_16:
     smmlar r2, r6, r10, r2
     smmlar r3, r7, r10, r3
     smmulr r4, r11, r10
-    ldr r10, [r8, #20]
-    ldr r11, [r8, #40]
+    ldrd r10, r11, [r8, #40]
     add r10, r10, r11
     ldmia r9!, {r5, r6, r7, r11, r12, lr}
     smmlar r0, r5, r10, r0
@@ -4826,8 +4628,7 @@ cvm_cols_16:
     smmlar r3, r11, r10, r3
     smmlar r4, r12, r10, r4
     smmulr r5, lr, r10
-    ldr r10, [r8, #24]
-    ldr r11, [r8, #36]
+    ldrd r10, r11, [r8, #48]
     add r10, r10, r11
     ldmia r9!, {r6, r7, r11, r12, lr}
     smmlar r0, r6, r10, r0
@@ -4838,8 +4639,7 @@ cvm_cols_16:
     ldmia r9!, {r6, r7}
     smmlar r5, r6, r10, r5
     smmulr r6, r7, r10
-    ldr r10, [r8, #28]
-    ldr r11, [r8, #32]
+    ldrd r10, r11, [r8, #56]
     add r10, r10, r11
     ldmia r9!, {r7, r11, r12, lr}
     smmlar r0, r7, r10, r0
@@ -4855,34 +4655,29 @@ cvm_cols_16:
     stmia r10!, {r0, r1, r2, r3, r4, r5, r6, r7}
     str r10, [sp, #4]
     ldr r9, [sp, #20]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #60]
+    ldrd r10, r11, [r8, #0]
     sub r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #56]
+    ldrd r10, r11, [r8, #8]
     sub r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
-    ldr r11, [r8, #52]
+    ldrd r10, r11, [r8, #16]
     sub r10, r10, r11
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
     smmlar r1, r3, r10, r1
     smmulr r2, r4, r10
-    ldr r10, [r8, #12]
-    ldr r11, [r8, #48]
+    ldrd r10, r11, [r8, #24]
     sub r10, r10, r11
     ldmia r9!, {r3, r4, r5, r6}
     smmlar r0, r3, r10, r0
     smmlar r1, r4, r10, r1
     smmlar r2, r5, r10, r2
     smmulr r3, r6, r10
-    ldr r10, [r8, #16]
-    ldr r11, [r8, #44]
+    ldrd r10, r11, [r8, #32]
     sub r10, r10, r11
     ldmia r9!, {r4, r5, r6, r7, r11}
     smmlar r0, r4, r10, r0
@@ -4890,8 +4685,7 @@ cvm_cols_16:
     smmlar r2, r6, r10, r2
     smmlar r3, r7, r10, r3
     smmulr r4, r11, r10
-    ldr r10, [r8, #20]
-    ldr r11, [r8, #40]
+    ldrd r10, r11, [r8, #40]
     sub r10, r10, r11
     ldmia r9!, {r5, r6, r7, r11, r12, lr}
     smmlar r0, r5, r10, r0
@@ -4900,8 +4694,7 @@ cvm_cols_16:
     smmlar r3, r11, r10, r3
     smmlar r4, r12, r10, r4
     smmulr r5, lr, r10
-    ldr r10, [r8, #24]
-    ldr r11, [r8, #36]
+    ldrd r10, r11, [r8, #48]
     sub r10, r10, r11
     ldmia r9!, {r6, r7, r11, r12, lr}
     smmlar r0, r6, r10, r0
@@ -4912,8 +4705,7 @@ cvm_cols_16:
     ldmia r9!, {r6, r7}
     smmlar r5, r6, r10, r5
     smmulr r6, r7, r10
-    ldr r10, [r8, #28]
-    ldr r11, [r8, #32]
+    ldrd r10, r11, [r8, #56]
     sub r10, r10, r11
     ldmia r9!, {r7, r11, r12, lr}
     smmlar r0, r7, r10, r0
@@ -4951,34 +4743,29 @@ cvm_cols_diff_16:
     mov r8, r0
 1:
     ldr r9, [sp, #16]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #60]
+    ldrd r10, r11, [r8, #0]
     add r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #56]
+    ldrd r10, r11, [r8, #8]
     add r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
-    ldr r11, [r8, #52]
+    ldrd r10, r11, [r8, #16]
     add r10, r10, r11
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
     smmlar r1, r3, r10, r1
     smmulr r2, r4, r10
-    ldr r10, [r8, #12]
-    ldr r11, [r8, #48]
+    ldrd r10, r11, [r8, #24]
     add r10, r10, r11
     ldmia r9!, {r3, r4, r5, r6}
     smmlar r0, r3, r10, r0
     smmlar r1, r4, r10, r1
     smmlar r2, r5, r10, r2
     smmulr r3, r6, r10
-    ldr r10, [r8, #16]
-    ldr r11, [r8, #44]
+    ldrd r10, r11, [r8, #32]
     add r10, r10, r11
     ldmia r9!, {r4, r5, r6, r7, r11}
     smmlar r0, r4, r10, r0
@@ -4986,8 +4773,7 @@ cvm_cols_diff_16:
     smmlar r2, r6, r10, r2
     smmlar r3, r7, r10, r3
     smmulr r4, r11, r10
-    ldr r10, [r8, #20]
-    ldr r11, [r8, #40]
+    ldrd r10, r11, [r8, #40]
     add r10, r10, r11
     ldmia r9!, {r5, r6, r7, r11, r12, lr}
     smmlar r0, r5, r10, r0
@@ -4996,8 +4782,7 @@ cvm_cols_diff_16:
     smmlar r3, r11, r10, r3
     smmlar r4, r12, r10, r4
     smmulr r5, lr, r10
-    ldr r10, [r8, #24]
-    ldr r11, [r8, #36]
+    ldrd r10, r11, [r8, #48]
     add r10, r10, r11
     ldmia r9!, {r6, r7, r11, r12, lr}
     smmlar r0, r6, r10, r0
@@ -5008,8 +4793,7 @@ cvm_cols_diff_16:
     ldmia r9!, {r6, r7}
     smmlar r5, r6, r10, r5
     smmulr r6, r7, r10
-    ldr r10, [r8, #28]
-    ldr r11, [r8, #32]
+    ldrd r10, r11, [r8, #56]
     add r10, r10, r11
     ldmia r9!, {r7, r11, r12, lr}
     smmlar r0, r7, r10, r0
@@ -5047,34 +4831,29 @@ cvm_cols_diff_16:
     stmia r9!, {r0, r1, r2, r3, r4, r5, r6, r7}
     str r9, [sp, #4]
     ldr r9, [sp, #20]
-    ldr r10, [r8, #0]
-    ldr r11, [r8, #60]
+    ldrd r10, r11, [r8, #0]
     sub r10, r10, r11
     ldr r0, [r9], #4
     smmulr r0, r0, r10
-    ldr r10, [r8, #4]
-    ldr r11, [r8, #56]
+    ldrd r10, r11, [r8, #8]
     sub r10, r10, r11
     ldmia r9!, {r1, r2}
     smmlar r0, r1, r10, r0
     smmulr r1, r2, r10
-    ldr r10, [r8, #8]
-    ldr r11, [r8, #52]
+    ldrd r10, r11, [r8, #16]
     sub r10, r10, r11
     ldmia r9!, {r2, r3, r4}
     smmlar r0, r2, r10, r0
     smmlar r1, r3, r10, r1
     smmulr r2, r4, r10
-    ldr r10, [r8, #12]
-    ldr r11, [r8, #48]
+    ldrd r10, r11, [r8, #24]
     sub r10, r10, r11
     ldmia r9!, {r3, r4, r5, r6}
     smmlar r0, r3, r10, r0
     smmlar r1, r4, r10, r1
     smmlar r2, r5, r10, r2
     smmulr r3, r6, r10
-    ldr r10, [r8, #16]
-    ldr r11, [r8, #44]
+    ldrd r10, r11, [r8, #32]
     sub r10, r10, r11
     ldmia r9!, {r4, r5, r6, r7, r11}
     smmlar r0, r4, r10, r0
@@ -5082,8 +4861,7 @@ cvm_cols_diff_16:
     smmlar r2, r6, r10, r2
     smmlar r3, r7, r10, r3
     smmulr r4, r11, r10
-    ldr r10, [r8, #20]
-    ldr r11, [r8, #40]
+    ldrd r10, r11, [r8, #40]
     sub r10, r10, r11
     ldmia r9!, {r5, r6, r7, r11, r12, lr}
     smmlar r0, r5, r10, r0
@@ -5092,8 +4870,7 @@ cvm_cols_diff_16:
     smmlar r3, r11, r10, r3
     smmlar r4, r12, r10, r4
     smmulr r5, lr, r10
-    ldr r10, [r8, #24]
-    ldr r11, [r8, #36]
+    ldrd r10, r11, [r8, #48]
     sub r10, r10, r11
     ldmia r9!, {r6, r7, r11, r12, lr}
     smmlar r0, r6, r10, r0
@@ -5104,8 +4881,7 @@ cvm_cols_diff_16:
     ldmia r9!, {r6, r7}
     smmlar r5, r6, r10, r5
     smmulr r6, r7, r10
-    ldr r10, [r8, #28]
-    ldr r11, [r8, #32]
+    ldrd r10, r11, [r8, #56]
     sub r10, r10, r11
     ldmia r9!, {r7, r11, r12, lr}
     smmlar r0, r7, r10, r0

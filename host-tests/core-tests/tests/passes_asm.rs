@@ -129,12 +129,22 @@ fn header(s: &mut String, name: &str) {
 }
 
 /// `cvm_rows_J(frame, t, n, ctx)`: for each of the `n` rows of `J`
-/// samples at `frame`, the even and the odd block of the row pass, stored
-/// transposed at `t + 64 k + 4 i`. `ctx = [even, odd, m, sh]`.
+/// samples at `frame` (the next row `stride` bytes on, which may be
+/// negative), the even and the odd block of the row pass, stored
+/// transposed at `t + 64 k + 8 i`: every other word, so that a second
+/// call can fill the words between (see [`slot`]).
+/// `ctx = [even, odd, m, sh, stride]`.
 fn rows(s: &mut String, j: usize) {
     let (h, g) = halves(j);
     let name = format!("cvm_rows_{j}");
-    start(s, &name, "{r4, r5, r11, r12}");
+    header(s, &name);
+    s.push_str(
+        "    push {r4, r5, r6, r7, r8, r9, r10, r11, lr}\n\
+         \x20   ldm r3, {r4, r5, r11, r12}\n\
+         \x20   ldr r6, [r3, #16]\n\
+         \x20   push {r0, r1, r2, r3, r4, r5, r6}\n",
+    );
+    loop_start(s);
     // r8 the row, r9 the coefficients, r10 the input, r11 m, r12 sh, lr
     // the streamed coefficient.
     block(s, h, &["lr"], &|l, s| {
@@ -166,10 +176,22 @@ fn rows(s: &mut String, j: usize) {
             writeln!(s, "    str r{k}, [r10, #{}]", T_STRIDE * (h + k)).unwrap();
         }
     }
-    writeln!(s, "    add r10, r10, #4").unwrap();
+    writeln!(s, "    add r10, r10, #8").unwrap();
     writeln!(s, "    str r10, [sp, #4]").unwrap();
-    writeln!(s, "    add r8, r8, #{}", 2 * j).unwrap();
-    end(s, &name, 6);
+    writeln!(s, "    ldr r10, [sp, #24]").unwrap();
+    writeln!(s, "    add r8, r8, r10").unwrap();
+    end(s, &name, 7);
+}
+
+/// The word of a row of `t` that the row pass gives detector row `i` of
+/// `n`: the rows of the top half at the even words, those of the bottom
+/// half, from the last up, at the odd words between, so that the rows the
+/// column pass folds together (`i` and `n - 1 - i`) are adjacent, one
+/// `LDRD` apart (the middle row of an odd `n` last). The firmware makes
+/// two calls of the row pass to lay them out so.
+fn slot(i: usize, n: usize) -> usize {
+    let h = n.div_ceil(2);
+    if i < h { 2 * i } else { 2 * (n - 1 - i) + 1 }
 }
 
 /// `cvm_cols_J(t, out, n, ctx)`: for each of the `n` rows of `t` (`J`
@@ -235,19 +257,21 @@ fn cols(s: &mut String, j: usize, diff: bool) {
             writeln!(s, "    str r10, [sp, #4]").unwrap();
         }
     };
+    // A row of `t` holds its `J` values in the row pass's order (`slot`):
+    // the two a fold adds or subtracts are one `LDRD` apart.
     block(s, h, &temps, &|l, s| {
-        writeln!(s, "    ldr r10, [r8, #{}]", 4 * l).unwrap();
         if l < g {
-            writeln!(s, "    ldr r11, [r8, #{}]", 4 * (j - 1 - l)).unwrap();
+            writeln!(s, "    ldrd r10, r11, [r8, #{}]", 4 * slot(l, j)).unwrap();
             writeln!(s, "    add r10, r10, r11").unwrap();
+        } else {
+            writeln!(s, "    ldr r10, [r8, #{}]", 4 * slot(l, j)).unwrap();
         }
     });
     store(s, h);
     if g > 0 {
         writeln!(s, "    ldr r9, [sp, #20]").unwrap();
         block(s, g, &temps, &|l, s| {
-            writeln!(s, "    ldr r10, [r8, #{}]", 4 * l).unwrap();
-            writeln!(s, "    ldr r11, [r8, #{}]", 4 * (j - 1 - l)).unwrap();
+            writeln!(s, "    ldrd r10, r11, [r8, #{}]", 4 * slot(l, j)).unwrap();
             writeln!(s, "    sub r10, r10, r11").unwrap();
         });
         store(s, g);
@@ -632,6 +656,40 @@ const OUT: u32 = 0x2000_2000;
 const EVEN: u32 = 0x2000_3000;
 const ODD: u32 = 0x2000_3100;
 const CTX: u32 = 0x2000_3200;
+const CTX2: u32 = 0x2000_3240;
+
+/// The row pass over `n` rows of `J = j` samples at `FRAME` as the
+/// firmware calls it (`embed::rows`): the top half of the rows down from
+/// the first, then the bottom half up from the last, into the words of
+/// `t` that [`slot`] names. Returns the instructions run.
+fn row_pass(text: &str, m: &mut Machine, j: usize, n: usize, mul: i32, sh: u32) -> usize {
+    let h = n.div_ceil(2);
+    let name = format!("cvm_rows_{j}");
+    let stride = 2 * j as i32;
+    m.words(CTX, &[EVEN as i32, ODD as i32, mul, sh as i32, stride]);
+    let mut count = run(text, &name, m, [FRAME, T, h as u32, CTX]);
+    if n > h {
+        let last = FRAME + (2 * j * (n - 1)) as u32;
+        m.words(CTX2, &[EVEN as i32, ODD as i32, mul, sh as i32, -stride]);
+        count += run(text, &name, m, [last, T + 4, (n - h) as u32, CTX2]);
+    }
+    count
+}
+
+#[test]
+fn rows_of_a_map_go_to_the_words_the_column_pass_folds_together() {
+    // n = 5: rows 0, 1, 2 at words 0, 2, 4; rows 4, 3 at words 1, 3.
+    let got: Vec<usize> = (0..5).map(|i| slot(i, 5)).collect();
+    assert_eq!(got, [0, 2, 4, 3, 1]);
+    for n in 1..=MAX_J {
+        let mut seen: Vec<usize> = (0..n).map(|i| slot(i, n)).collect();
+        for l in 0..n / 2 {
+            assert_eq!(slot(n - 1 - l, n), slot(l, n) + 1, "n = {n}, pair {l}");
+        }
+        seen.sort();
+        assert_eq!(seen, (0..n).collect::<Vec<_>>(), "n = {n}: a permutation");
+    }
+}
 
 #[test]
 fn the_row_passes_match_the_reference_for_every_axis_length() {
@@ -657,13 +715,7 @@ fn the_row_passes_match_the_reference_for_every_axis_length() {
             }
             m.words(EVEN, &c.even);
             m.words(ODD, &c.odd);
-            m.words(CTX, &[EVEN as i32, ODD as i32, mul, sh as i32]);
-            run(
-                &text,
-                &format!("cvm_rows_{j}"),
-                &mut m,
-                [FRAME, T, c.n as u32, CTX],
-            );
+            row_pass(&text, &mut m, j, c.n, mul, sh);
             let (re, ro) = (unpack(&c.even, h), unpack(&c.odd, j / 2));
             for (i, row) in frame.chunks(j).enumerate() {
                 let x: Vec<i64> = row.iter().map(|&v| v as i64).collect();
@@ -673,9 +725,13 @@ fn the_row_passes_match_the_reference_for_every_axis_length() {
                 let uo: Vec<i32> = uo.into_iter().map(conv).collect();
                 let want: Vec<i32> = apply(&re, &ue).into_iter().chain(apply(&ro, &uo)).collect();
                 for (k, &w) in want.iter().enumerate() {
-                    let got = m.load(T + (T_STRIDE * k + 4 * i) as u32, 4) as i32;
+                    let got = m.load(T + (T_STRIDE * k + 4 * slot(i, c.n)) as u32, 4) as i32;
                     assert_eq!(got, w, "cvm_rows_{j}, row {i} of {}, t[{k}]", c.n);
                 }
+            }
+            // Nothing written past the `n` words of a row of `t`.
+            for k in (0..j).filter(|_| c.n < MAX_J) {
+                assert!(!m.mem.contains_key(&(T + (T_STRIDE * k + 4 * c.n) as u32)));
             }
         }
     }
@@ -705,7 +761,12 @@ fn the_column_passes_match_the_reference_for_every_axis_length() {
             let machine = || {
                 let mut m = Machine::new();
                 for (i, row) in t.iter().enumerate() {
-                    m.words(T + (T_STRIDE * i) as u32, row);
+                    // In the row pass's order.
+                    let mut laid = vec![0; j];
+                    for (l, &v) in row.iter().enumerate() {
+                        laid[slot(l, j)] = v;
+                    }
+                    m.words(T + (T_STRIDE * i) as u32, &laid);
                 }
                 m.words(EVEN, &c.even);
                 m.words(ODD, &c.odd);
@@ -796,13 +857,8 @@ fn instructions_per_map() {
         }
         m.words(EVEN, &c.even);
         m.words(ODD, &c.odd);
-        m.words(CTX, &[EVEN as i32, ODD as i32, 1, 0]);
-        let rows = run(
-            &text,
-            &format!("cvm_rows_{j}"),
-            &mut m,
-            [FRAME, T, j as u32, CTX],
-        );
+        let rows = row_pass(&text, &mut m, j, j, 1, 0);
+        m.words(CTX, &[EVEN as i32, ODD as i32]);
         let cols = run(
             &text,
             &format!("cvm_cols_{j}"),
