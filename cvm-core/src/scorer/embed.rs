@@ -25,7 +25,11 @@ pub const MAX_H: usize = MAX_J.div_ceil(2);
 pub const TRI: usize = MAX_H * (MAX_H + 1) / 2;
 
 /// The row pass's output `T`, transposed (`t[k][i]`), in a fixed `MAX_J`
-/// stride; only the words the row pass writes are read.
+/// stride; only the words the row pass writes are read. On the Cortex-M
+/// the detector rows take the words of a row of `t` in another order
+/// (the top half at the even words, the bottom half from the last row up
+/// at the odd ones), so that the column pass reads each pair of rows it
+/// folds with one `LDRD`; the Rust passes keep `i` in order.
 type Rows = [[MaybeUninit<i32>; MAX_J]; MAX_J];
 
 /// The quantised factor of one folded axis: the even block (`h` cells, the
@@ -433,7 +437,8 @@ fn tri<const N: usize>(r: &[i32; TRI], u: &[i32; N]) -> [i32; N] {
 /// exact), converts the folded counts to `Q(f)`
 /// (`round((v << k) * m / 2^32)`), applies the even and the odd block and
 /// stores the results transposed, `t[k][i]` (even) and `t[H + k][i]`
-/// (odd): every `t[k][i]` with `k < H + G` and `i < n_rows` is written.
+/// (odd): every `t[k][i]` with `k < H + G` and `i < n_rows` is written
+/// (on the Cortex-M with `i` in the order of [`Rows`]).
 #[inline(never)]
 fn rows<const H: usize, const G: usize>(
     f2: &Factor,
