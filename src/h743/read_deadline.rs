@@ -6,9 +6,8 @@
 //! embassy-time's `with_timeout` because the read finishes long before its
 //! deadline nearly always: `with_timeout` queued an alarm per frame that
 //! still fired after the read, woke the acquisition task for nothing and
-//! cost about 460 instructions per beam on the chip model
-//! (docs/performance.md); starting and stopping TIM13 costs a few register
-//! writes. Its interrupt has the priority of the DRDY and DMA interrupts.
+//! cost 451 instructions per beam on the chip model (docs/firmware.md);
+//! starting and stopping TIM13 costs a few register writes. Its interrupt has the priority of the DRDY and DMA interrupts.
 
 use embassy_stm32::interrupt;
 use embassy_stm32::interrupt::InterruptExt;
