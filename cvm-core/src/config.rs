@@ -76,13 +76,9 @@ pub struct Config {
 
 impl Config {
     /// `i32` words of one prepared map: `J1 J2` for the paper kernels'
-    /// embedding, `(K + 1) J1 J2` for the square kernels' box sums.
+    /// embedding, and as many for the square kernels' (docs/method.md §4).
     pub const fn state_words(&self) -> usize {
-        let cells = self.geometry.cells();
-        match self.kernels {
-            Kernels::Paper { .. } => cells,
-            Kernels::Square { kmax } => (kmax as usize + 1) * cells,
-        }
+        self.geometry.cells()
     }
 
     /// The paper's default: paper kernels, uniform weights, normalised maps.
@@ -110,6 +106,9 @@ pub enum ConfigError {
     Weights,
     /// No fixed-point scaling keeps every accumulator in range.
     Range,
+    /// The square kernels' factor table is too short, or a block of their
+    /// quadratic form could not be factored.
+    Table,
 }
 
 impl core::fmt::Display for ConfigError {
@@ -119,6 +118,7 @@ impl core::fmt::Display for ConfigError {
             ConfigError::KernelSize => "square kernel size K above 15",
             ConfigError::Weights => "a weight is negative or not finite, or all weights are zero",
             ConfigError::Range => "no fixed-point scaling keeps every accumulator in range",
+            ConfigError::Table => "square kernels' factor table too short or not factorable",
         })
     }
 }

@@ -1,5 +1,6 @@
 //! The fixed-point scorer: normalise a raw map, embed it once, and score a
-//! pair of embedded maps in `O(J1*J2)`.
+//! pair of embedded maps in `O(J1*J2)`. The square kernels' embedding is
+//! in the module `square`; what follows is the paper kernels'.
 //!
 //! # The folded embedding (paper kernels)
 //!
@@ -30,7 +31,7 @@
 //! | row pass `T = y R2'ᵀ` | `i32` | `Q(f + p2 - 32)`: one `round(r y / 2^32)` per term (`SMMLAR`) |
 //! | `T` folded along axis 1 | `i32` | same, exact sums and differences |
 //! | embedding `E = R1' T` | `i32` | `Q(e)`, `e = f + p1 + p2 - 64`, one rounding per term, `‖E‖_F < 2^30` |
-//! | squared distance | `i64` | `Q(2e)` (square kernels: `Q(2f)`) |
+//! | squared distance | `i64` | `Q(2e)` |
 //! | score (gradient component, magnitude) | `u32` | `Q(q)`: real value = `s / 2^q` |
 //!
 //! # Why nothing overflows
@@ -58,8 +59,10 @@
 //!   `‖E‖_F <= ‖R1'q‖_F ‖R2'q‖_F ‖F1 y‖_F / 2^64 + ‖R1'q‖_F √(2N) ε / 2^32 +
 //!   √N ε < 2^30`: every entry and every difference of two entries fits
 //!   `i32`, and the squared distance `‖E1 - E2‖²_F < 2^62` fits `i64`.
-//! * Square kernels: `|x| <= 2^f`, `|SAT| <= 2X < 2^31` with `X = 2^f + N`
-//!   (raw `N (65535 2^f + 1)`) and `(K+1) N (2X)² < 2^63` (`u64` accumulator).
+//! * Square kernels: the same conversion of counts folded on both axes
+//!   (`|v| <= S`, raw `|v| < 2^18`, so raw `f <= 11`), then one dense
+//!   factor per folded block, `N` words per map in `Q(f + p - 32)`: their
+//!   formats and bounds are in the module `square`.
 //!
 //! The score format `q` is the largest with `D_max * 2^q <= 2^31 - 1`, where
 //! `D_max = N * Σ_b w(b)` bounds the distance of normalised maps (every LCD
@@ -77,11 +80,16 @@ use crate::tables::{axis_kernel, axis_weights, pow2, sqrt, weight_sum};
 pub enum FrameError {
     /// The frame or the state buffer does not hold `J1 * J2` values.
     Length,
+    /// Square kernels without their factor table ([`Scorer::with_factors`]).
+    Factors,
 }
 
 impl core::fmt::Display for FrameError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        f.write_str("frame or state buffer of the wrong length")
+        f.write_str(match self {
+            FrameError::Length => "frame or state buffer of the wrong length",
+            FrameError::Factors => "square kernels without their factor table",
+        })
     }
 }
 
@@ -121,9 +129,23 @@ pub struct Scorer {
     q: i32,
     /// The unrolled passes of this geometry (paper kernels).
     passes: Passes,
+    /// Factor format `Q(p)` of the square kernels.
+    square_p: u32,
+    /// The square kernels' factor table, once attached
+    /// ([`Scorer::with_factors`]); empty otherwise.
+    factors: &'static [i32],
 }
 
 mod embed;
+mod square;
+
+/// Words of the largest square kernels' factor table (16x16 maps):
+/// [`Scorer::factor_words`] of any configuration is at most this.
+pub const MAX_FACTOR_WORDS: usize = square::Blocks {
+    j1: MAX_J,
+    j2: MAX_J,
+}
+.table_words();
 
 use embed::{Factor, MAX_H, Passes, TRI};
 /// The sum pass, exposed for the test that checks when it copies the frame.
@@ -131,9 +153,6 @@ use embed::{Factor, MAX_H, Passes, TRI};
 pub use embed::{FrameCopy, sum_and_saturation};
 use embed::{RealFactor, precision, quantise, real_factor};
 
-/// Finest input format tried for square kernels; `2^(32+f)` must fit the
-/// reciprocal's `u64`.
-const MAX_FRAC: i32 = 24;
 /// Finest input format of normalised maps with paper kernels: the per-map
 /// multiplier `2^(32+f) / S'` (`S' >= 2^30`) must stay below `2^31`.
 const MAX_FRAC_NORM: i32 = 28;
@@ -142,8 +161,6 @@ const MAX_FRAC_NORM: i32 = 28;
 const MAX_FRAC_RAW: i32 = 11;
 const I31: f64 = 2147483647.0;
 const LIMIT_E: f64 = 1073741823.0; // 2^30 - 1
-/// `2^63`: the `i64`/`u64` accumulators.
-const LIMIT_SQUARE: f64 = (1u64 << 63) as f64;
 
 impl Scorer {
     /// Builds the tables for `cfg`. Usable in `const` context, so a firmware
@@ -181,6 +198,7 @@ impl Scorer {
             return Err(ConfigError::Weights);
         }
 
+        let mut square_p = 0;
         let empty = Factor {
             h: 0,
             g: 0,
@@ -202,30 +220,12 @@ impl Scorer {
                 )
             }
             Kind::Square { kmax } => {
-                // Largest input format whose sums provably stay in range.
-                // Not below 0, so that raw counts convert by a left shift:
-                // at f = 0 every bound below holds for any kmax < 16 and
-                // N <= 256 ((kmax + 1) N (2 N 65536)^2 <= 2^62 < 2^63), so
-                // the error is never returned.
-                let mut f: i32 = MAX_FRAC;
-                loop {
-                    if f < 0 {
-                        return Err(ConfigError::Range);
-                    }
-                    let scale = pow2(f);
-                    let cell = 65535.0 * scale + 1.0;
-                    let xsum = if cfg.normalise { scale + n } else { n * cell };
-                    let xmax = if cfg.normalise { scale } else { cell };
-                    let box_max = 2.0 * xsum;
-                    if xmax < I31
-                        && box_max < I31
-                        && (kmax as f64 + 1.0) * n * box_max * box_max < LIMIT_SQUARE
-                    {
-                        break;
-                    }
-                    f -= 1;
-                }
-                (f, empty, empty, f)
+                let blocks = square::Blocks { j1, j2 };
+                let Some((f, p, _)) = square::formats(&blocks, kmax as usize, cfg.normalise) else {
+                    return Err(ConfigError::Range);
+                };
+                square_p = p;
+                (f, empty, empty, f + p as i32 - 32)
             }
         };
 
@@ -260,7 +260,72 @@ impl Scorer {
             scale_num: pow2(32 + f) as f32,
             q,
             passes,
+            square_p,
+            factors: &[],
         })
+    }
+
+    /// Words of the square kernels' factor table ([`Scorer::with_factors`]);
+    /// 0 for the paper kernels, whose factors the `Scorer` holds.
+    pub const fn factor_words(&self) -> usize {
+        match self.kind {
+            Kind::Square { .. } => self.blocks().table_words(),
+            Kind::Paper => 0,
+        }
+    }
+
+    /// Whether this scorer still needs [`Scorer::with_factors`] before it
+    /// can prepare a map.
+    pub const fn needs_factors(&self) -> bool {
+        matches!(self.kind, Kind::Square { .. }) && self.factors.is_empty()
+    }
+
+    /// Builds the square kernels' factors into `table` (at least
+    /// [`Scorer::factor_words`] words; the rest is left alone) and returns
+    /// the scorer that embeds with them. Done once, at start-up: an f64
+    /// Cholesky factorisation of four blocks of up to 64 cells, on 16.6 KB
+    /// of stack. The paper kernels need no table: `self` is returned as it
+    /// is.
+    pub fn with_factors(mut self, table: &'static mut [i32]) -> Result<Scorer, ConfigError> {
+        let Kind::Square { kmax } = self.kind else {
+            return Ok(self);
+        };
+        let words = self.factor_words();
+        let Some(table) = table.get_mut(..words) else {
+            return Err(ConfigError::Table);
+        };
+        if !square::build(&self.blocks(), kmax as usize, self.square_p, table) {
+            return Err(ConfigError::Table);
+        }
+        self.factors = table;
+        Ok(self)
+    }
+
+    /// `self` with the factor table of `other`, a scorer of the same
+    /// geometry, kernels and factor format that has one
+    /// ([`Scorer::with_factors`]): for a host that builds many scorers of
+    /// one configuration (the full scale, the thresholds or the weights
+    /// aside) and one table.
+    pub fn with_factors_of(mut self, other: &Scorer) -> Result<Scorer, ConfigError> {
+        if !matches!(self.kind, Kind::Square { .. }) {
+            return Ok(self);
+        }
+        let same = self.kind == other.kind
+            && self.config.geometry == other.config.geometry
+            && self.square_p == other.square_p
+            && other.factors.len() == self.factor_words();
+        if !same {
+            return Err(ConfigError::Table);
+        }
+        self.factors = other.factors;
+        Ok(self)
+    }
+
+    const fn blocks(&self) -> square::Blocks {
+        square::Blocks {
+            j1: self.config.geometry.j1 as usize,
+            j2: self.config.geometry.j2 as usize,
+        }
     }
 
     pub const fn config(&self) -> &Config {
@@ -301,6 +366,9 @@ impl Scorer {
                     bounds = Some(b);
                 }
             }
+        }
+        if let Kind::Square { .. } = self.kind {
+            factors = [self.square_p; 2];
         }
         Formats {
             input: self.frac,
@@ -460,30 +528,36 @@ impl Scorer {
             return Err(FrameError::Length);
         };
         match self.kind {
-            Kind::Square { kmax } => {
-                let x = scratch.v.as_flattened_mut().get_mut(..n).unwrap_or(&mut []);
-                let (flags, power) = self.normalise_power(frame, x)?;
-                let acc = self.box_sums(x, &mut scratch.sat, state, kmax as usize, diff);
-                if let Some(near) = near.get_mut(..state.len()) {
-                    embed::copy_words(state, near);
+            Kind::Square { .. } => {
+                if self.factors.is_empty() {
+                    return Err(FrameError::Factors);
+                }
+                let blocks = self.blocks();
+                let mut copy = embed::FrameCopy::new();
+                let (power, fl, frame) = self.sum_pass(frame, &mut copy);
+                square::fold(&blocks, frame, self.scale(power), &mut scratch.z);
+                if !square::embed(&blocks, self.factors, &mut scratch.z) {
+                    return Err(FrameError::Factors);
+                }
+                let e = scratch.z.get(..n).unwrap_or(&[]);
+                let acc = if diff {
+                    squared_difference(state, e)
+                } else {
+                    0
+                };
+                embed::copy_words(e, state);
+                if let Some(near) = near.get_mut(..n) {
+                    embed::copy_words(e, near);
                 }
                 Ok(Prepared {
-                    flags,
+                    flags: fl,
                     power,
                     score: if diff { self.to_score(acc) } else { 0 },
                 })
             }
             Kind::Paper => {
                 let mut copy = embed::FrameCopy::new();
-                let (sum, sat, frame) =
-                    embed::sum_and_saturation(frame, self.config.full_scale, &mut copy);
-                let mut fl = 0;
-                if sat {
-                    fl |= flags::SATURATED;
-                }
-                if sum == 0 {
-                    fl |= flags::DARK;
-                }
+                let (sum, fl, frame) = self.sum_pass(frame, &mut copy);
                 let conv = self.scale(sum);
                 let acc = embed::embed(
                     &self.passes,
@@ -502,6 +576,22 @@ impl Scorer {
                 })
             }
         }
+    }
+
+    /// The sample sum of `frame`, its flags ([`flags::SATURATED`],
+    /// [`flags::DARK`]) and the frame to read from then (`copy` once the
+    /// sum pass has copied it there): the first pass of both kernel sets.
+    #[inline(always)]
+    fn sum_pass<'c>(&self, frame: &'c [u16], copy: &'c mut FrameCopy) -> (u32, u8, &'c [u16]) {
+        let (sum, sat, frame) = embed::sum_and_saturation(frame, self.config.full_scale, copy);
+        let mut fl = 0;
+        if sat {
+            fl |= flags::SATURATED;
+        }
+        if sum == 0 {
+            fl |= flags::DARK;
+        }
+        (sum, fl, frame)
     }
 
     /// How the folded counts `v` of a map with sample sum `sum` become
@@ -535,83 +625,6 @@ impl Scorer {
         // Both kernel sets store an embedding whose squared Euclidean
         // distance is the CVM distance.
         self.to_score(squared_difference(a, b))
-    }
-
-    /// The square kernels' embedding of a normalised map `x`: for each
-    /// `k = 0..=kmax` and each cell, the sum of `x` over the cell's box of
-    /// half-width `k` (clipped at the map's border), `k`-major, from one
-    /// summed-area table: `(kmax + 1) J1 J2` words, `O(K N)` per map. The
-    /// distance of two maps is then `Σ (e1 - e2)²` over those words,
-    /// because a box sum is linear: `B(x1) - B(x2) = B(x1 - x2)`, the very
-    /// terms of Eq. 8. Every box sum of a map (`x >= 0`) lies between 0 and
-    /// the map's total, which the table already holds in `i32`, so the
-    /// words and their differences fit `i32`; their squares and sum are the
-    /// terms and sum the scorer's bounds were derived for.
-    ///
-    /// With `diff`, also returns `Σ (old - new)²` against the embedding
-    /// `state` held (the streaming engine's vertical component), computed
-    /// word by word as each word is overwritten.
-    // Out of line: inlined into the engine, its loops ran out of registers
-    // and kept the accumulator on the stack.
-    #[inline(never)]
-    fn box_sums(
-        &self,
-        x: &[i32],
-        sat: &mut Table,
-        state: &mut [i32],
-        kmax: usize,
-        diff: bool,
-    ) -> u64 {
-        let j1 = self.config.geometry.j1 as usize;
-        let j2 = self.config.geometry.j2 as usize;
-        let kmax = kmax.min(MAX_J - 1);
-        // sat[i+1][PAD + c] = Σ_{i'<=i, c'<c} x[i'][c'] for c in 0..=J2,
-        // and the value at c = J2 repeated over the next kmax words. Row 0
-        // and the left pad (c <= 0) are the zero border, which nothing ever
-        // writes, so the caller's table needs no clearing per map. Then the
-        // box of half-width h at column k, clipped at the border, spans
-        // sat columns PAD + k - h to PAD + k + h + 1 for every k: four
-        // streams, no index tables, no clamping in the loop.
-        for (i, xrow) in x.chunks_exact(j2.max(1)).take(j1).enumerate() {
-            let (done, rest) = sat.split_at_mut(i + 1);
-            let (Some(above), Some(row)) = (done.last(), rest.first_mut()) else {
-                break;
-            };
-            let mut run = 0i32;
-            let cells = row.iter_mut().zip(above).skip(PAD + 1);
-            for ((out, a), v) in cells.zip(xrow) {
-                run = run.wrapping_add(*v);
-                *out = a.wrapping_add(run);
-            }
-            let Some((body, pad)) = row.split_at_mut_checked(PAD + j2 + 1) else {
-                break;
-            };
-            let total = body.last().copied().unwrap_or(0);
-            pad.iter_mut().take(kmax).for_each(|p| *p = total);
-        }
-        let mut acc: i64 = 0;
-        let mut rows = state.chunks_exact_mut(j2.max(1));
-        for h in 0..=kmax {
-            let (lo, hi) = (PAD - h, PAD + h + 1);
-            for i in 0..j1 {
-                let (ilo, ihi) = crate::tables::box_range(i, h, j1);
-                let (Some(top), Some(bot), Some(out)) =
-                    (sat.get(ilo), sat.get(ihi + 1), rows.next())
-                else {
-                    break;
-                };
-                let (Some(bh), Some(th), Some(bl), Some(tl)) = (
-                    bot.get(hi..hi + j2),
-                    top.get(hi..hi + j2),
-                    bot.get(lo..lo + j2),
-                    top.get(lo..lo + j2),
-                ) else {
-                    break;
-                };
-                acc = acc.wrapping_add(box_row(out, [bh, th, bl, tl], diff));
-            }
-        }
-        acc as u64
     }
 
     /// `Q(2f)` squared distance to a `Q(q)` score, rounded, saturating.
@@ -703,9 +716,9 @@ pub struct Formats {
     /// `f`: the input `y` is in `Q(f)`.
     pub input: i32,
     /// `p1`, `p2`: the factor blocks of axis 1 and 2 are in `Q(p)` (paper
-    /// kernels; 0 for square kernels, which have none).
+    /// kernels; square kernels: their one factor format twice).
     pub factors: [u32; 2],
-    /// `e`: the embedding is in `Q(e)` (square kernels: the box sums, `f`).
+    /// `e`: the embedding is in `Q(e)`.
     pub embedding: i32,
     /// `q`: scores are in `Q(q)`.
     pub score: i32,
@@ -807,31 +820,6 @@ fn fill(x: &mut [i32], frame: &[u16], f: impl Fn(u16) -> i32) {
     }
 }
 
-/// One row of box sums `bh - th - bl + tl` (the corners of each box in the
-/// summed-area table) written to `out`; with `diff`, returns `Σ (old -
-/// new)²` over the words it overwrote (the square kernels' vertical
-/// component), else 0. Out of line and on slices of one length, so that
-/// the loops keep their pointers and accumulator in registers.
-#[inline(never)]
-fn box_row(out: &mut [i32], [bh, th, bl, tl]: [&[i32]; 4], diff: bool) -> i64 {
-    let corners = bh.iter().zip(th).zip(bl.iter().zip(tl));
-    let sums = corners
-        .map(|((bh, th), (bl, tl))| bh.wrapping_sub(*th).wrapping_sub(*bl).wrapping_add(*tl));
-    let mut acc: i64 = 0;
-    if diff {
-        for (word, e) in out.iter_mut().zip(sums) {
-            let d = word.wrapping_sub(e) as i64;
-            acc = acc.wrapping_add(d * d);
-            *word = e;
-        }
-    } else {
-        for (word, e) in out.iter_mut().zip(sums) {
-            *word = e;
-        }
-    }
-    acc
-}
-
 /// `Σ (a - b)²` of two embeddings: `|a|, |b| < 2^30`, so each difference
 /// fits `i32` and the sum (below `2^62`) fits `i64`: one `SUB` and one
 /// `SMLAL` per word. Kept out of line so that its registers are not shared
@@ -910,29 +898,18 @@ fn squared_difference_blocks(_a: &[i32], _b: &[i32]) -> (i64, usize) {
     (0, 0)
 }
 
-/// Scratch space of the square kernels: the normalised map, in a fixed
-/// `MAX_J` stride, and its summed-area table, whose zero border stays
-/// zero from one map to the next. (The paper kernels' row pass keeps its
+/// Scratch space of the square kernels: a map's folded blocks, which the
+/// embedding overwrites in place. (The paper kernels' row pass keeps its
 /// output on the stack: see `embed::embed`.)
 #[derive(Clone)]
 pub struct Scratch {
-    v: [[i32; MAX_J]; MAX_J],
-    /// The summed-area table of the square kernels' box sums.
-    sat: Table,
+    z: [i32; square::FOLD_WORDS],
 }
-
-/// A summed-area table with its zero border and its padding
-/// ([`Scorer::box_sums`]): `J + 1` rows of `PAD` zeros, `J + 1` sums and
-/// up to `MAX_J - 1` copies of the last.
-type Table = [[i32; 2 * PAD + MAX_J + 1]; MAX_J + 1];
-/// Columns of a [`Table`] row left of column 0.
-const PAD: usize = MAX_J;
 
 impl Scratch {
     pub const fn new() -> Self {
         Scratch {
-            v: [[0; MAX_J]; MAX_J],
-            sat: [[0; 2 * PAD + MAX_J + 1]; MAX_J + 1],
+            z: [0; square::FOLD_WORDS],
         }
     }
 }

@@ -16,6 +16,7 @@ use core::hint::black_box;
 use core::panic::PanicInfo;
 
 use cvm_core::Scorer;
+use cvm_core::scorer::MAX_FACTOR_WORDS;
 use cvm_core::config::{Config, Geometry, Kernels, MAX_J, Weights};
 use cvm_core::pipeline::{Pipeline, Settings};
 use cvm_core::protocol::{LineSink, MAX_LINE, Priority};
@@ -65,10 +66,13 @@ static SQUARE: Scorer = scorer(config(Kernels::Square { kmax: 14 }, false));
 
 static mut ROW_A: [i32; WORDS] = [0; WORDS];
 static mut ROW_B: [i32; WORDS] = [0; WORDS];
-/// The current row's last three maps (`Pipeline::with_near`), large enough
-/// for the square kernels' maps; handed out whole or empty, as the
+/// The current row's last three maps (`Pipeline::with_near`); handed out
+/// whole or empty, as the
 /// optimiser cannot tell, so both ways are linked.
-static mut NEAR: [i32; 3 * 15 * CELLS] = [0; 3 * 15 * CELLS];
+static mut NEAR: [i32; 3 * CELLS] = [0; 3 * CELLS];
+/// The square kernels' factor table, built at start-up (its f64
+/// factorisation is checked here too).
+static mut FACTORS: [i32; MAX_FACTOR_WORDS] = [0; MAX_FACTOR_WORDS];
 static mut QUEUE: LineQueue<8192> = LineQueue::new(4096);
 static mut BUS: [[u16; CELLS]; 2] = [[0; CELLS]; 2];
 
@@ -105,7 +109,15 @@ impl FrameStore for Frames<'_> {
 
 #[unsafe(no_mangle)]
 pub extern "C" fn _start() -> ! {
-    let scorer: &'static Scorer = if black_box(true) { &PAPER } else { &SQUARE };
+    // SAFETY: `_start` runs once and is the only user of `FACTORS`.
+    let factors = unsafe { &mut *core::ptr::addr_of_mut!(FACTORS) };
+    let square = match black_box(SQUARE.clone()).with_factors(factors) {
+        Ok(s) => s,
+        Err(_) => loop {
+            black_box(());
+        },
+    };
+    let scorer: &Scorer = if black_box(true) { &PAPER } else { &square };
     let settings = Settings {
         cols: black_box(300),
         threshold: black_box(1 << 20),

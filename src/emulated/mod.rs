@@ -22,6 +22,7 @@ use core::cell::RefCell;
 use cortex_m_rt::entry;
 use cvm_core::pipeline::{Pipeline, Settings};
 use cvm_core::protocol::{MAX_LINE, ResetCause};
+use cvm_core::scorer::MAX_FACTOR_WORDS;
 use cvm_core::stream::{row_words, row_words_for};
 use cvm_core::{MAX_J, Scorer};
 use cvm_fw_app::acquire::Acquisition;
@@ -61,6 +62,10 @@ static FRAMES: SampleBuffers<FRAME_BUFFERS> = SampleBuffers::new();
 static ROW_A: ConstStaticCell<[i32; ROW_WORDS]> = ConstStaticCell::new([0; ROW_WORDS]);
 static ROW_B: ConstStaticCell<[i32; ROW_WORDS]> = ConstStaticCell::new([0; ROW_WORDS]);
 static SCORER: StaticCell<Scorer> = StaticCell::new();
+/// The square kernels' factor table, built at start-up for the scan's
+/// configuration (unused with paper kernels).
+static FACTORS: ConstStaticCell<[i32; MAX_FACTOR_WORDS]> =
+    ConstStaticCell::new([0; MAX_FACTOR_WORDS]);
 static VERSION: StaticCell<[u8; cvm_core::protocol::MAX_FW]> = StaticCell::new();
 
 /// Fails the run with a one-line message on the host's stderr.
@@ -134,7 +139,13 @@ async fn scan_task(syst: cortex_m::peripheral::SYST) {
         );
     }
     let scorer: &'static Scorer = match Scorer::new(&header.config) {
-        Ok(s) => SCORER.init(s),
+        Ok(s) => match s.with_factors(FACTORS.take()) {
+            Ok(s) => SCORER.init(s),
+            Err(_) => fail(
+                EXIT_INTERNAL,
+                "the square kernels' factors could not be built",
+            ),
+        },
         Err(_) => fail(EXIT_INPUT, "the core refused the scoring configuration"),
     };
     let firmware_version: &'static str = match header.version() {
@@ -156,7 +167,6 @@ async fn scan_task(syst: cortex_m::peripheral::SYST) {
         reset_cause: ResetCause::PowerOn,
         boots: 1,
     };
-    // Square kernels keep (K + 1) box sums per cell: fewer columns fit.
     let words = row_words_for(header.cols as usize, scorer.config());
     let (Some(row_a), Some(row_b)) = (ROW_A.take().get_mut(..words), ROW_B.take().get_mut(..words))
     else {

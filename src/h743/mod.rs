@@ -99,6 +99,14 @@ const TABLES: Scorer = match Scorer::new(&CORE) {
     Err(_) => panic!("cvm-core refuses the configuration in config.rs"),
 };
 
+/// The square kernels' factor table (empty with the paper kernels, whose
+/// factors the `Scorer` holds), built by `main` at start-up, in AXI SRAM.
+struct FactorTable(core::cell::UnsafeCell<[i32; FACTOR_WORDS]>);
+// SAFETY: handed out once, by `main`, before any task runs.
+unsafe impl Sync for FactorTable {}
+const FACTOR_WORDS: usize = TABLES.factor_words();
+static FACTORS: FactorTable = FactorTable(core::cell::UnsafeCell::new([0; FACTOR_WORDS]));
+
 /// The tables the scorer reads, in DTCM: every map loads its factor
 /// coefficients, which cost no wait state there and about 10 cycles each
 /// from flash with the D-cache off (scripts/twin-cost.sh,
@@ -243,12 +251,19 @@ fn main() -> ! {
         Err(_) => defmt::panic!("USART3 refuses {} baud", BAUD),
     };
 
+    // SAFETY: handed out here, once, before any task runs. The square
+    // kernels' f64 factorisation runs before the watchdog starts.
+    let factors = unsafe { &mut *FACTORS.0.get() };
+    let Ok(tables) = TABLES.with_factors(factors) else {
+        defmt::panic!("the square kernels' factors cannot be built")
+    };
+
     let mut wdg = IndependentWatchdog::new(pins.iwdg, WATCHDOG_US);
     wdg.unleash();
 
     QUEUE.lock(|q| q.borrow_mut().set_reserve(KEEP_RESERVE));
     // SAFETY: written here, once, before any task runs; read-only after.
-    let scorer: &'static Scorer = unsafe { (*SCORER.0.get()).write(TABLES) };
+    let scorer: &'static Scorer = unsafe { (*SCORER.0.get()).write(tables) };
     // SAFETY: the row buffers are handed out here, once, before any task runs.
     let (row_a, row_b) = unsafe { (&mut *ROW_A.0.get(), &mut *ROW_B.0.get()) };
     // SRAM1..3 is NOLOAD: start from a known state.

@@ -23,7 +23,7 @@
 //! finest `p1`, `p2`. Written with full matrices, `i128` products and
 //! Euclidean division; nothing is shared with the core but its public API.
 
-use cvm_core::{Config, Geometry, Kernels, Scorer, Weights};
+use cvm_core::{Config, Geometry, Kernels, Weights};
 use cvm_core_tests::{random_map, rng};
 use rand::RngExt;
 
@@ -303,7 +303,7 @@ fn embedding_and_distances_are_bit_exact_on_small_maps() {
                     normalise,
                     full_scale: u16::MAX,
                 };
-                let scorer = Scorer::new(&cfg).unwrap();
+                let scorer = dmap::fixed::scorer(&cfg).unwrap();
                 let axis_w = |j: usize| -> Vec<f64> {
                     let n = if bmax == 0 {
                         j

@@ -69,7 +69,7 @@ fn flags_match_the_frame_for_every_entry_point() {
         let cells = usize::from(j1) * usize::from(j2);
         for &fs in FULL_SCALES {
             for cfg in configs(j1, j2, fs) {
-                let scorer = Scorer::new(&cfg).unwrap();
+                let scorer = dmap::fixed::scorer(&cfg).unwrap();
                 let mut held = vec![0i32; scorer.state_words()];
                 scorer.prepare(&vec![7; cells], &mut held).unwrap();
                 let mut scratch = cvm_core::scorer::Scratch::new();
@@ -106,7 +106,7 @@ fn engine_reports_dark_and_saturated_positions() {
     let cells = j1 * j2;
     for fs in [u16::MAX, 2000] {
         for cfg in configs(j1 as u8, j2 as u8, fs) {
-            let scorer = Scorer::new(&cfg).unwrap();
+            let scorer = dmap::fixed::scorer(&cfg).unwrap();
             let mut r = rng(u64::from(fs));
             let mut scan = Vec::new();
             for i in 0..rows * cols {
@@ -282,7 +282,7 @@ fn summaries_equal_their_recomputation() {
             full_scale: fs,
             ..Config::paper(Geometry::new(j1, j2).unwrap())
         };
-        let scorer = Scorer::new(&cfg).unwrap();
+        let scorer = dmap::fixed::scorer(&cfg).unwrap();
         // A few distinct maps reused, so that equal magnitudes are common.
         let pool: Vec<Vec<u16>> = (0..3)
             .map(|k| match k {

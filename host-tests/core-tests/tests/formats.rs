@@ -66,7 +66,20 @@ fn every_configuration_has_formats() {
     for cfg in &configs {
         let scorer = Scorer::new(cfg).unwrap_or_else(|e| panic!("{cfg:?}: {e:?}"));
         if !cfg.normalise {
-            min_raw = min_raw.min(raw_format(&scorer, 1024));
+            let f = raw_format(&scorer, 1024);
+            min_raw = min_raw.min(f);
+            if let Kernels::Square { .. } = cfg.kernels {
+                // The finest `f` with `Σ|x| <= N 65535 2^f < 2^31` and a
+                // folded count `|v| < 2^18` shifted by `f + 2` inside
+                // `i32`: the bound on the embedding never binds first.
+                let n = scorer.cells() as f64 * 65535.0;
+                let expected = (2147483647.0 / n).log2().floor() as i32;
+                assert_eq!(f, expected.min(11), "{cfg:?}");
+            }
+        } else if let Kernels::Square { .. } = cfg.kernels {
+            // Normalised square maps: the paper kernels' format and exact
+            // reciprocal, f = 28.
+            assert_eq!(normalised_format(&scorer), 28, "{cfg:?}");
         } else if let Kernels::Paper { .. } = cfg.kernels {
             // The finest format, 28, always fits normalised maps (the
             // reciprocal of the sum is exact for it; the scorer's
@@ -74,9 +87,9 @@ fn every_configuration_has_formats() {
             assert_eq!(normalised_format(&scorer), 28, "{cfg:?}");
         }
     }
-    // The square kernels' bound is tightest at 13x16 with kmax 14: f = 0,
-    // where the search ends.
-    assert_eq!(min_raw, 0);
+    // The paper kernels' raw formats are 8 to 11; the square kernels'
+    // `Σ|x| = N 65535 2^f < 2^31` is tightest at 16x16: f = 7.
+    assert_eq!(min_raw, 7);
 }
 
 /// Separable weights of widely different magnitudes (1e-8 to 1e8, some

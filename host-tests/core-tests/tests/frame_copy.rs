@@ -7,7 +7,7 @@
 //! flags.
 
 use cvm_core::scorer::Scratch;
-use cvm_core::{Config, Geometry, Kernels, Scorer, Weights};
+use cvm_core::{Config, Geometry, Kernels, Weights};
 use cvm_core_tests::{frame_flags, random_map, rng};
 
 /// `words` as `u16` samples (little endian: sample `2i` is the low half of
@@ -63,7 +63,7 @@ fn aligned_and_unaligned_frames_embed_the_same() {
                 normalise: true,
                 full_scale: FULL_SCALE,
             };
-            let scorer = Scorer::new(&cfg).unwrap();
+            let scorer = dmap::fixed::scorer(&cfg).unwrap();
             let cells = usize::from(j1) * usize::from(j2);
             for case in 0..4 {
                 let mut frame = random_map(&mut r, cells, usize::from(j2));

@@ -402,7 +402,7 @@ impl Calibration {
 /// `scoring` plus `full_scale` on `j1 x j2` maps (checked as
 /// [`Calibration::threshold_for`] does).
 pub fn threshold_units(path: &Path, config: &Config) -> Result<f64> {
-    let scorer = Scorer::new(config)
+    let scorer = crate::fixed::scorer(config)
         .map_err(|e| anyhow!("fixed-point scorer refused the configuration: {e}"))?;
     Calibration::load(path)?.threshold_for(path, config, &scorer)
 }
@@ -525,7 +525,7 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
                 full_scale: a.full_scale,
                 ..a.scoring.core_config(g.0, g.1)?
             };
-            let scorer = Scorer::new(&config)
+            let scorer = crate::fixed::scorer(&config)
                 .map_err(|e| anyhow!("fixed-point scorer refused the configuration: {e}"))?;
             setup = Some((config, scorer, g));
         }

@@ -3,7 +3,34 @@
 //! engine, applied to a scan held in memory (`dmap score --distance
 //! cvm-fixed`). The streaming engine must reproduce it bit for bit.
 
-use cvm_core::{PositionScore, Scorer, flags, magnitude, power};
+use std::collections::HashMap;
+use std::sync::Mutex;
+
+use cvm_core::{Config, Kernels, PositionScore, Scorer, flags, magnitude, power};
+
+/// The fixed-point scorer of `cfg`, ready to prepare maps: with square
+/// kernels, their factor table built and attached ([`Scorer::with_factors`]).
+/// A table depends on the geometry, `kmax` and the normalisation only, and
+/// lives as long as the process, as a firmware's does: each is built once
+/// and shared by every scorer of its configuration.
+pub fn scorer(cfg: &Config) -> Result<Scorer, cvm_core::ConfigError> {
+    type Key = (u8, u8, u8, bool);
+    static BUILT: Mutex<Option<HashMap<Key, Scorer>>> = Mutex::new(None);
+    let scorer = Scorer::new(cfg)?;
+    let Kernels::Square { kmax } = cfg.kernels else {
+        return Ok(scorer);
+    };
+    let key = (cfg.geometry.j1, cfg.geometry.j2, kmax, cfg.normalise);
+    let mut built = BUILT.lock().unwrap_or_else(|e| e.into_inner());
+    let built = built.get_or_insert_with(HashMap::new);
+    if let Some(other) = built.get(&key) {
+        return scorer.with_factors_of(other);
+    }
+    let table: &'static mut [i32] = vec![0; scorer.factor_words()].leak();
+    let scorer = scorer.with_factors(table)?;
+    built.insert(key, scorer.clone());
+    Ok(scorer)
+}
 
 /// Scores every position of a `rows x cols` scan of `u16` maps (raster
 /// order, `cells` samples per map), with the border rule of docs/method.md §3.

@@ -108,7 +108,7 @@ impl ScoringArgs {
     /// The fixed-point scorer, with a readable error if the core refuses it.
     pub fn scorer(&self, j1: usize, j2: usize) -> Result<cvm_core::Scorer> {
         let cfg = self.core_config(j1, j2)?;
-        cvm_core::Scorer::new(&cfg)
+        crate::fixed::scorer(&cfg)
             .map_err(|e| anyhow::anyhow!("fixed-point scorer refused the configuration: {e}"))
     }
 

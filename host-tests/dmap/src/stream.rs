@@ -195,7 +195,7 @@ pub fn configure(
     j2: usize,
     cols: usize,
 ) -> Result<(Scorer, Settings, Vec<String>)> {
-    let scorer = Scorer::new(&core_config(scoring, output, j1, j2)?)
+    let scorer = crate::fixed::scorer(&core_config(scoring, output, j1, j2)?)
         .map_err(|e| anyhow::anyhow!("fixed-point scorer refused the configuration: {e}"))?;
     if let Some(path) = &output.calibration {
         // Refuses a calibration made for another configuration.

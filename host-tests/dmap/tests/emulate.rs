@@ -109,20 +109,41 @@ fn emulated_firmware_matches_host_pipeline_non_square_unit_weights() {
     );
 }
 
+/// The largest square kernels' factor table (16x16, four blocks of 64
+/// cells), normalised maps.
+#[test]
+fn emulated_firmware_matches_host_pipeline_square_16x16() {
+    compare("square16", 16, 16, 9, 5, &["--kernels", "square"]);
+}
+
 /// The Cortex-M row and column passes are generated per axis length
 /// (`cvm-core/src/scorer/passes_arm.s`): `j1 x (17 - j1)` runs each of the
 /// 16 row passes and the 16 column passes once, on the board's code.
 #[test]
 fn emulated_firmware_matches_host_pipeline_every_axis_length() {
+    every_axis_length("paper", &[]);
+}
+
+/// The square kernels' embedding loop on every block shape that
+/// `j1 x (17 - j1)` folds into (odd and even axes, empty odd blocks of
+/// one-cell axes, rows of 1 to 64 coefficients).
+#[test]
+fn emulated_firmware_matches_host_pipeline_square_every_axis_length() {
+    every_axis_length("square", &["--kernels", "square"]);
+}
+
+fn every_axis_length(label: &str, extra: &[&str]) {
     for j1 in 1..=16 {
         let j2 = 17 - j1;
-        let dir =
-            std::env::temp_dir().join(format!("dmap-emulate-axes-{}-{j1}", std::process::id()));
+        let dir = std::env::temp_dir().join(format!(
+            "dmap-emulate-axes-{label}-{}-{j1}",
+            std::process::id()
+        ));
         std::fs::create_dir_all(&dir).unwrap();
         let scan = dir.join("scan.npy");
         write_scan(&scan, j1, j2, 7, 4, j1 as u64);
         let scan = scan.to_str().unwrap();
-        let args = [scan, "--scores", "--threshold", "0.05"];
+        let args = [&[scan, "--scores", "--threshold", "0.05"], extra].concat();
         let host = dmap(&[&["stream"], &args[..]].concat());
         let target = dmap(&[&["emulate"], &args[..]].concat());
         let _ = std::fs::remove_dir_all(&dir);

@@ -20,7 +20,7 @@ use cvm_core::flags;
 use cvm_core::pipeline::{Pipeline, Settings};
 use cvm_core::protocol::{self, Line, LineSink, Priority};
 use cvm_core::stream::{MAX_ROW_JUMP, Position, PushOutcome, Totals, row_words_for};
-use cvm_core::{RowSummary, Scorer};
+use cvm_core::RowSummary;
 use libfuzzer_sys::arbitrary::{Result, Unstructured};
 use libfuzzer_sys::fuzz_target;
 use std::collections::HashMap;
@@ -500,7 +500,7 @@ fn step(run: &mut Run, u: &mut Unstructured, lines: &mut Lines) -> Result<()> {
 
 fn run(u: &mut Unstructured) -> Result<()> {
     let cfg = config(u)?;
-    let Ok(scorer) = Scorer::new(&cfg) else {
+    let Ok(scorer) = dmap::fixed::scorer(&cfg) else {
         return Ok(());
     };
     let cols = u.int_in_range(1..=MAX_COLS as u32)?;

@@ -1,0 +1,553 @@
+//! The square kernels' embedding: `N` words per map, like the paper
+//! kernels', from the Cholesky factors of the folded quadratic form.
+//!
+//! With square kernels (`b = (k, k)`, `k = 0..=K`, unit weights) the
+//! distance is `d = Δᵀ M Δ` with `M = Σ_k A_k ⊗ A'_k`, `A_k = B_kᵀ B_k` and
+//! `B_k` the 0/1 matrix of the boxes of half-width `k` clipped at the
+//! border (`A_k[r][s]` counts the boxes that hold both cells). `M` is a sum
+//! of Kronecker products, not one, so it has no separable factor like the
+//! paper kernels'; but every `A_k` is centrosymmetric, so folding both
+//! axes (`u = x[l] + x[J-1-l]`, `v = x[l] - x[J-1-l]`, the middle cell in
+//! `u`, exactly as for the paper kernels) splits `M` into four blocks that
+//! do not interact: even or odd along axis 1 times even or odd along axis
+//! 2, of at most `8 x 8 = 64` cells. Each block `G` is positive definite
+//! (the `k = 0` term is the identity), and its upper-triangular Cholesky
+//! factor `R` (`Rᵀ R = G`) embeds the block's folded values `z` as `R z`.
+//! The squared Euclidean distance of two embeddings is the CVM distance.
+//!
+//! The factors depend on the geometry and `K` only. They are computed in
+//! f64 when the configuration is attached to a table
+//! ([`super::Scorer::with_factors`], at start-up: up to 8 704 words, too
+//! many for the `Scorer` that every firmware builds as a constant), and
+//! stored row by row, each row padded with zeros to a multiple of four
+//! words so that the per-map loop reads four coefficients and four inputs
+//! per pair of `LDM`s.
+//!
+//! # Formats and why nothing overflows
+//!
+//! `z` is in `Q(f)`, the factor in `Q(p)`, the embedding `E = R z` in
+//! `Q(f + p - 32)`: one `round(r z / 2^32)` per term (`SMMLAR`). With
+//! `X` a bound on `Σ|x|` (normalised `2^f + N/2`: each sample is rounded;
+//! raw `N 65535 2^f`), every cell lies in one entry of each block, so
+//! `Σ|z| <= X < 2^31` over a block. `|R_ij| <= sqrt(G_jj)`, and `p` is the
+//! finest with `sqrt(max G_jj) 2^p + 1/2 < 2^31 - 1`, so every partial sum
+//! of a row is below `2^31 X / 2^32 + 32 < 2^30 + 32`. The embedding's
+//! norm is at most `X sqrt(max M_ii) 2^(p-32)` (`|M_ij| <= sqrt(M_ii M_jj)`
+//! for a positive definite `M`) plus the rounding, `√N (32 + X / 2^33)`,
+//! and `f` and `p` are the finest for which that stays below `2^30`: every
+//! word and every difference of two words fits `i32`, and a squared
+//! distance (below `2^62`) fits the `i64` accumulator.
+//!
+//! # Accuracy
+//!
+//! Each word is within `s/2 + X / 2^33` units of the exact `R z 2^(p-32)`
+//! (`s <= 64` rounded terms, and each coefficient rounded to `Q(p)`), and
+//! the f64 Cholesky factor is exact to about `1e-14` of `G`. Against the
+//! f64 brute force of Eq. 8 the distances meet the bound the paper kernels
+//! meet (core-tests, `fixed_vs_f64`).
+
+use crate::config::{MAX_CELLS, MAX_J};
+use crate::tables::{pow2, round, sqrt};
+
+/// Largest block of one folded axis (`ceil(16 / 2)`).
+const MAX_H: usize = MAX_J.div_ceil(2);
+/// Largest folded block of a map.
+const MAX_BLOCK: usize = MAX_H * MAX_H;
+/// Words of a packed upper triangle of `MAX_BLOCK` rows (the f64 Cholesky's
+/// work space, on the stack of the one call that builds a table).
+const MAX_TRI: usize = MAX_BLOCK * (MAX_BLOCK + 1) / 2;
+/// Words of the scratch space the per-map path folds a map into: every
+/// row of the last block reads up to three words past the block.
+pub const FOLD_WORDS: usize = MAX_CELLS + 4;
+/// Input format of normalised maps: the per-map reciprocal of the paper
+/// kernels (`Scorer::scale`, exact for `f = 28` only).
+const FRAC_NORM: i32 = 28;
+/// Finest input format of raw maps: a folded count `|v| <= 4 65535 < 2^18`
+/// shifted left by `f + 2` stays below `2^31`.
+const MAX_FRAC_RAW: i32 = 11;
+const I31: f64 = 2147483647.0;
+const LIMIT_E: f64 = 1073741823.0; // 2^30 - 1
+/// Relative slack on the f64 bounds (the Cholesky factor and the square
+/// roots are computed, not exact).
+const SLACK: f64 = 1.0 + 1e-9;
+
+/// The sizes of the four folded blocks of a `j1 x j2` map, in the order
+/// the embedding stores them: (even, even), (even, odd), (odd, even),
+/// (odd, odd) along (axis 1, axis 2).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Blocks {
+    pub j1: usize,
+    pub j2: usize,
+}
+
+impl Blocks {
+    /// Rows and columns of block `b` (0..4) and whether each axis is odd.
+    pub const fn dims(&self, b: usize) -> (usize, usize, bool, bool) {
+        let (odd1, odd2) = (b & 2 != 0, b & 1 != 0);
+        let n1 = if odd1 {
+            self.j1 / 2
+        } else {
+            self.j1.div_ceil(2)
+        };
+        let n2 = if odd2 {
+            self.j2 / 2
+        } else {
+            self.j2.div_ceil(2)
+        };
+        (n1, n2, odd1, odd2)
+    }
+
+    /// Words of the factor table of this geometry.
+    pub const fn table_words(&self) -> usize {
+        let mut w = 0;
+        let mut b = 0;
+        while b < 4 {
+            let (n1, n2, _, _) = self.dims(b);
+            w += padded_words(n1 * n2);
+            b += 1;
+        }
+        w
+    }
+}
+
+/// `A_k[r][s]` on an axis of `j` cells: the boxes of half-width `k`,
+/// clipped at the border, that hold both cells.
+const fn box_gram(j: usize, k: usize, r: usize, s: usize) -> i64 {
+    let (lo, hi) = if r < s { (r, s) } else { (s, r) };
+    let first = hi.saturating_sub(k);
+    let last = if lo + k < j { lo + k } else { j - 1 };
+    if last >= first {
+        (last - first + 1) as i64
+    } else {
+        0
+    }
+}
+
+/// Four times the folded entry `(Mᵀ A_k M)[a][c]` of one axis (the fold's
+/// weights are 1/2 for a mirrored pair and 1 for the middle cell, so four
+/// times the entry is an integer); `odd` picks the odd block.
+const fn folded4(j: usize, k: usize, a: usize, c: usize, odd: bool) -> i64 {
+    let sign = if odd { -1 } else { 1 };
+    let (ra, wa, na) = cells(j, a);
+    let (rc, wc, nc) = cells(j, c);
+    let mut s = 0;
+    let mut p = 0;
+    while p < na {
+        let mut q = 0;
+        while q < nc {
+            let (ia, fa) = if p == 0 { (ra, wa) } else { (j - 1 - ra, sign) };
+            let (ic, fc) = if q == 0 { (rc, wc) } else { (j - 1 - rc, sign) };
+            s += fa * fc * box_gram(j, k, ia, ic);
+            q += 1;
+        }
+        p += 1;
+    }
+    s
+}
+
+/// Fold column `a`: its first cell, that cell's weight (times 2) and the
+/// number of cells (the middle cell of an odd axis stands alone).
+const fn cells(j: usize, a: usize) -> (usize, i64, usize) {
+    if j % 2 == 1 && a == j / 2 {
+        (a, 2, 1)
+    } else {
+        (a, 1, 2)
+    }
+}
+
+/// Sixteen times the entry of block `b` between cells `(p, q)` and
+/// `(p', q')` of the block: an integer, exact in f64.
+const fn block_entry16(g: &Blocks, kmax: usize, b: usize, cell: usize, other: usize) -> i64 {
+    let (_, n2, odd1, odd2) = g.dims(b);
+    // A block with no columns has no cells to ask about.
+    let n2 = if n2 == 0 { 1 } else { n2 };
+    let (p, q) = (cell / n2, cell % n2);
+    let (p2, q2) = (other / n2, other % n2);
+    let mut s = 0;
+    let mut k = 0;
+    while k <= kmax {
+        s += folded4(g.j1, k, p, p2, odd1) * folded4(g.j2, k, q, q2, odd2);
+        k += 1;
+    }
+    s
+}
+
+/// The largest diagonal entries of the blocks `G` and of `M`.
+const fn diagonals(g: &Blocks, kmax: usize) -> (f64, f64) {
+    let mut gmax = 0;
+    let mut b = 0;
+    while b < 4 {
+        let (n1, n2, _, _) = g.dims(b);
+        let mut c = 0;
+        while c < n1 * n2 {
+            let v = block_entry16(g, kmax, b, c, c);
+            if v > gmax {
+                gmax = v;
+            }
+            c += 1;
+        }
+        b += 1;
+    }
+    let mut mmax = 0;
+    let mut r = 0;
+    while r < g.j1 {
+        let mut c = 0;
+        while c < g.j2 {
+            let mut v = 0;
+            let mut k = 0;
+            while k <= kmax {
+                v += box_gram(g.j1, k, r, r) * box_gram(g.j2, k, c, c);
+                k += 1;
+            }
+            if v > mmax {
+                mmax = v;
+            }
+            c += 1;
+        }
+        r += 1;
+    }
+    (gmax as f64 / 16.0, mmax as f64)
+}
+
+/// The bounds of the module docs at formats `f`, `p`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SquareBounds {
+    /// `X`: `Σ|x|` of a map, and of the folded values of one block.
+    pub input: f64,
+    /// Every partial sum of the embedding: `2^31 X / 2^32 + 32 < 2^31`.
+    pub partial: f64,
+    /// `‖E‖ < 2^30`.
+    pub embedding: f64,
+}
+
+/// The finest input format `f` and factor format `p` for which every bound
+/// of the module docs holds, with those bounds; `None` if none does.
+pub const fn formats(g: &Blocks, kmax: usize, normalise: bool) -> Option<(i32, u32, SquareBounds)> {
+    let n = (g.j1 * g.j2) as f64;
+    let (gmax, mmax) = diagonals(g, kmax);
+    let rmax = sqrt(gmax) * SLACK;
+    let smax = g.j1.div_ceil(2) * g.j2.div_ceil(2);
+    let mut f = if normalise { FRAC_NORM } else { MAX_FRAC_RAW };
+    while f >= 0 {
+        let scale = pow2(f);
+        let x = if normalise {
+            scale + n
+        } else {
+            n * 65535.0 * scale
+        };
+        if x < I31 {
+            let mut p: i32 = 62;
+            while p >= 0 && rmax * pow2(p) + 0.5 >= I31 {
+                p -= 1;
+            }
+            while p >= 0 {
+                let word = smax as f64 / 2.0 + x * pow2(-33);
+                let e = x * sqrt(mmax) * SLACK * pow2(p - 32) + sqrt(n) * word;
+                let partial = (rmax * pow2(p) + 0.5) * x * pow2(-32) + smax as f64 / 2.0;
+                if e < LIMIT_E && partial < I31 {
+                    let b = SquareBounds {
+                        input: x,
+                        partial,
+                        embedding: e,
+                    };
+                    return Some((f, p as u32, b));
+                }
+                p -= 1;
+            }
+        }
+        f -= 1;
+    }
+    None
+}
+
+/// Packed upper-triangle offset of row `i` of an `s`-row block.
+const fn row_start(s: usize, i: usize) -> usize {
+    i * (2 * s - i + 1) / 2
+}
+
+/// Builds the padded factor table of geometry `g` with kernels up to
+/// `kmax` in `Q(p)` into `out` (at least [`Blocks::table_words`] words).
+/// Runs once per configuration, at start-up: the f64 Cholesky of each
+/// block in a packed triangle on the stack (16.6 KB at most). Returns
+/// false if `out` is too short or a block is not positive definite
+/// (neither happens for a geometry and `kmax` that [`formats`] accepted).
+pub fn build(g: &Blocks, kmax: usize, p: u32, out: &mut [i32]) -> bool {
+    let scale = pow2(p as i32);
+    let mut at = 0;
+    for b in 0..4 {
+        let (n1, n2, _, _) = g.dims(b);
+        let s = n1 * n2;
+        let mut r = [0.0f64; MAX_TRI];
+        for i in 0..s {
+            // R[i][l] = (G[i][l] - Σ_{m<i} R[m][i] R[m][l]) / R[i][i].
+            let mut d = block_entry16(g, kmax, b, i, i) as f64 / 16.0;
+            for m in 0..i {
+                let v = r.get(row_start(s, m) + i - m).copied().unwrap_or(0.0);
+                d -= v * v;
+            }
+            if d.is_nan() || d <= 0.0 {
+                return false;
+            }
+            let piv = sqrt(d);
+            for l in i..s {
+                let v = if l == i {
+                    piv
+                } else {
+                    let mut t = block_entry16(g, kmax, b, i, l) as f64 / 16.0;
+                    for m in 0..i {
+                        let base = row_start(s, m);
+                        let a = r.get(base + i - m).copied().unwrap_or(0.0);
+                        let c = r.get(base + l - m).copied().unwrap_or(0.0);
+                        t -= a * c;
+                    }
+                    t / piv
+                };
+                if let Some(w) = r.get_mut(row_start(s, i) + l - i) {
+                    *w = v;
+                }
+            }
+        }
+        for i in 0..s {
+            let len = s - i;
+            let Some(row) = out.get_mut(at..at + len.div_ceil(4) * 4) else {
+                return false;
+            };
+            let start = row_start(s, i);
+            let coeffs = r.get(start..start + len).unwrap_or(&[]);
+            row.fill(0);
+            for (w, &v) in row.iter_mut().zip(coeffs) {
+                // Below 2^31 - 1 by the choice of `p`; saturating all the same.
+                *w = round(v * scale).clamp(i32::MIN as i64, i32::MAX as i64) as i32;
+            }
+            at += row.len();
+        }
+    }
+    at == g.table_words()
+}
+
+/// Folds the raw map `frame` (row-major, `j2` per row) on both axes into
+/// the four blocks of `z`, one after the other, and converts each folded
+/// count `v` (exact: `|v| <= S`, the sum of the map's samples) to `Q(f)`
+/// as the paper kernels do: `round((v << k) m / 2^32)` with `(k, m)` from
+/// `Scorer::scale` (normalised: error below 1; raw: `v 2^f`, exact). Each
+/// group of four mirrored samples gives one word of each block.
+#[inline(never)]
+pub fn fold(g: &Blocks, frame: &[u16], (k, m): (u32, i32), z: &mut [i32]) {
+    let (j1, j2) = (g.j1, g.j2);
+    let (h1, g1, h2, g2) = (j1.div_ceil(2), j1 / 2, j2.div_ceil(2), j2 / 2);
+    let k = k.min(31);
+    let conv = |v: i32| smmulr(v << k, m);
+    let Some((b00, rest)) = z.split_at_mut_checked(h1 * h2) else {
+        return;
+    };
+    let Some((b01, rest)) = rest.split_at_mut_checked(h1 * g2) else {
+        return;
+    };
+    let Some((b10, b11)) = rest.split_at_mut_checked(g1 * h2) else {
+        return;
+    };
+    for p in 0..h1 {
+        // Rows p and j1-1-p: the same row at the middle of an odd axis,
+        // which has no odd part.
+        let pm = j1 - 1 - p;
+        let (Some(top), Some(bot)) = (
+            frame.get(p * j2..p * j2 + j2),
+            frame.get(pm * j2..pm * j2 + j2),
+        ) else {
+            return;
+        };
+        let (Some(r00), Some(r01)) = (
+            b00.get_mut(p * h2..p * h2 + h2),
+            b01.get_mut(p * g2..p * g2 + g2),
+        ) else {
+            return;
+        };
+        let (tl, tr) = (
+            top.get(..g2).unwrap_or(&[]),
+            top.get(j2 - g2..).unwrap_or(&[]),
+        );
+        if p == pm {
+            let cols = tl
+                .iter()
+                .zip(tr.iter().rev())
+                .zip(r00.iter_mut().zip(r01.iter_mut()));
+            for ((&a, &b), (e, o)) in cols {
+                let (a, b) = (a as i32, b as i32);
+                *e = conv(a + b);
+                *o = conv(a - b);
+            }
+            if h2 > g2
+                && let (Some(e), Some(&a)) = (r00.get_mut(g2), top.get(g2))
+            {
+                *e = conv(a as i32);
+            }
+            continue;
+        }
+        let (Some(r10), Some(r11)) = (
+            b10.get_mut(p * h2..p * h2 + h2),
+            b11.get_mut(p * g2..p * g2 + g2),
+        ) else {
+            return;
+        };
+        let (bl, br) = (
+            bot.get(..g2).unwrap_or(&[]),
+            bot.get(j2 - g2..).unwrap_or(&[]),
+        );
+        let samples = tl
+            .iter()
+            .zip(tr.iter().rev())
+            .zip(bl.iter().zip(br.iter().rev()));
+        let outs = r00
+            .iter_mut()
+            .zip(r01.iter_mut())
+            .zip(r10.iter_mut().zip(r11.iter_mut()));
+        for (((&a, &b), (&c, &d)), ((ee, eo), (oe, oo))) in samples.zip(outs) {
+            let (s1, d1) = (a as i32 + b as i32, a as i32 - b as i32);
+            let (s2, d2) = (c as i32 + d as i32, c as i32 - d as i32);
+            *ee = conv(s1 + s2);
+            *eo = conv(d1 + d2);
+            *oe = conv(s1 - s2);
+            *oo = conv(d1 - d2);
+        }
+        if h2 > g2
+            && let (Some(e), Some(o), Some(&a), Some(&c)) =
+                (r00.get_mut(g2), r10.get_mut(g2), top.get(g2), bot.get(g2))
+        {
+            *e = conv(a as i32 + c as i32);
+            *o = conv(a as i32 - c as i32);
+        }
+    }
+}
+
+/// `round(a b / 2^32)`: one `SMMULR`.
+#[inline(always)]
+fn smmulr(a: i32, b: i32) -> i32 {
+    #[cfg(target_arch = "arm")]
+    {
+        let r: i32;
+        // SAFETY: one register-only instruction.
+        unsafe {
+            core::arch::asm!(
+                "smmulr {r}, {a}, {b}",
+                r = lateout(reg) r,
+                a = in(reg) a,
+                b = in(reg) b,
+                options(pure, nomem, nostack, preserves_flags)
+            );
+        }
+        r
+    }
+    #[cfg(not(target_arch = "arm"))]
+    {
+        ((a as i64 * b as i64 + (1 << 31)) >> 32) as i32
+    }
+}
+
+/// Embeds the folded blocks of `z` in place: block by block, `E = R z`,
+/// word `i` of a block overwriting its input `z_i` once no later row needs
+/// it. `table` holds [`Blocks::table_words`] words, `z` at least
+/// [`FOLD_WORDS`]. Returns false (and leaves `z` partly embedded) if
+/// either is too short.
+pub fn embed(g: &Blocks, table: &[i32], z: &mut [i32]) -> bool {
+    let n = g.j1 * g.j2;
+    if z.len() < n + 3 {
+        return false;
+    }
+    let (mut t, mut at) = (0, 0);
+    for b in 0..4 {
+        let (n1, n2, _, _) = g.dims(b);
+        let s = n1 * n2;
+        let words = padded_words(s);
+        let (Some(zb), Some(tb)) = (z.get_mut(at..), table.get(t..t + words)) else {
+            return false;
+        };
+        if s > 0 {
+            block(tb, zb, s);
+        }
+        t += words;
+        at += s;
+    }
+    true
+}
+
+/// [`block_words`] in closed form, for the per-map path: rows of
+/// `4(q+1)` words for `r` of them and `4t` words for four each of
+/// `t = 1..=q` (`s = 4q + r`).
+const fn padded_words(s: usize) -> usize {
+    let (q, r) = (s / 4, s % 4);
+    4 * (q + 1) * (2 * q + r)
+}
+
+/// One block of [`embed`] (`s > 0`; `table` and `z` checked by the caller).
+#[cfg(target_arch = "arm")]
+#[inline(always)]
+fn block(table: &[i32], z: &mut [i32], s: usize) {
+    // SAFETY: `table` holds the block's `padded_words(s)` words and `z` its
+    // `s` words plus the three that the last row's last group reads past
+    // them (`embed` checked both); the function writes `z[..s]` only and
+    // preserves the callee-saved registers (AAPCS).
+    unsafe {
+        square_arm::cvm_square_block(table.as_ptr(), z.as_mut_ptr(), s);
+    }
+}
+
+#[cfg(not(target_arch = "arm"))]
+#[inline(always)]
+fn block(table: &[i32], z: &mut [i32], s: usize) {
+    let mut t = 0;
+    for i in 0..s {
+        let len = s - i;
+        let coeffs = table.get(t..t + len).unwrap_or(&[]);
+        let inputs = z.get(i..i + len).unwrap_or(&[]);
+        let mut acc = 0i32;
+        for (&c, &v) in coeffs.iter().zip(inputs) {
+            acc = acc.wrapping_add(((c as i64 * v as i64 + (1 << 31)) >> 32) as i32);
+        }
+        if let Some(w) = z.get_mut(i) {
+            *w = acc;
+        }
+        t += len.div_ceil(4) * 4;
+    }
+}
+
+#[cfg(target_arch = "arm")]
+mod square_arm {
+    // `(table, z, s) -> table'`: for each row `i < s` of the block,
+    // `z[i] = Σ_g SMMLAR` over its padded groups of four coefficients and
+    // four inputs from `z[i]` on, then the next row. r0 the table, r1 the
+    // row's first input (and its output), r2 the group cursor, r3 the
+    // row's length, r12 its groups, lr the accumulator, r4-r11 one group.
+    core::arch::global_asm!(
+        ".section .text.cvm_square_block,\"ax\",%progbits",
+        ".global cvm_square_block",
+        ".type cvm_square_block,%function",
+        ".p2align 2",
+        ".thumb_func",
+        "cvm_square_block:",
+        "    push {{r4, r5, r6, r7, r8, r9, r10, r11, lr}}",
+        "    mov r3, r2",
+        "1:",
+        "    add r12, r3, #3",
+        "    lsr r12, r12, #2",
+        "    mov lr, #0",
+        "    mov r2, r1",
+        "2:",
+        "    ldm r0!, {{r4, r5, r6, r7}}",
+        "    ldm r2!, {{r8, r9, r10, r11}}",
+        "    smmlar lr, r4, r8, lr",
+        "    smmlar lr, r5, r9, lr",
+        "    smmlar lr, r6, r10, lr",
+        "    smmlar lr, r7, r11, lr",
+        "    subs r12, r12, #1",
+        "    bne 2b",
+        "    str lr, [r1], #4",
+        "    subs r3, r3, #1",
+        "    bne 1b",
+        "    pop {{r4, r5, r6, r7, r8, r9, r10, r11, pc}}",
+        ".size cvm_square_block, . - cvm_square_block",
+    );
+
+    unsafe extern "C" {
+        pub fn cvm_square_block(table: *const i32, z: *mut i32, s: usize) -> *const i32;
+    }
+}
