@@ -144,6 +144,9 @@ pub enum EngineError {
     /// A row buffer is shorter than [`row_words_for`], or the near buffer
     /// is not empty but shorter than [`near_words`].
     Buffer,
+    /// A square-kernel scorer without its factor table
+    /// ([`Scorer::with_factors`]): it could not prepare a single map.
+    Factors,
 }
 
 impl core::fmt::Display for EngineError {
@@ -151,6 +154,7 @@ impl core::fmt::Display for EngineError {
         f.write_str(match self {
             EngineError::Columns => "no columns, or more than the engine holds",
             EngineError::Buffer => "a row buffer or the near buffer is too short for the maps",
+            EngineError::Factors => "square kernels without their factor table",
         })
     }
 }
@@ -259,6 +263,9 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
         let cols = cols as usize;
         if cols == 0 || cols > MAX_COLS {
             return Err(EngineError::Columns);
+        }
+        if scorer.needs_factors() {
+            return Err(EngineError::Factors);
         }
         let cells = scorer.cells();
         let words = row_words_for(cols, scorer.config());

@@ -15,12 +15,12 @@
 //! - row lines agree with their score lines, the end line with everything.
 #![no_main]
 
+use cvm_core::RowSummary;
 use cvm_core::config::{Config, Geometry, Kernels, Weights};
 use cvm_core::flags;
 use cvm_core::pipeline::{Pipeline, Settings};
 use cvm_core::protocol::{self, Line, LineSink, Priority};
 use cvm_core::stream::{MAX_ROW_JUMP, Position, PushOutcome, Totals, row_words_for};
-use cvm_core::RowSummary;
 use libfuzzer_sys::arbitrary::{Result, Unstructured};
 use libfuzzer_sys::fuzz_target;
 use std::collections::HashMap;
