@@ -2,7 +2,8 @@
 # Estimated cycles per beam of the H743 release firmware's scoring path on
 # the chip model: instructions plus the bus cost model of
 # scripts/twin-cost.py (accesses by memory and static, stall cycles per
-# access), for 9x9 and 15x15 maps with paper kernels. Extra arguments go to
+# access), for 9x9 and 15x15 maps with paper kernels
+# (`KERNELS=square` for the square kernels). Extra arguments go to
 # twin-cost.py (e.g. `--dtcm ROW_A` to cost a static as if in DTCM).
 # Builds the ELF for each geometry into target/twin like twin-profile.sh.
 set -euo pipefail
@@ -14,7 +15,7 @@ if ! python3 -c "import capstone" >/dev/null 2>&1; then
     python3 -m pip install --quiet --disable-pip-version-check capstone==5.0.7
 fi
 for j in 9 15; do
-    CVM_H743_SCAN="j1=$j j2=$j cols=12 rows=6 scores=true" \
+    CVM_H743_SCAN="j1=$j j2=$j cols=12 rows=6 scores=true kernels=${KERNELS:-paper}" \
         cargo build --release --target-dir target/twin >&2
     python3 scripts/twin-cost.py target/twin/thumbv7em-none-eabihf/release/cvm-fw "$j" "$j" "$@"
     echo

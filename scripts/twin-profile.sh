@@ -1,12 +1,13 @@
 #!/usr/bin/env bash
 # Instructions per beam of the H743 release firmware on the chip model, by
-# stage, for 9x9 and 15x15 maps with paper kernels (docs/twin.md). Builds
+# stage, for 9x9 and 15x15 maps with paper kernels
+# (`KERNELS=square` for the square kernels) (docs/twin.md). Builds
 # the ELF for each geometry into target/twin (cargo's own caching).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
 for j in 9 15; do
-    CVM_H743_SCAN="j1=$j j2=$j cols=12 rows=6 scores=true" \
+    CVM_H743_SCAN="j1=$j j2=$j cols=12 rows=6 scores=true kernels=${KERNELS:-paper}" \
         cargo build --release --target-dir target/twin >&2
     elf=target/twin/thumbv7em-none-eabihf/release/cvm-fw
     (cd host-tests/twin && python3 -m h743twin.profile "../../$elf" "$j" "$j" --top "${TOP:-0}")

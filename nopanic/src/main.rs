@@ -16,10 +16,10 @@ use core::hint::black_box;
 use core::panic::PanicInfo;
 
 use cvm_core::Scorer;
-use cvm_core::scorer::MAX_FACTOR_WORDS;
 use cvm_core::config::{Config, Geometry, Kernels, MAX_J, Weights};
 use cvm_core::pipeline::{Pipeline, Settings};
 use cvm_core::protocol::{LineSink, MAX_LINE, Priority};
+use cvm_core::scorer::MAX_FACTOR_WORDS;
 use cvm_core::stream::{Position, row_words};
 use cvm_fw_app::acquire::{Acquisition, BeamRecord};
 use cvm_fw_app::driver::{CountingSink, FrameStore, ScanDriver};
