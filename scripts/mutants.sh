@@ -22,9 +22,11 @@
 #             fw-app-tests
 #   embed     the per-map passes of cvm-core/src/scorer/embed.rs (sum and
 #             saturation, conversion, row and column passes)
-#   scorer    normalisation, flags, score conversion, distances, the
-#             square kernels' box sums and the gradient magnitude in
-#             cvm-core/src/scorer.rs
+#   scorer    normalisation, flags, score conversion, distances and the
+#             gradient magnitude in cvm-core/src/scorer.rs
+#   square    the square kernels' factors and per-map embedding,
+#             cvm-core/src/scorer/square.rs (its portable code: the
+#             Cortex-M assembly is checked by the emulated board's tests)
 #   protocol  the line encoder and CRC in cvm-core/src/protocol.rs
 #   pipeline  cvm-core/src/pipeline.rs
 #   decision  the power channel and the object labeller,
@@ -74,7 +76,7 @@ while [ $# -gt 0 ] && [ "$1" != "--" ]; do
     shift
 done
 [ "${1-}" = "--" ] && shift
-[ ${#passes[@]} -gt 0 ] || passes=(fw-app acquire stream embed scorer protocol pipeline decision tables parser emufile rest)
+[ ${#passes[@]} -gt 0 ] || passes=(fw-app acquire stream embed scorer square protocol pipeline decision tables parser emufile rest)
 
 if ! cargo mutants --version >/dev/null 2>&1; then
     cargo install --locked cargo-mutants
@@ -124,7 +126,7 @@ rm -f "$stage/host-tests/dmap/tests/emulate.rs" "$stage/host-tests/dmap/tests/tw
 # -> (u32, i32) with (0, 0)" or "replace + with - in rows").
 fn_re() { printf '(replace|in) (%s)( |$)' "$1"; }
 embed_fns='sum_and_saturation|words_sum|copy_words|mul_hi_round|tri|rows|rows_model|cols|cols_model|above2|sum_copy_blocks|embed'
-scorer_fns='Scorer::(normalise|normalise_power|converter|prepare|prepare_with|prepare_replacing|prepare_into|prepare_map|prepare_map_near|box_sums|scale|distance|square_distance|to_score)|recip_sample|shr_sample|fill|squared_difference|squared_difference_blocks|box_row|reciprocal|magnitude'
+scorer_fns='Scorer::(normalise|normalise_power|converter|prepare|prepare_with|prepare_replacing|prepare_into|prepare_map|prepare_map_near|sum_pass|scale|distance|square_distance|to_score)|recip_sample|shr_sample|fill|squared_difference|squared_difference_blocks|reciprocal|magnitude'
 protocol_fns='crc16|LineBuf::[a-z0-9_]+|encode_score|encode_header|encode_row|encode_end|end_fields|HeaderInfo<.*>::new'
 core_tests=(--test-package cvm-core-tests --test-package cvm-fw-app-tests)
 
@@ -141,6 +143,7 @@ for pass in "${passes[@]}"; do
         --re "$(fn_re "$embed_fns")") ;;
     scorer) args=(--package cvm-core "${core_tests[@]}" --file cvm-core/src/scorer.rs
         --re "$(fn_re "$scorer_fns")") ;;
+    square) args=(--package cvm-core "${core_tests[@]}" --file cvm-core/src/scorer/square.rs) ;;
     protocol) args=(--package cvm-core "${core_tests[@]}" --file cvm-core/src/protocol.rs
         --re "$(fn_re "$protocol_fns")") ;;
     pipeline) args=(--package cvm-core "${core_tests[@]}" --file cvm-core/src/pipeline.rs) ;;
@@ -159,7 +162,7 @@ for pass in "${passes[@]}"; do
         --exclude cvm-core/src/objects.rs --exclude cvm-core/src/tables.rs
         --exclude cvm-core/src/config.rs --exclude cvm-core/src/flags.rs
         --exclude cvm-core/src/scorer.rs --exclude cvm-core/src/scorer/embed.rs
-        --exclude cvm-core/src/protocol.rs) ;;
+        --exclude cvm-core/src/scorer/square.rs --exclude cvm-core/src/protocol.rs) ;;
     *)
         echo "unknown pass '$pass'" >&2
         exit 2

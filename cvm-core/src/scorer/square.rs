@@ -19,9 +19,9 @@
 //! f64 when the configuration is attached to a table
 //! ([`super::Scorer::with_factors`], at start-up: up to 8 704 words, too
 //! many for the `Scorer` that every firmware builds as a constant), and
-//! stored row by row, each row padded with zeros to a multiple of four
-//! words so that the per-map loop reads four coefficients and four inputs
-//! per pair of `LDM`s.
+//! stored two rows at a time in groups of three columns, so that the
+//! per-map loop reads three inputs and the six coefficients of both rows
+//! that use them with two `LDM`s (`padded_words`).
 //!
 //! # Formats and why nothing overflows
 //!
@@ -307,20 +307,44 @@ pub fn build(g: &Blocks, kmax: usize, p: u32, out: &mut [i32]) -> bool {
                 }
             }
         }
-        for i in 0..s {
-            let len = s - i;
-            let Some(row) = out.get_mut(at..at + len.div_ceil(4) * 4) else {
-                return false;
+        let q = |i: usize, l: usize| -> i32 {
+            let v = if l < s && l >= i {
+                r.get(row_start(s, i) + l - i).copied().unwrap_or(0.0)
+            } else {
+                0.0
             };
-            let start = row_start(s, i);
-            let coeffs = r.get(start..start + len).unwrap_or(&[]);
-            row.fill(0);
-            for (w, &v) in row.iter_mut().zip(coeffs) {
-                // Below 2^31 - 1 by the choice of `p`; saturating all the same.
-                *w = round(v * scale).clamp(i32::MIN as i64, i32::MAX as i64) as i32;
+            // Below 2^31 - 1 by the choice of `p`; saturating all the same.
+            round(v * scale).clamp(i32::MIN as i64, i32::MAX as i64) as i32
+        };
+        let Some(block) = out.get_mut(at..at + padded_words(s)) else {
+            return false;
+        };
+        let mut words = block.iter_mut();
+        let mut put = |v: i32| {
+            if let Some(w) = words.next() {
+                *w = v;
             }
-            at += row.len();
+        };
+        // Rows in pairs (see `padded_words`): the number of groups of
+        // three columns, row i's diagonal, then per group row i's three
+        // coefficients and row i+1's.
+        for i in (0..s.saturating_sub(1)).step_by(2) {
+            let groups = (s - i - 1).div_ceil(3);
+            put(groups as i32);
+            put(q(i, i));
+            for gr in 0..groups {
+                let j = i + 1 + 3 * gr;
+                for row in [i, i + 1] {
+                    for l in j..j + 3 {
+                        put(q(row, l));
+                    }
+                }
+            }
         }
+        if s % 2 == 1 {
+            put(q(s - 1, s - 1));
+        }
+        at += padded_words(s);
     }
     at == g.table_words()
 }
@@ -389,26 +413,7 @@ pub fn fold(g: &Blocks, frame: &[u16], (k, m): (u32, i32), z: &mut [i32]) {
         ) else {
             return;
         };
-        let (bl, br) = (
-            bot.get(..g2).unwrap_or(&[]),
-            bot.get(j2 - g2..).unwrap_or(&[]),
-        );
-        let samples = tl
-            .iter()
-            .zip(tr.iter().rev())
-            .zip(bl.iter().zip(br.iter().rev()));
-        let outs = r00
-            .iter_mut()
-            .zip(r01.iter_mut())
-            .zip(r10.iter_mut().zip(r11.iter_mut()));
-        for (((&a, &b), (&c, &d)), ((ee, eo), (oe, oo))) in samples.zip(outs) {
-            let (s1, d1) = (a as i32 + b as i32, a as i32 - b as i32);
-            let (s2, d2) = (c as i32 + d as i32, c as i32 - d as i32);
-            *ee = conv(s1 + s2);
-            *eo = conv(d1 + d2);
-            *oe = conv(s1 - s2);
-            *oo = conv(d1 - d2);
-        }
+        quads(top, bot, g2, [&mut *r00, &mut *r01, &mut *r10, r11], (k, m));
         if h2 > g2
             && let (Some(e), Some(o), Some(&a), Some(&c)) =
                 (r00.get_mut(g2), r10.get_mut(g2), top.get(g2), bot.get(g2))
@@ -417,6 +422,82 @@ pub fn fold(g: &Blocks, frame: &[u16], (k, m): (u32, i32), z: &mut [i32]) {
             *o = conv(a as i32 - c as i32);
         }
     }
+}
+
+/// The groups of four mirrored samples of rows `p` (`top`) and
+/// `J1 - 1 - p` (`bot`), both `J2` long: for each `q < g2 = J2 / 2`, one
+/// word of each block's row (`outs`: even-even, even-odd, odd-even,
+/// odd-odd, each at least `g2` long) from `top[q]`, `top[J2-1-q]`,
+/// `bot[q]`, `bot[J2-1-q]`.
+#[cfg(not(target_arch = "arm"))]
+#[inline(always)]
+fn quads(top: &[u16], bot: &[u16], g2: usize, outs: [&mut [i32]; 4], (k, m): (u32, i32)) {
+    let conv = |v: i32| smmulr(v << k, m);
+    let j2 = top.len();
+    let (tl, tr) = (
+        top.get(..g2).unwrap_or(&[]),
+        top.get(j2 - g2..).unwrap_or(&[]),
+    );
+    let (bl, br) = (
+        bot.get(..g2).unwrap_or(&[]),
+        bot.get(j2 - g2..).unwrap_or(&[]),
+    );
+    let [r00, r01, r10, r11] = outs;
+    let samples = tl
+        .iter()
+        .zip(tr.iter().rev())
+        .zip(bl.iter().zip(br.iter().rev()));
+    let outs = r00
+        .iter_mut()
+        .zip(r01.iter_mut())
+        .zip(r10.iter_mut().zip(r11.iter_mut()));
+    for (((&a, &b), (&c, &d)), ((ee, eo), (oe, oo))) in samples.zip(outs) {
+        let (s1, d1) = (a as i32 + b as i32, a as i32 - b as i32);
+        let (s2, d2) = (c as i32 + d as i32, c as i32 - d as i32);
+        *ee = conv(s1 + s2);
+        *eo = conv(d1 + d2);
+        *oe = conv(s1 - s2);
+        *oo = conv(d1 - d2);
+    }
+}
+
+/// [`quads`] on the Cortex-M: `cvm_square_quads`, 26 instructions per
+/// group of four words where the compiled loop, short of registers for
+/// its eight pointers, took about 52.
+#[cfg(target_arch = "arm")]
+#[inline(always)]
+fn quads(top: &[u16], bot: &[u16], g2: usize, outs: [&mut [i32]; 4], (k, m): (u32, i32)) {
+    let j2 = top.len();
+    let [r00, r01, r10, r11] = outs;
+    let fits = g2 > 0
+        && 2 * g2 <= j2
+        && bot.len() == j2
+        && r00.len() >= g2
+        && r01.len() >= g2
+        && r10.len() >= g2
+        && r11.len() >= g2;
+    if !fits {
+        return;
+    }
+    let addr = |p: *const u8| p as usize as u32;
+    let top_p = top.as_ptr();
+    let ctx: [u32; 10] = [
+        addr(top_p.cast()),
+        addr(top_p.wrapping_add(j2 - 1).cast()),
+        addr(bot.as_ptr().cast()).wrapping_sub(addr(top_p.cast())),
+        addr(r00.as_ptr().cast()),
+        addr(r01.as_ptr().cast()),
+        addr(r10.as_ptr().cast()).wrapping_sub(addr(r00.as_ptr().cast())),
+        addr(r11.as_ptr().cast()).wrapping_sub(addr(r01.as_ptr().cast())),
+        k,
+        m as u32,
+        g2 as u32,
+    ];
+    // SAFETY: `g2` groups read `top[..g2]`, `top[j2-g2..]` and the same
+    // words of `bot` (both `j2` long, `2 g2 <= j2`), and write the first
+    // `g2` words of each of the four output rows (each that long), all
+    // checked above; the function preserves the callee-saved registers.
+    unsafe { square_arm::cvm_square_quads(&ctx) };
 }
 
 /// `round(a b / 2^32)`: one `SMMULR`.
@@ -446,7 +527,7 @@ fn smmulr(a: i32, b: i32) -> i32 {
 /// Embeds the folded blocks of `z` in place: block by block, `E = R z`,
 /// word `i` of a block overwriting its input `z_i` once no later row needs
 /// it. `table` holds [`Blocks::table_words`] words, `z` at least
-/// [`FOLD_WORDS`]. Returns false (and leaves `z` partly embedded) if
+/// `N + 3` ([`FOLD_WORDS`]). Returns false (and leaves `z` partly embedded) if
 /// either is too short.
 pub fn embed(g: &Blocks, table: &[i32], z: &mut [i32]) -> bool {
     let n = g.j1 * g.j2;
@@ -457,7 +538,9 @@ pub fn embed(g: &Blocks, table: &[i32], z: &mut [i32]) -> bool {
     for b in 0..4 {
         let (n1, n2, _, _) = g.dims(b);
         let s = n1 * n2;
-        let words = padded_words(s);
+        let Some(&words) = PADDED_WORDS.get(s) else {
+            return false;
+        };
         let (Some(zb), Some(tb)) = (z.get_mut(at..), table.get(t..t + words)) else {
             return false;
         };
@@ -470,84 +553,183 @@ pub fn embed(g: &Blocks, table: &[i32], z: &mut [i32]) -> bool {
     true
 }
 
-/// [`block_words`] in closed form, for the per-map path: rows of
-/// `4(q+1)` words for `r` of them and `4t` words for four each of
-/// `t = 1..=q` (`s = 4q + r`).
+/// Words of the factor of a block of `s` cells as the embedding reads
+/// it: for each pair of rows `(i, i+1)`, a count, row `i`'s diagonal and
+/// `6 ceil((s - i - 1) / 3)` coefficients (groups of three columns of both
+/// rows, zero past the block); then, for an odd `s`, the last diagonal.
+/// [`padded_words`] of every block size, for the per-map path.
+const PADDED_WORDS: [usize; MAX_BLOCK + 1] = {
+    let mut w = [0; MAX_BLOCK + 1];
+    let mut s = 0;
+    while s <= MAX_BLOCK {
+        w[s] = padded_words(s);
+        s += 1;
+    }
+    w
+};
+
 const fn padded_words(s: usize) -> usize {
-    let (q, r) = (s / 4, s % 4);
-    4 * (q + 1) * (2 * q + r)
+    let mut w = s % 2;
+    let mut i = 0;
+    while i + 1 < s {
+        w += 2 + 6 * (s - i - 1).div_ceil(3);
+        i += 2;
+    }
+    w
 }
 
-/// One block of [`embed`] (`s > 0`; `table` and `z` checked by the caller).
-#[cfg(target_arch = "arm")]
+/// One block of [`embed`] (`s > 0`; `table` holds the block's
+/// `padded_words(s)` words and `z` its `s` words plus two, checked by the
+/// caller): the pairs of rows, then the last row of an odd block.
 #[inline(always)]
 fn block(table: &[i32], z: &mut [i32], s: usize) {
-    // SAFETY: `table` holds the block's `padded_words(s)` words and `z` its
-    // `s` words plus the three that the last row's last group reads past
-    // them (`embed` checked both); the function writes `z[..s]` only and
-    // preserves the callee-saved registers (AAPCS).
-    unsafe {
-        square_arm::cvm_square_block(table.as_ptr(), z.as_mut_ptr(), s);
+    let pairs = s / 2;
+    if pairs > 0 {
+        pairs_of_rows(table, z, pairs);
+    }
+    if s % 2 == 1
+        && let (Some(&r), Some(v)) = (table.last(), z.get_mut(s - 1))
+    {
+        *v = smmulr(r, *v);
     }
 }
 
-#[cfg(not(target_arch = "arm"))]
+#[cfg(target_arch = "arm")]
 #[inline(always)]
-fn block(table: &[i32], z: &mut [i32], s: usize) {
-    let mut t = 0;
-    for i in 0..s {
-        let len = s - i;
-        let coeffs = table.get(t..t + len).unwrap_or(&[]);
-        let inputs = z.get(i..i + len).unwrap_or(&[]);
-        let mut acc = 0i32;
-        for (&c, &v) in coeffs.iter().zip(inputs) {
-            acc = acc.wrapping_add(((c as i64 * v as i64 + (1 << 31)) >> 32) as i32);
+fn pairs_of_rows(table: &[i32], z: &mut [i32], pairs: usize) {
+    // SAFETY: `table` holds the records of `pairs` pairs of rows, and `z`
+    // the `2 pairs` words they write plus every word their groups read
+    // (at most two past the block, which `embed` checked it has); the
+    // function preserves the callee-saved registers (AAPCS).
+    unsafe {
+        square_arm::cvm_square_pairs(table.as_ptr(), z.as_mut_ptr(), pairs);
+    }
+}
+
+/// The same arithmetic as `cvm_square_pairs`: one rounded product per
+/// term, wrapping sums (which the bounds keep inside `i32`).
+#[cfg(not(target_arch = "arm"))]
+fn pairs_of_rows(table: &[i32], z: &mut [i32], pairs: usize) {
+    let mac = |acc: i32, c: i32, v: i32| acc.wrapping_add(smmulr(c, v));
+    let mut t = table.iter().copied();
+    for p in 0..pairs {
+        let i = 2 * p;
+        let (Some(groups), Some(diag)) = (t.next(), t.next()) else {
+            return;
+        };
+        let mut a = smmulr(diag, z.get(i).copied().unwrap_or(0));
+        let mut b = 0;
+        for g in 0..groups.max(0) as usize {
+            let j = i + 1 + 3 * g;
+            let v: [i32; 3] = core::array::from_fn(|k| z.get(j + k).copied().unwrap_or(0));
+            for &x in &v {
+                a = mac(a, t.next().unwrap_or(0), x);
+            }
+            for &x in &v {
+                b = mac(b, t.next().unwrap_or(0), x);
+            }
         }
         if let Some(w) = z.get_mut(i) {
-            *w = acc;
+            *w = a;
         }
-        t += len.div_ceil(4) * 4;
+        if let Some(w) = z.get_mut(i + 1) {
+            *w = b;
+        }
     }
 }
 
 #[cfg(target_arch = "arm")]
 mod square_arm {
-    // `(table, z, s) -> table'`: for each row `i < s` of the block,
-    // `z[i] = Σ_g SMMLAR` over its padded groups of four coefficients and
-    // four inputs from `z[i]` on, then the next row. r0 the table, r1 the
-    // row's first input (and its output), r2 the group cursor, r3 the
-    // row's length, r12 its groups, lr the accumulator, r4-r11 one group.
+    // `(table, z, pairs) -> table'`: for each pair of rows `(i, i+1)`,
+    // `z[i]` and `z[i+1]` from the record (count, diagonal, groups): one
+    // `LDM` of three inputs and one of six coefficients per group, six
+    // `SMMLAR`s. Outputs are stored after the group loop, where no later
+    // row reads them. r0 the table, r1 the row's first input (pushed with
+    // r2, the pairs left, while the groups run), r2 the groups, r3 and lr
+    // the two rows' sums, r4-r12 one group.
     core::arch::global_asm!(
-        ".section .text.cvm_square_block,\"ax\",%progbits",
-        ".global cvm_square_block",
-        ".type cvm_square_block,%function",
+        ".section .text.cvm_square_pairs,\"ax\",%progbits",
+        ".global cvm_square_pairs",
+        ".type cvm_square_pairs,%function",
         ".p2align 2",
         ".thumb_func",
-        "cvm_square_block:",
+        "cvm_square_pairs:",
         "    push {{r4, r5, r6, r7, r8, r9, r10, r11, lr}}",
-        "    mov r3, r2",
         "1:",
-        "    add r12, r3, #3",
-        "    lsr r12, r12, #2",
+        "    push {{r1, r2}}",
+        "    ldm r0!, {{r2, r4}}",
+        "    ldr r5, [r1], #4",
+        "    smmulr r3, r4, r5",
         "    mov lr, #0",
-        "    mov r2, r1",
         "2:",
-        "    ldm r0!, {{r4, r5, r6, r7}}",
-        "    ldm r2!, {{r8, r9, r10, r11}}",
-        "    smmlar lr, r4, r8, lr",
-        "    smmlar lr, r5, r9, lr",
-        "    smmlar lr, r6, r10, lr",
-        "    smmlar lr, r7, r11, lr",
-        "    subs r12, r12, #1",
+        "    ldm r1!, {{r4, r5, r6}}",
+        "    ldm r0!, {{r7, r8, r9, r10, r11, r12}}",
+        "    smmlar r3, r7, r4, r3",
+        "    smmlar r3, r8, r5, r3",
+        "    smmlar r3, r9, r6, r3",
+        "    smmlar lr, r10, r4, lr",
+        "    smmlar lr, r11, r5, lr",
+        "    smmlar lr, r12, r6, lr",
+        "    subs r2, r2, #1",
         "    bne 2b",
+        "    pop {{r1, r2}}",
+        "    str r3, [r1], #4",
         "    str lr, [r1], #4",
-        "    subs r3, r3, #1",
+        "    subs r2, r2, #1",
         "    bne 1b",
         "    pop {{r4, r5, r6, r7, r8, r9, r10, r11, pc}}",
-        ".size cvm_square_block, . - cvm_square_block",
+        ".size cvm_square_pairs, . - cvm_square_pairs",
+    );
+
+    // `(ctx)`: the groups of `quads`. `ctx` holds the top row's first
+    // and last sample, the bottom row's offset from the top (bytes), the
+    // even-even and even-odd output rows, the odd-even and odd-odd rows'
+    // offsets from those (bytes), `k`, `m` and the number of groups. Per
+    // group: four `LDRH`, the eight sums and differences (each second one
+    // as `s - 2 b`, which needs no spare register), four conversions
+    // (`LSL`, `SMMULR`) and four stores.
+    core::arch::global_asm!(
+        ".section .text.cvm_square_quads,\"ax\",%progbits",
+        ".global cvm_square_quads",
+        ".type cvm_square_quads,%function",
+        ".p2align 2",
+        ".thumb_func",
+        "cvm_square_quads:",
+        "    push {{r4, r5, r6, r7, r8, r9, r10, r11, lr}}",
+        "    ldm r0, {{r0, r1, r2, r3, r4, r5, r6, r7, r8, r9}}",
+        "1:",
+        "    ldrh r10, [r0, r2]",
+        "    ldrh r11, [r1, r2]",
+        "    ldrh r12, [r0], #2",
+        "    ldrh lr, [r1], #-2",
+        "    add r12, r12, lr",
+        "    sub lr, r12, lr, lsl #1",
+        "    add r10, r10, r11",
+        "    sub r11, r10, r11, lsl #1",
+        "    add r12, r12, r10",
+        "    sub r10, r12, r10, lsl #1",
+        "    add lr, lr, r11",
+        "    sub r11, lr, r11, lsl #1",
+        "    lsl r12, r12, r7",
+        "    smmulr r12, r12, r8",
+        "    lsl r10, r10, r7",
+        "    smmulr r10, r10, r8",
+        "    lsl lr, lr, r7",
+        "    smmulr lr, lr, r8",
+        "    lsl r11, r11, r7",
+        "    smmulr r11, r11, r8",
+        "    str r10, [r3, r5]",
+        "    str r12, [r3], #4",
+        "    str r11, [r4, r6]",
+        "    str lr, [r4], #4",
+        "    subs r9, r9, #1",
+        "    bne 1b",
+        "    pop {{r4, r5, r6, r7, r8, r9, r10, r11, pc}}",
+        ".size cvm_square_quads, . - cvm_square_quads",
     );
 
     unsafe extern "C" {
-        pub fn cvm_square_block(table: *const i32, z: *mut i32, s: usize) -> *const i32;
+        pub fn cvm_square_pairs(table: *const i32, z: *mut i32, pairs: usize) -> *const i32;
+        pub fn cvm_square_quads(ctx: *const [u32; 10]);
     }
 }
