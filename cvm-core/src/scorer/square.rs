@@ -260,56 +260,94 @@ pub const fn formats(g: &Blocks, kmax: usize, normalise: bool) -> Option<(i32, u
     None
 }
 
-/// Packed upper-triangle offset of row `i` of an `s`-row block.
-const fn row_start(s: usize, i: usize) -> usize {
-    i * (2 * s - i + 1) / 2
+/// Offset of column `l` of a packed upper triangle stored column by
+/// column (`R[0..=l][l]`).
+const fn col_start(l: usize) -> usize {
+    l * (l + 1) / 2
 }
 
-/// Builds the padded factor table of geometry `g` with kernels up to
-/// `kmax` in `Q(p)` into `out` (at least [`Blocks::table_words`] words).
-/// Runs once per configuration, at start-up: the f64 Cholesky of each
-/// block in a packed triangle on the stack (16.6 KB at most). Returns
-/// false if `out` is too short or a block is not positive definite
-/// (neither happens for a geometry and `kmax` that [`formats`] accepted).
+/// The folded axis matrices of every `k`, four times over (integers):
+/// `[axis 1 even, axis 1 odd, axis 2 even, axis 2 odd][k][a][c]`.
+type Folded = [[[[i16; MAX_H]; MAX_H]; MAX_J]; 4];
+
+fn folded_axes(g: &Blocks, kmax: usize) -> Folded {
+    let mut f = [[[[0i16; MAX_H]; MAX_H]; MAX_J]; 4];
+    for (which, fk) in f.iter_mut().enumerate() {
+        let (j, odd) = (if which < 2 { g.j1 } else { g.j2 }, which % 2 == 1);
+        let n = if odd { j / 2 } else { j.div_ceil(2) };
+        for (k, m) in fk.iter_mut().enumerate().take(kmax + 1) {
+            for (a, row) in m.iter_mut().enumerate().take(n) {
+                for (c, v) in row.iter_mut().enumerate().take(n) {
+                    // |entry| <= 4 J: an i16.
+                    *v = folded4(j, k, a, c, odd) as i16;
+                }
+            }
+        }
+    }
+    f
+}
+
+/// Builds the factor table of geometry `g` with kernels up to `kmax` in
+/// `Q(p)` into `out` (at least [`Blocks::table_words`] words). Runs once
+/// per configuration, at start-up: the folded axis matrices of every `k`
+/// (8 KB), then the f64 Cholesky of each block, column by column in a
+/// packed triangle (16.6 KB), both on the stack. Returns false if `out`
+/// is too short or a block is not positive definite (neither happens for
+/// a geometry and `kmax` that [`formats`] accepted).
 pub fn build(g: &Blocks, kmax: usize, p: u32, out: &mut [i32]) -> bool {
     let scale = pow2(p as i32);
+    let kmax = kmax.min(MAX_J - 1);
+    let folded = folded_axes(g, kmax);
     let mut at = 0;
     for b in 0..4 {
-        let (n1, n2, _, _) = g.dims(b);
+        let (n1, n2, odd1, odd2) = g.dims(b);
         let s = n1 * n2;
-        let mut r = [0.0f64; MAX_TRI];
-        for i in 0..s {
-            // R[i][l] = (G[i][l] - Σ_{m<i} R[m][i] R[m][l]) / R[i][i].
-            let mut d = block_entry16(g, kmax, b, i, i) as f64 / 16.0;
-            for m in 0..i {
-                let v = r.get(row_start(s, m) + i - m).copied().unwrap_or(0.0);
-                d -= v * v;
+        let (f1, f2) = (&folded[odd1 as usize], &folded[2 + odd2 as usize]);
+        // G[c][c'] of the block: cells c = (c / n2, c % n2).
+        let entry = |c: usize, c2: usize| -> f64 {
+            if n2 == 0 || c >= s {
+                return 0.0;
             }
+            let (p1, q1, p2, q2) = (c / n2, c % n2, c2 / n2, c2 % n2);
+            let mut v = 0i64;
+            for (a, b) in f1.iter().zip(f2).take(kmax + 1) {
+                let x = a.get(p1).and_then(|r| r.get(p2)).copied().unwrap_or(0);
+                let y = b.get(q1).and_then(|r| r.get(q2)).copied().unwrap_or(0);
+                v += x as i64 * y as i64;
+            }
+            v as f64 / 16.0
+        };
+        let mut r = [0.0f64; MAX_TRI];
+        for l in 0..s {
+            let Some((done, rest)) = r.split_at_mut_checked(col_start(l)) else {
+                return false;
+            };
+            let Some(col) = rest.get_mut(..=l) else {
+                return false;
+            };
+            // R[i][l] = (G[i][l] - Σ_{m<i} R[m][i] R[m][l]) / R[i][i], then
+            // R[l][l] = sqrt(G[l][l] - Σ_{m<l} R[m][l]²).
+            for i in 0..l {
+                let ci = done.get(col_start(i)..=col_start(i) + i).unwrap_or(&[]);
+                let (head, tail) = col.split_at_mut(i);
+                let dot: f64 = ci.iter().zip(head.iter()).map(|(x, y)| x * y).sum();
+                let piv = ci.last().copied().unwrap_or(0.0);
+                if let Some(v) = tail.first_mut() {
+                    *v = (entry(i, l) - dot) / piv;
+                }
+            }
+            let (head, last) = col.split_at_mut(l);
+            let d = entry(l, l) - head.iter().map(|x| x * x).sum::<f64>();
             if d.is_nan() || d <= 0.0 {
                 return false;
             }
-            let piv = sqrt(d);
-            for l in i..s {
-                let v = if l == i {
-                    piv
-                } else {
-                    let mut t = block_entry16(g, kmax, b, i, l) as f64 / 16.0;
-                    for m in 0..i {
-                        let base = row_start(s, m);
-                        let a = r.get(base + i - m).copied().unwrap_or(0.0);
-                        let c = r.get(base + l - m).copied().unwrap_or(0.0);
-                        t -= a * c;
-                    }
-                    t / piv
-                };
-                if let Some(w) = r.get_mut(row_start(s, i) + l - i) {
-                    *w = v;
-                }
+            if let Some(v) = last.first_mut() {
+                *v = sqrt(d);
             }
         }
         let q = |i: usize, l: usize| -> i32 {
             let v = if l < s && l >= i {
-                r.get(row_start(s, i) + l - i).copied().unwrap_or(0.0)
+                r.get(col_start(l) + i).copied().unwrap_or(0.0)
             } else {
                 0.0
             };
