@@ -88,6 +88,10 @@ pub struct TwinArgs {
     /// Run the model at most this many milliseconds after the last beam
     #[arg(long, value_name = "MS", default_value_t = 1500.0)]
     pub settle_ms: f64,
+    /// The first beam comes this many milliseconds after reset (square
+    /// kernels build their factor table at start-up: about 80 ms at 15x15)
+    #[arg(long, value_name = "MS", default_value_t = 20.0)]
+    pub start_ms: f64,
     /// A debugger is attached (the DBGMCU freeze bits apply while the core is halted)
     #[arg(long)]
     pub debugger: bool,
@@ -440,6 +444,7 @@ pub fn run_model(
         .arg(scan)
         .args(["--beam-us", &args.beam_us.to_string()])
         .args(["--settle-ms", &args.settle_ms.to_string()])
+        .args(["--start-ms", &args.start_ms.to_string()])
         .env("PYTHONPATH", pythonpath);
     for f in &args.faults {
         cmd.args(["--fault", f]);
@@ -496,6 +501,9 @@ pub fn run(args: &TwinArgs) -> Result<()> {
     }
     if !(args.settle_ms.is_finite() && args.settle_ms >= 0.0) {
         bail!("--settle-ms must be a non-negative number of milliseconds");
+    }
+    if !(args.start_ms.is_finite() && args.start_ms >= 0.0) {
+        bail!("--start-ms must be a non-negative number of milliseconds");
     }
     // The emulated board's scan file: the same reading, validation,
     // settings and warnings as `dmap emulate` and `dmap stream`.
