@@ -26,10 +26,12 @@
 //! # Formats and why nothing overflows
 //!
 //! `z` is in `Q(f)`, the factor in `Q(p)`, the embedding `E = R z` in
-//! `Q(f + p - 32)`: one `round(r z / 2^32)` per term (`SMMLAR`). With
-//! `X` a bound on `Σ|x|` (normalised `2^f + N/2`: each sample is rounded;
-//! raw `N 65535 2^f`), every cell lies in one entry of each block, so
-//! `Σ|z| <= X < 2^31` over a block. `|R_ij| <= sqrt(G_jj)`, and `p` is the
+//! `Q(f + p - 32)`: one `round(r z / 2^32)` per term (`SMMLAR`). Every
+//! sample lies in one folded count `v` of each block, so over a block
+//! `Σ|v| <= S` (the map's sum), and `z` is `v` converted as the paper
+//! kernels convert (`round((v << k) m / 2^32)`, within 1 of `v 2^f / S`;
+//! raw: `v 2^f`, exact). Hence `Σ|z| <= X < 2^31` over a block, with
+//! `X = 2^f + N` normalised (`f = 28`) and `X = N 65535 2^f` raw. `|R_ij| <= sqrt(G_jj)`, and `p` is the
 //! finest with `sqrt(max G_jj) 2^p + 1/2 < 2^31 - 1`, so every partial sum
 //! of a row is below `2^31 X / 2^32 + 32 < 2^30 + 32`. The embedding's
 //! norm is at most `X sqrt(max M_ii) 2^(p-32)` (`|M_ij| <= sqrt(M_ii M_jj)`
@@ -56,8 +58,8 @@ const MAX_BLOCK: usize = MAX_H * MAX_H;
 /// Words of a packed upper triangle of `MAX_BLOCK` rows (the f64 Cholesky's
 /// work space, on the stack of the one call that builds a table).
 const MAX_TRI: usize = MAX_BLOCK * (MAX_BLOCK + 1) / 2;
-/// Words of the scratch space the per-map path folds a map into: every
-/// row of the last block reads up to three words past the block.
+/// Words of the scratch space the per-map path folds a map into: the
+/// last group of a block's rows reads up to two words past the block.
 pub const FOLD_WORDS: usize = MAX_CELLS + 4;
 /// Input format of normalised maps: the per-map reciprocal of the paper
 /// kernels (`Scorer::scale`, exact for `f = 28` only).
