@@ -440,9 +440,9 @@ pub fn fold(g: &Blocks, frame: &[u16], (k, m): (u32, i32), z: &mut [i32]) {
                 *e = conv(a + b);
                 *o = conv(a - b);
             }
-            if h2 > g2
-                && let (Some(e), Some(&a)) = (r00.get_mut(g2), top.get(g2))
-            {
+            // The middle column of an odd axis 2: the one word of `r00`
+            // past `g2` (none when the axis is even, `h2 = g2`).
+            if let (Some(e), Some(&a)) = (r00.get_mut(g2), top.get(g2)) {
                 *e = conv(a as i32);
             }
             continue;
@@ -454,9 +454,8 @@ pub fn fold(g: &Blocks, frame: &[u16], (k, m): (u32, i32), z: &mut [i32]) {
             return;
         };
         quads(top, bot, g2, [&mut *r00, &mut *r01, &mut *r10, r11], (k, m));
-        if h2 > g2
-            && let (Some(e), Some(o), Some(&a), Some(&c)) =
-                (r00.get_mut(g2), r10.get_mut(g2), top.get(g2), bot.get(g2))
+        if let (Some(e), Some(o), Some(&a), Some(&c)) =
+            (r00.get_mut(g2), r10.get_mut(g2), top.get(g2), bot.get(g2))
         {
             *e = conv(a as i32 + c as i32);
             *o = conv(a as i32 - c as i32);
@@ -584,19 +583,13 @@ pub fn embed(g: &Blocks, table: &[i32], z: &mut [i32]) -> bool {
         let (Some(zb), Some(tb)) = (z.get_mut(at..), table.get(t..t + words)) else {
             return false;
         };
-        if s > 0 {
-            block(tb, zb, s);
-        }
+        block(tb, zb, s);
         t += words;
         at += s;
     }
     true
 }
 
-/// Words of the factor of a block of `s` cells as the embedding reads
-/// it: for each pair of rows `(i, i+1)`, a count, row `i`'s diagonal and
-/// `6 ceil((s - i - 1) / 3)` coefficients (groups of three columns of both
-/// rows, zero past the block); then, for an odd `s`, the last diagonal.
 /// [`padded_words`] of every block size, for the per-map path.
 const PADDED_WORDS: [usize; MAX_BLOCK + 1] = {
     let mut w = [0; MAX_BLOCK + 1];
@@ -608,6 +601,10 @@ const PADDED_WORDS: [usize; MAX_BLOCK + 1] = {
     w
 };
 
+/// Words of the factor of a block of `s` cells as the embedding reads
+/// it: for each pair of rows `(i, i+1)`, a count, row `i`'s diagonal and
+/// `6 ceil((s - i - 1) / 3)` coefficients (groups of three columns of both
+/// rows, zero past the block); then, for an odd `s`, the last diagonal.
 const fn padded_words(s: usize) -> usize {
     let mut w = s % 2;
     let mut i = 0;
@@ -618,7 +615,7 @@ const fn padded_words(s: usize) -> usize {
     w
 }
 
-/// One block of [`embed`] (`s > 0`; `table` holds the block's
+/// One block of [`embed`] (nothing for `s = 0`; `table` holds the block's
 /// `padded_words(s)` words and `z` its `s` words plus two, checked by the
 /// caller): the pairs of rows, then the last row of an odd block.
 #[inline(always)]
@@ -654,9 +651,9 @@ fn pairs_of_rows(table: &[i32], z: &mut [i32], pairs: usize) {
     let mut t = table.iter().copied();
     for p in 0..pairs {
         let i = 2 * p;
-        let (Some(groups), Some(diag)) = (t.next(), t.next()) else {
-            return;
-        };
+        // Past the table, as the assembly would read what follows it:
+        // here zeros, so that a count of pairs too large shows.
+        let (groups, diag) = (t.next().unwrap_or(0), t.next().unwrap_or(0));
         let mut a = smmulr(diag, z.get(i).copied().unwrap_or(0));
         let mut b = 0;
         for g in 0..groups.max(0) as usize {
