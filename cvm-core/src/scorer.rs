@@ -221,7 +221,7 @@ impl Scorer {
             }
             Kind::Square { kmax } => {
                 let blocks = square::Blocks { j1, j2 };
-                let Some((f, p, _)) = square::formats(&blocks, kmax as usize, cfg.normalise) else {
+                let Some((f, p)) = square::formats(&blocks, kmax as usize, cfg.normalise) else {
                     return Err(ConfigError::Range);
                 };
                 square_p = p;
@@ -627,7 +627,7 @@ impl Scorer {
         self.to_score(squared_difference(a, b))
     }
 
-    /// `Q(2f)` squared distance to a `Q(q)` score, rounded, saturating.
+    /// `Q(2e)` squared distance to a `Q(q)` score, rounded, saturating.
     fn to_score(&self, acc: u64) -> u32 {
         // Squared distances are in Q(2 e_frac); `1 <= s <= 63` (see
         // `Scorer::new`), and `acc >> s` plus the rounding bit cannot wrap.

@@ -211,20 +211,10 @@ const fn diagonals(g: &Blocks, kmax: usize) -> (f64, f64) {
     (gmax as f64 / 16.0, mmax as f64)
 }
 
-/// The bounds of the module docs at formats `f`, `p`.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct SquareBounds {
-    /// `X`: `Σ|x|` of a map, and of the folded values of one block.
-    pub input: f64,
-    /// Every partial sum of the embedding: `2^31 X / 2^32 + 32 < 2^31`.
-    pub partial: f64,
-    /// `‖E‖ < 2^30`.
-    pub embedding: f64,
-}
-
 /// The finest input format `f` and factor format `p` for which every bound
-/// of the module docs holds, with those bounds; `None` if none does.
-pub const fn formats(g: &Blocks, kmax: usize, normalise: bool) -> Option<(i32, u32, SquareBounds)> {
+/// of the module docs holds (`X` below 2^31, every partial sum below 2^31,
+/// `‖E‖ < 2^30`); `None` if none does.
+pub const fn formats(g: &Blocks, kmax: usize, normalise: bool) -> Option<(i32, u32)> {
     let n = (g.j1 * g.j2) as f64;
     let (gmax, mmax) = diagonals(g, kmax);
     let rmax = sqrt(gmax) * SLACK;
@@ -247,12 +237,7 @@ pub const fn formats(g: &Blocks, kmax: usize, normalise: bool) -> Option<(i32, u
                 let e = x * sqrt(mmax) * SLACK * pow2(p - 32) + sqrt(n) * word;
                 let partial = (rmax * pow2(p) + 0.5) * x * pow2(-32) + smax as f64 / 2.0;
                 if e < LIMIT_E && partial < I31 {
-                    let b = SquareBounds {
-                        input: x,
-                        partial,
-                        embedding: e,
-                    };
-                    return Some((f, p as u32, b));
+                    return Some((f, p as u32));
                 }
                 p -= 1;
             }
