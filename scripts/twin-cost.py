@@ -25,7 +25,22 @@ The accesses are found by decoding each instruction the scoring path runs
 not with Unicorn's memory hooks: a read hook on a load inside a Thumb IT
 block leaves Unicorn's IT state set after the block, so that a later
 instruction runs as if conditional (unicorn-engine/unicorn#2309; the
-firmware then goes wrong, e.g. an invalid instruction at a branch)."""
+firmware then goes wrong, e.g. an invalid instruction at a branch).
+
+The same accesses are also run through a model of the M7's D-cache
+(h743twin/dcache.py: 16 KiB, 4-way set associative, 32-byte lines, least
+recently used replacement), as if the firmware enabled it with one MPU region making
+`.dma_buffers` (the DMA's frame buffers and UART line) non-cacheable and
+the ARMv7-M default attributes elsewhere: AXI SRAM and SRAM1-4
+write-back with write-allocate, flash write-through, the TCMs and the
+peripherals not cached. Every data access of the firmware goes through
+the cache once the scan has started (what the rest of the firmware
+evicts counts), and the stalls of the scoring path's accesses are added
+up: none on a hit, a line fill on a miss (`LINE_COST`), a write-back
+when a dirty line is evicted; accesses that are not cached keep their
+cost from `COST`. The "D-cache on" row of the output is that estimate;
+the line costs are assumptions like the others (`--line-cost
+REGION=FILL/WRITEBACK`)."""
 
 import argparse
 import bisect
@@ -40,6 +55,7 @@ from elftools.elf.elffile import ELFFile  # noqa: E402
 from unicorn import UC_HOOK_CODE  # noqa: E402
 from unicorn import arm_const as ucarm  # noqa: E402
 
+from h743twin.dcache import DCache  # noqa: E402
 from h743twin.machine import cycles_of_ms  # noqa: E402
 from h743twin.profile import SCORING, add_scan_args, boot_for_scan, stage_of  # noqa: E402
 
@@ -61,6 +77,18 @@ COST = {
     "SRAM4": (10, 2),
     "flash": (10, 10),
     "peripherals": (12, 4),
+}
+
+# D-cache on: stall cycles per line fill (a miss, read or write: the cache
+# allocates on both) and per write-back of a dirty line, beyond the
+# instruction's own cycle. A fill is the uncached first-word latency plus
+# the rest of the 32-byte line: 3 more 64-bit beats on AXI at 200 MHz, 7
+# more 32-bit beats behind the AXI-AHB bridge, one 256-bit flash word.
+LINE_COST = {
+    "AXI SRAM": (12, 2),
+    "SRAM1-3": (24, 4),
+    "SRAM4": (24, 4),
+    "flash": (12, 0),
 }
 
 
@@ -94,6 +122,8 @@ def objects_of(path):
         objs = sorted((s["st_value"], s["st_size"], s.name)
                       for s in elf.get_section_by_name(".symtab").iter_symbols()
                       if s["st_info"]["type"] == "STT_OBJECT" and s["st_size"])
+        syms = {s.name: s["st_value"] for s in elf.get_section_by_name(".symtab").iter_symbols()}
+    dma = (syms.get("__sdma_buffers", 0), syms.get("__edma_buffers", 0))
     starts = [a for a, _, _ in objs]
 
     def name_of(addr):
@@ -102,7 +132,7 @@ def objects_of(path):
             return short(objs[i][2])
         return None
 
-    return name_of
+    return name_of, dma
 
 
 # Capstone register names -> Unicorn registers.
@@ -206,18 +236,24 @@ def main(argv=None):
     add_scan_args(ap)
     ap.add_argument("--dtcm", default="", help="statics (substrings) to cost as if in DTCM")
     ap.add_argument("--cost", action="append", default=[], help="REGION=READ/WRITE stall cycles")
+    ap.add_argument("--line-cost", action="append", default=[],
+                    help="REGION=FILL/WRITEBACK stall cycles with the D-cache on")
     args = ap.parse_args(argv)
-    for c in args.cost:
-        k, v = c.split("=")
-        r, w = v.split("/")
-        COST[k] = (int(r), int(w))
+    for table, opts in ((COST, args.cost), (LINE_COST, args.line_cost)):
+        for c in opts:
+            k, v = c.split("=")
+            r, w = v.split("/")
+            table[k] = (int(r), int(w))
     moved = [s for s in args.dtcm.split(",") if s]
 
     m, det = boot_for_scan(args)
     func_of = m.core.symbolize
-    obj_of = objects_of(args.elf)
+    obj_of, (dma_lo, dma_hi) = objects_of(args.elf)
     scoring_block = {}
     counts = {}  # (region, object, is_write) -> accesses
+    cached_stall = {}  # (region, object) -> stall cycles with the D-cache on
+    dcache = DCache(LINE_COST, region_of)
+    started = [False]
 
     def in_scoring(addr):
         hit = scoring_block.get(addr)
@@ -229,13 +265,25 @@ def main(argv=None):
     acc = Accesses(m.core.uc)
 
     def on_code(uc, addr, size, data):
-        if not in_scoring(addr):
+        scoring = in_scoring(addr)
+        if scoring:
+            started[0] = True
+        elif not started[0]:
             return
         for a, write, words in acc.of(addr, size):
-            reg = region_of(a)
-            obj = obj_of(a) or ("stack" if reg == "DTCM" else reg)
-            key = (reg, obj, write)
-            counts[key] = counts.get(key, 0) + words
+            for k in range(words):
+                w = a + 4 * k
+                reg = region_of(w)
+                if reg in LINE_COST and not dma_lo <= w < dma_hi:
+                    s = dcache.access(w, write, reg)
+                else:
+                    s = COST.get(reg, (0, 0))[1 if write else 0]
+                if not scoring:
+                    continue
+                obj = obj_of(w) or ("stack" if reg == "DTCM" else reg)
+                key = (reg, obj, write)
+                counts[key] = counts.get(key, 0) + 1
+                cached_stall[(reg, obj)] = cached_stall.get((reg, obj), 0) + s
 
     m.core.uc.hook_add(UC_HOOK_CODE, on_code, begin=REGIONS[1][1], end=REGIONS[1][2] - 1)
     m.run(det.done_at + cycles_of_ms(5))
@@ -252,25 +300,30 @@ def main(argv=None):
 
     print(f"Scoring path, {args.j1}x{args.j2}, {beams} beams: {num(instr / beams)} instructions per beam")
     print()
-    print("| memory | static | reads per beam | writes per beam | stall cycles per beam |")
-    print("|---|---|---:|---:|---:|")
+    print("| memory | static | reads per beam | writes per beam "
+          "| stall cycles per beam, D-cache off | D-cache on |")
+    print("|---|---|---:|---:|---:|---:|")
     stall = 0.0
     stall_moved = 0.0
+    stall_cached = 0.0
     for (reg, obj), (r, w) in sorted(by_obj.items(), key=lambda kv: -(kv[1][0] + kv[1][1])):
         cr, cw = COST.get(reg, (0, 0))
         s = (r * cr + w * cw) / beams
+        sc = cached_stall.get((reg, obj), 0) / beams
         stall += s
+        stall_cached += sc
         if not any(x in obj for x in moved):
             stall_moved += s
         if (r + w) / beams >= 1:
-            print(f"| {reg} | {obj} | {num(r / beams)} | {num(w / beams)} | {num(s)} |")
+            print(f"| {reg} | {obj} | {num(r / beams)} | {num(w / beams)} | {num(s)} | {num(sc)} |")
     ipb = instr / beams
     print()
     print("| placement | instructions per beam | estimated cycles per beam |")
     print("|---|---:|---:|")
-    print(f"| as linked | {num(ipb)} | {num(ipb + stall)} |")
+    print(f"| as linked, D-cache off | {num(ipb)} | {num(ipb + stall)} |")
     if moved:
         print(f"| with {', '.join(moved)} in DTCM | {num(ipb)} | {num(ipb + stall_moved)} |")
+    print(f"| as linked, D-cache on, `.dma_buffers` not cacheable | {num(ipb)} | {num(ipb + stall_cached)} |")
     return 0
 
 
