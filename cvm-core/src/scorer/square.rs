@@ -125,36 +125,18 @@ const fn box_gram(j: usize, k: usize, r: usize, s: usize) -> i64 {
     }
 }
 
-/// Four times the folded entry `(Mᵀ A_k M)[a][c]` of one axis (the fold's
-/// weights are 1/2 for a mirrored pair and 1 for the middle cell, so four
-/// times the entry is an integer); `odd` picks the odd block.
+/// Four times the folded entry `(Mᵀ A_k M)[a][c]` of one axis; `odd`
+/// picks the odd block. Fold column `a` is the pair of cells `a` and
+/// `J-1-a`, of weight 1/2 each (the mirrored one with the odd block's
+/// sign), so four times the entry is an integer. The middle cell of an
+/// odd axis, which the fold takes alone with weight 1, is its own mirror
+/// image: as a pair with itself it gets the same 1/2 + 1/2.
 const fn folded4(j: usize, k: usize, a: usize, c: usize, odd: bool) -> i64 {
     let sign = if odd { -1 } else { 1 };
-    let (ra, wa, na) = cells(j, a);
-    let (rc, wc, nc) = cells(j, c);
-    let mut s = 0;
-    let mut p = 0;
-    while p < na {
-        let mut q = 0;
-        while q < nc {
-            let (ia, fa) = if p == 0 { (ra, wa) } else { (j - 1 - ra, sign) };
-            let (ic, fc) = if q == 0 { (rc, wc) } else { (j - 1 - rc, sign) };
-            s += fa * fc * box_gram(j, k, ia, ic);
-            q += 1;
-        }
-        p += 1;
-    }
-    s
-}
-
-/// Fold column `a`: its first cell, that cell's weight (times 2) and the
-/// number of cells (the middle cell of an odd axis stands alone).
-const fn cells(j: usize, a: usize) -> (usize, i64, usize) {
-    if j % 2 == 1 && a == j / 2 {
-        (a, 2, 1)
-    } else {
-        (a, 1, 2)
-    }
+    let (ma, mc) = (j - 1 - a, j - 1 - c);
+    box_gram(j, k, a, c)
+        + sign * (box_gram(j, k, a, mc) + box_gram(j, k, ma, c))
+        + box_gram(j, k, ma, mc)
 }
 
 /// Sixteen times the entry of block `b` between cells `(p, q)` and
@@ -332,12 +314,10 @@ pub fn build(g: &Blocks, kmax: usize, p: u32, out: &mut [i32]) -> bool {
                 *v = sqrt(d);
             }
         }
+        // `l >= i` at every call below; past the last column (the last
+        // group's padding) `r` holds zeros, or ends.
         let q = |i: usize, l: usize| -> i32 {
-            let v = if l < s && l >= i {
-                r.get(col_start(l) + i).copied().unwrap_or(0.0)
-            } else {
-                0.0
-            };
+            let v = r.get(col_start(l) + i).copied().unwrap_or(0.0);
             // Below 2^31 - 1 by the choice of `p`; saturating all the same.
             round(v * scale).clamp(i32::MIN as i64, i32::MAX as i64) as i32
         };
