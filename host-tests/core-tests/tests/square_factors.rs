@@ -175,3 +175,95 @@ fn a_table_is_shared_only_between_scorers_it_fits() {
     assert_eq!(paper.clone().with_factors(table(0)).unwrap(), paper);
     assert_eq!(paper.clone().with_factors_of(&built).unwrap(), paper);
 }
+
+/// `A_k[r][s]` by enumeration: the boxes of half-width `k` (one centred
+/// on every cell, clipped at the border) that hold both cells.
+fn boxes_holding(j: usize, k: usize, r: usize, s: usize) -> f64 {
+    (0..j)
+        .filter(|&t| t.abs_diff(r) <= k && t.abs_diff(s) <= k)
+        .count() as f64
+}
+
+/// The largest diagonal entry of the folded blocks `G` and of `M` itself,
+/// from the definitions: `M = Σ_k A_k ⊗ A'_k`, and a folded cell is the
+/// mirrored pair `(e_a ± e_(J-1-a)) / 2` (the middle cell of an odd axis
+/// alone), so that its diagonal entry along one axis is
+/// `(A[a][a] ± 2 A[a][a'] + A[a'][a']) / 4`, or `A[a][a]`.
+fn diagonal_maxima(j1: usize, j2: usize, kmax: usize) -> (f64, f64) {
+    let folded = |j: usize, k: usize, a: usize, odd: bool| {
+        let m = j - 1 - a;
+        if m == a {
+            boxes_holding(j, k, a, a)
+        } else {
+            let sign = if odd { -1.0 } else { 1.0 };
+            (boxes_holding(j, k, a, a)
+                + sign * 2.0 * boxes_holding(j, k, a, m)
+                + boxes_holding(j, k, m, m))
+                / 4.0
+        }
+    };
+    let halves = |j: usize| [(j.div_ceil(2), false), (j / 2, true)];
+    let mut gmax: f64 = 0.0;
+    for (n1, odd1) in halves(j1) {
+        for (n2, odd2) in halves(j2) {
+            for a in 0..n1 {
+                for c in 0..n2 {
+                    let g: f64 = (0..=kmax)
+                        .map(|k| folded(j1, k, a, odd1) * folded(j2, k, c, odd2))
+                        .sum();
+                    gmax = gmax.max(g);
+                }
+            }
+        }
+    }
+    let mut mmax: f64 = 0.0;
+    for r in 0..j1 {
+        for c in 0..j2 {
+            let m: f64 = (0..=kmax)
+                .map(|k| boxes_holding(j1, k, r, r) * boxes_holding(j2, k, c, c))
+                .sum();
+            mmax = mmax.max(m);
+        }
+    }
+    (gmax, mmax)
+}
+
+/// The formats of every square configuration meet the overflow proof of
+/// the module docs, with `max G_jj` and `max M_ii` computed here from the
+/// definitions, and `p` is the finest that does: at `p + 1` a coefficient,
+/// a partial sum or the embedding's norm would be too large.
+#[test]
+fn factor_formats_meet_the_overflow_proof_and_are_the_finest() {
+    let i31 = 2f64.powi(31) - 1.0;
+    let limit_e = 2f64.powi(30) - 1.0;
+    for j1 in 1..=16usize {
+        for j2 in 1..=16usize {
+            let n = (j1 * j2) as f64;
+            let smax = (j1.div_ceil(2) * j2.div_ceil(2)) as f64;
+            for kmax in 0..=15usize {
+                let (gmax, mmax) = diagonal_maxima(j1, j2, kmax);
+                for normalise in [true, false] {
+                    let cfg = config(j1 as u8, j2 as u8, kmax as u8, normalise);
+                    let formats = Scorer::new(&cfg).unwrap().formats();
+                    let (f, p) = (formats.input, formats.factors[0]);
+                    let x = if normalise {
+                        2f64.powi(f) + n
+                    } else {
+                        n * 65535.0 * 2f64.powi(f)
+                    };
+                    let holds = |p: i32| {
+                        let coefficient = gmax.sqrt() * 2f64.powi(p) + 0.5;
+                        let partial = coefficient * x / 2f64.powi(32) + smax / 2.0;
+                        let norm = x * mmax.sqrt() * 2f64.powi(p - 32)
+                            + n.sqrt() * (smax / 2.0 + x / 2f64.powi(33));
+                        coefficient < i31 && partial < i31 && norm < limit_e
+                    };
+                    let what = format!("{j1}x{j2} kmax {kmax} normalise {normalise}: f {f} p {p}");
+                    assert!(x < i31, "{what}: X = {x}");
+                    assert!(holds(p as i32), "{what}: a bound fails");
+                    assert!(p == 62 || !holds(p as i32 + 1), "{what}: p + 1 fits too");
+                }
+            }
+        }
+    }
+}
