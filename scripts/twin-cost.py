@@ -123,7 +123,9 @@ def objects_of(path):
                       for s in elf.get_section_by_name(".symtab").iter_symbols()
                       if s["st_info"]["type"] == "STT_OBJECT" and s["st_size"])
         syms = {s.name: s["st_value"] for s in elf.get_section_by_name(".symtab").iter_symbols()}
-    dma = (syms.get("__sdma_buffers", 0), syms.get("__edma_buffers", 0))
+    if "__sdma_buffers" not in syms or "__edma_buffers" not in syms:
+        sys.exit(f"twin-cost: {path} has no .dma_buffers bounds (__sdma_buffers, __edma_buffers)")
+    dma = (syms["__sdma_buffers"], syms["__edma_buffers"])
     starts = [a for a, _, _ in objs]
 
     def name_of(addr):
