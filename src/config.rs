@@ -18,11 +18,8 @@ pub const FIRMWARE_VERSION: &str = concat!("cvm-fw-", env!("CARGO_PKG_VERSION"))
 /// full count.
 pub const MAX_DEFECT_LINES_PER_ROW: u16 = 16;
 
-/// Frame buffers: the SPI fills one while the other is scored.
-pub const FRAME_BUFFERS: usize = 2;
-
 /// Beam records between acquisition and scoring (see
-/// `cvm_fw_app::acquire`).
+/// `cvm_fw_app::acquire`): at least two more than the frame buffers.
 pub const BEAM_LOG: usize = 64;
 
 /// Queue bytes kept free for keep lines, for scans of up to `max_cols`
@@ -55,6 +52,9 @@ pub mod emulated {
     pub const QUEUE_BYTES: usize = 96 * 1024;
     pub const KEEP_RESERVE: usize = super::keep_reserve(MAX_COLS);
     const _: () = assert!(super::queue_fits(QUEUE_BYTES, MAX_COLS));
+    /// Frame buffers: the scan file is read one beam at a time, so one is
+    /// filled while the other is scored.
+    pub const FRAME_BUFFERS: usize = 2;
 }
 
 #[cfg(feature = "h743")]
@@ -138,6 +138,41 @@ pub mod h743 {
         );
         us as u32
     };
+    /// Frame buffers: one for the SPI to fill, one being scored, and one
+    /// for every beam that can arrive while the scoring task emits a row.
+    /// When the row below a row is complete, the engine finishes that
+    /// row's positions (magnitudes, decisions) and its lines are encoded
+    /// and queued in one go, between two beams: on the chip model 490
+    /// instructions per column with a few defects per row and 670 with
+    /// every position a defect (16 defect lines, one object), 200 000 at
+    /// 300 columns, where a 15x15 frame takes 57 600 cycles on the SPI.
+    /// With two buffers, the beam after the next was lost at the start
+    /// of every row at beam periods up to 250 us (docs/firmware.md,
+    /// "Beam rate"). Sized for [`ROW_END_CYCLES_PER_COL`] and beams one
+    /// frame's bus time apart, but at least [`MIN_BEAM_CYCLES`] (a beam
+    /// costs the scoring task more than that), at most what the beam log
+    /// can track.
+    pub const FRAME_BUFFERS: usize = {
+        let frame_cycles =
+            (GEOMETRY.cells() as u64 * 16 * SYSCLK_HZ as u64).div_ceil(SPI_HZ as u64);
+        let beam = if frame_cycles > MIN_BEAM_CYCLES {
+            frame_cycles
+        } else {
+            MIN_BEAM_CYCLES
+        };
+        let n = 2 + (COLS as u64 * ROW_END_CYCLES_PER_COL).div_ceil(beam) as usize;
+        if n < super::BEAM_LOG - 2 {
+            n
+        } else {
+            super::BEAM_LOG - 2
+        }
+    };
+    /// Cycles per column the end of a row takes at most, with margin (see
+    /// [`FRAME_BUFFERS`]; 670 measured).
+    pub const ROW_END_CYCLES_PER_COL: u64 = 1_000;
+    /// Cycles below which no beam is scored, whatever the map size:
+    /// sequencing, the engine's bookkeeping, the interrupts and the tasks.
+    pub const MIN_BEAM_CYCLES: u64 = 3_000;
     /// Beams scored between two yields of the scoring task.
     pub const SCORE_BURST: u32 = 8;
     const _: () = assert!(

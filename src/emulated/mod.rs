@@ -35,8 +35,8 @@ use embassy_sync::blocking_mutex::raw::ThreadModeRawMutex;
 use embassy_sync::signal::Signal;
 use static_cell::{ConstStaticCell, StaticCell};
 
-use crate::config::emulated::{KEEP_RESERVE, MAX_COLS, QUEUE_BYTES};
-use crate::config::{BEAM_LOG, FIRMWARE_VERSION, FRAME_BUFFERS};
+use crate::config::emulated::{FRAME_BUFFERS, KEEP_RESERVE, MAX_COLS, QUEUE_BYTES};
+use crate::config::{BEAM_LOG, FIRMWARE_VERSION};
 use crate::frames::{SampleBuffers, Samples};
 use crate::sink::{QueueSink, SharedQueue};
 use cycles::Stopwatch;

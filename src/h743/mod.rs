@@ -60,13 +60,14 @@ use frame_reader::{FrameReader, READER};
 use static_cell::StaticCell;
 use tasks::{score_task, uart_task};
 
+use crate::config::BEAM_LOG;
 use crate::config::h743::FIRMWARE_VERSION;
+use crate::config::h743::FRAME_BUFFERS;
 use crate::config::h743::{
     BAUD, COLS, CORE, J1, J2, KEEP_RESERVE, MAX_COLS, MAX_DEFECT_LINES_PER_ROW,
     POWER_THRESHOLD_UNITS, QUEUE_BYTES, READ_TIMEOUT_US, ROWS, SCORES, SPI_DIV, SPI_HZ, SYSCLK_HZ,
     THRESHOLD_UNITS, WATCHDOG_US,
 };
-use crate::config::{BEAM_LOG, FRAME_BUFFERS};
 use crate::frames::SampleBuffers;
 use crate::sink::SharedQueue;
 
@@ -122,14 +123,37 @@ unsafe impl Sync for DtcmScorer {}
 static SCORER: DtcmScorer =
     DtcmScorer(core::cell::UnsafeCell::new(core::mem::MaybeUninit::uninit()));
 
-/// Row buffer A in AXI SRAM (.bss), row buffer B in SRAM1..3: at 300
-/// columns of 15x15 maps each is 270 KB, too much for one bank together.
-struct RowBuffer(core::cell::UnsafeCell<[i32; ROW_WORDS]>);
+/// The two row buffers. Both sit in AXI SRAM when they fit there beside
+/// everything else (the output queue, the frame buffers and a reserve for
+/// the rest of `.bss` and `.data`): every beam reads its slot's old map
+/// and writes the new one, and SRAM1..3, behind the AXI-to-AHB bridge,
+/// costs about twice the wait states (257 stall cycles per 9x9 beam at
+/// 300 columns, scripts/twin-cost.sh). Otherwise (300 columns of 15x15
+/// maps, 270 KB a row) row buffer B goes to SRAM1..3 (`.sram123`). A
+/// configuration for which neither fits fails to link.
+const ROWS_IN_AXI: bool = 2 * ROW_WORDS * 4
+    <= AXI_SRAM_BYTES
+        - QUEUE_BYTES
+        - core::mem::size_of::<SampleBuffers<FRAME_BUFFERS>>()
+        - AXI_OTHER_BYTES;
+const AXI_SRAM_BYTES: usize = 512 * 1024;
+/// The rest of AXI SRAM's statics: about 3 KB today (the UART line, the
+/// acquisition log, the task futures, `.data`).
+const AXI_OTHER_BYTES: usize = 16 * 1024;
+const AXI_ROW_WORDS: usize = if ROWS_IN_AXI {
+    2 * ROW_WORDS
+} else {
+    ROW_WORDS
+};
+const SRAM123_ROW_WORDS: usize = if ROWS_IN_AXI { 0 } else { ROW_WORDS };
+struct RowBuffers<const W: usize>(core::cell::UnsafeCell<[i32; W]>);
 // SAFETY: handed out once, by `main`, before any task runs.
-unsafe impl Sync for RowBuffer {}
-static ROW_A: RowBuffer = RowBuffer(core::cell::UnsafeCell::new([0; ROW_WORDS]));
+unsafe impl<const W: usize> Sync for RowBuffers<W> {}
+static ROWS_AXI: RowBuffers<AXI_ROW_WORDS> =
+    RowBuffers(core::cell::UnsafeCell::new([0; AXI_ROW_WORDS]));
 #[unsafe(link_section = ".sram123")]
-static ROW_B: RowBuffer = RowBuffer(core::cell::UnsafeCell::new([0; ROW_WORDS]));
+static ROWS_SRAM123: RowBuffers<SRAM123_ROW_WORDS> =
+    RowBuffers(core::cell::UnsafeCell::new([0; SRAM123_ROW_WORDS]));
 
 /// The current row's last three maps, in DTCM: every map is written
 /// here as well as to its row buffer, and the horizontal distances read
@@ -269,9 +293,11 @@ fn main() -> ! {
     // SAFETY: written here, once, before any task runs; read-only after.
     let scorer: &'static Scorer = unsafe { (*SCORER.0.get()).write(tables) };
     // SAFETY: the row buffers are handed out here, once, before any task runs.
-    let (row_a, row_b) = unsafe { (&mut *ROW_A.0.get(), &mut *ROW_B.0.get()) };
+    let (axi, sram123) = unsafe { (&mut *ROWS_AXI.0.get(), &mut *ROWS_SRAM123.0.get()) };
     // SRAM1..3 is NOLOAD: start from a known state.
-    row_b.fill(0);
+    sram123.fill(0);
+    let (row_a, rest) = axi.split_at_mut(ROW_WORDS);
+    let row_b = if ROWS_IN_AXI { rest } else { sram123 };
     let settings = Settings {
         cols: COLS as u32,
         threshold: scorer.threshold_from_units(THRESHOLD_UNITS),

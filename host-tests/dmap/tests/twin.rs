@@ -19,6 +19,11 @@ const COLS: usize = 12;
 /// A scan with a planted bright blob, a dark map and a saturated map over
 /// a random background.
 fn write_scan(path: &Path, j1: usize, j2: usize, seed: u64) {
+    write_scan_sized(path, ROWS, COLS, j1, j2, seed);
+}
+
+/// [`write_scan`] with `rows` x `cols` beams.
+fn write_scan_sized(path: &Path, rows: usize, cols: usize, j1: usize, j2: usize, seed: u64) {
     let mut state = seed;
     let mut rnd = move || {
         state = state
@@ -27,25 +32,25 @@ fn write_scan(path: &Path, j1: usize, j2: usize, seed: u64) {
         (state >> 33) as u32
     };
     let cells = j1 * j2;
-    let mut data = Vec::with_capacity(ROWS * COLS * cells);
-    for r in 0..ROWS {
-        for c in 0..COLS {
+    let mut data = Vec::with_capacity(rows * cols * cells);
+    for r in 0..rows {
+        for c in 0..cols {
             for k in 0..cells {
                 let mut v = 500 + (rnd() % 300) as u16;
-                if (r, c) == (ROWS / 2, COLS / 3) && k % 2 == 0 {
+                if (r, c) == (rows / 2, cols / 3) && k % 2 == 0 {
                     v += 6000;
                 }
-                if (r, c) == (1, COLS - 2) {
+                if (r, c) == (1, cols - 2) {
                     v = 0;
                 }
-                if (r, c) == (ROWS - 2, 1) {
+                if (r, c) == (rows - 2, 1) {
                     v = u16::MAX;
                 }
                 data.push(v);
             }
         }
     }
-    write_scan_u16(path, ROWS, COLS, Geometry::new(j1, j2).unwrap(), &data).unwrap();
+    write_scan_u16(path, rows, cols, Geometry::new(j1, j2).unwrap(), &data).unwrap();
 }
 
 fn dmap(args: &[&str]) -> Output {
@@ -176,6 +181,44 @@ fn twin_matches_stream_square_15x15() {
         &["--kernels", "square", "--threshold", "0.05"],
         &["--start-ms", "200"],
     );
+}
+
+/// The default geometry and width (15x15 maps, 300 columns: the release
+/// build but for the number of rows, row buffer B in SRAM1..3) with beams
+/// 10 % further apart than a frame takes on the SPI (144 us at 25 MHz):
+/// every beam is scored and the output is `dmap stream`'s. The end of a
+/// row (every position's decision, the row's lines) is done in one go
+/// between two beams, about 150 000 cycles here; with two frame buffers
+/// the second beam of every row from the third on was lost at beam
+/// periods up to 250 us.
+#[test]
+fn twin_default_geometry_scores_every_beam_at_the_spi_limit() {
+    let (rows, cols) = (4, 300);
+    let dir = tempfile::tempdir().unwrap();
+    let scan = dir.path().join("scan.npy");
+    write_scan_sized(&scan, rows, cols, 15, 15, 1515);
+    let scan = scan.to_str().unwrap();
+    let stream_args = [&["stream", scan][..], &FAULT_OPTS].concat();
+    let host = dmap(&stream_args);
+    ok(&stream_args, &host);
+    let twin_args = [&["twin", scan][..], &FAULT_OPTS, &["--beam-us", "160"]].concat();
+    let twin = dmap(&twin_args);
+    ok(&twin_args, &twin);
+    let e = end_line(&twin.stdout);
+    let n = (rows * cols) as u64;
+    assert_eq!((e["frames"], e["missing"]), (n, 0), "{e:?}");
+    assert_eq!(e["dropped"], 0, "{e:?}");
+    assert!(
+        twin.stdout == host.stdout,
+        "the H743 firmware and the host pipeline differ:\n--- stream\n{}\n--- twin\n{}",
+        String::from_utf8_lossy(&host.stdout),
+        String::from_utf8_lossy(&twin.stdout)
+    );
+    let c = counters(&twin);
+    assert_eq!(c["status"], "done", "{c}");
+    assert_eq!(c["beams"], n, "{c}");
+    assert_eq!(c["spi_overruns"], 0, "{c}");
+    stack_to_spare(&c);
 }
 
 /// The end line's values by key.
