@@ -139,19 +139,20 @@ pub mod h743 {
         us as u32
     };
     /// Frame buffers: one for the SPI to fill, one being scored, and one
-    /// for every beam that can arrive while the scoring task emits a row.
+    /// for every beam that can arrive while the scoring task emits rows.
     /// When the row below a row is complete, the engine finishes that
     /// row's positions (magnitudes, decisions) and its lines are encoded
     /// and queued in one go, between two beams: on the chip model 490
     /// instructions per column with a few defects per row and 670 with
     /// every position a defect (16 defect lines, one object), 200 000 at
     /// 300 columns, where a 15x15 frame takes 57 600 cycles on the SPI.
-    /// With two buffers, the beam after the next was lost at the start
-    /// of every row at beam periods up to 250 us (docs/firmware.md,
-    /// "Beam rate"). Sized for [`ROW_END_CYCLES_PER_COL`] and beams one
-    /// frame's bus time apart, but at least [`MIN_BEAM_CYCLES`] (a beam
-    /// costs the scoring task more than that), at most what the beam log
-    /// can track.
+    /// The end of a scan emits its last two rows at once, and the next
+    /// scan's beams may follow without a pause. With two buffers, the
+    /// beam after the next was lost at the start of every row at beam
+    /// periods up to 250 us (docs/firmware.md, "Beam rate"). Sized for
+    /// two rows at [`ROW_END_CYCLES_PER_COL`] and beams one frame's bus
+    /// time apart, but at least [`MIN_BEAM_CYCLES`] (a beam costs the
+    /// scoring task more than that), at most what the beam log can track.
     pub const FRAME_BUFFERS: usize = {
         let frame_cycles =
             (GEOMETRY.cells() as u64 * 16 * SYSCLK_HZ as u64).div_ceil(SPI_HZ as u64);
@@ -160,7 +161,7 @@ pub mod h743 {
         } else {
             MIN_BEAM_CYCLES
         };
-        let n = 2 + (COLS as u64 * ROW_END_CYCLES_PER_COL).div_ceil(beam) as usize;
+        let n = 2 + (2 * COLS as u64 * ROW_END_CYCLES_PER_COL).div_ceil(beam) as usize;
         if n < super::BEAM_LOG - 2 {
             n
         } else {

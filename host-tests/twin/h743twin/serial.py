@@ -43,6 +43,7 @@ class Spi:
         self.suspended = False
         self.done = 0
         self.busy_until = None
+        self.resume_at = None   # while a word's end is handled: when it ended
         self.gen = 0
         self.frames = 0
         self.overruns = 0
@@ -123,15 +124,27 @@ class Spi:
         if self.busy_until is not None or not self.can_shift():
             return
         cycles = max(1, round(self.bits() * CLOCK_HZ / self.sck_hz()))
-        self.busy_until = self.bus.core.cycles + cycles
+        # A word that follows the one just shifted starts when that one
+        # ended: the model gets here only at the core's next block
+        # boundary, and SCK does not wait for the core.
+        start = self.resume_at if self.resume_at is not None else self.bus.core.cycles
+        self.busy_until = start + cycles
         self.gen += 1
         gen = self.gen
-        self.bus.at(self.busy_until, lambda: self.shifted(gen))
+        due = self.busy_until
+        self.bus.at(due, lambda: self.shifted(gen, due))
 
-    def shifted(self, gen):
+    def shifted(self, gen, due):
         if gen != self.gen:
             return
         self.busy_until = None
+        self.resume_at = due
+        try:
+            self._shifted()
+        finally:
+            self.resume_at = None
+
+    def _shifted(self):
         if not self.can_shift():
             return
         out = self.tx.pop(0) if self.comm() != 2 and self.tx else 0

@@ -212,6 +212,18 @@ class SpiTests(unittest.TestCase):
         self.assertEqual(spi.frames, 1)
         self.assertEqual(spi.read(0x30, 2), 0x1001)
 
+    def test_words_follow_each_other_when_the_model_is_late(self):
+        # The model handles an event only at the core's next block boundary,
+        # here 100 cycles late every time; SCK does not wait for the core, so
+        # the fourth word still ends at 4 x 256 cycles.
+        bus, core, spi = self.make(masrx=1)
+        while bus.events and bus.events[0][0] <= 4 * 256:
+            core.cycles = bus.events[0][0] + 100
+            bus.fire_due()
+        self.assertEqual(core.cycles, 4 * 256 + 100)
+        self.assertEqual(spi.frames, 4)
+        self.assertEqual(spi.busy_until, 5 * 256)
+
     def test_masrx_suspends_instead_of_overrunning(self):
         bus, core, spi = self.make(masrx=1)
         run_until(bus, core, 40 * 256)
