@@ -20,7 +20,7 @@ pub const MAX_DEFECT_LINES_PER_ROW: u16 = 16;
 
 /// Beam records between acquisition and scoring (see
 /// `cvm_fw_app::acquire`): at least two more than the frame buffers.
-pub const BEAM_LOG: usize = 64;
+pub const BEAM_LOG: usize = 128;
 
 /// Queue bytes kept free for keep lines, for scans of up to `max_cols`
 /// columns: the most one scoring step can produce is a scan's end (two
@@ -139,41 +139,55 @@ pub mod h743 {
         us as u32
     };
     /// Frame buffers: one for the SPI to fill, one being scored, and one
-    /// for every beam that can arrive while the scoring task emits rows.
-    /// When the row below a row is complete, the engine finishes that
-    /// row's positions (magnitudes, decisions) and its lines are encoded
-    /// and queued in one go, between two beams: on the chip model 490
-    /// instructions per column with a few defects per row and 670 with
-    /// every position a defect (16 defect lines, one object), 200 000 at
-    /// 300 columns, where a 15x15 frame takes 57 600 cycles on the SPI.
-    /// The end of a scan emits its last two rows at once, and the next
-    /// scan's beams may follow without a pause. With two buffers, the
-    /// beam after the next was lost at the start of every row at beam
-    /// periods up to 250 us (docs/firmware.md, "Beam rate"). Sized for
-    /// two rows at [`ROW_END_CYCLES_PER_COL`] and beams one frame's bus
-    /// time apart, but at least [`MIN_BEAM_CYCLES`] (a beam costs the
-    /// scoring task more than that), at most what the beam log can track.
+    /// for every beam that can arrive while the scoring task is busy with
+    /// the end of a scan. Twice per row and scan the scoring task has a
+    /// burst between two beams (docs/firmware.md, "Beam rate"):
+    /// - when the row below a row is complete, that row's magnitudes,
+    ///   decisions and lines ([`ROW_END_CYCLES_PER_COL`]);
+    /// - at the end of a scan, its last two rows' and the last row's
+    ///   vertical distances, whose lower neighbour is the map itself by the
+    ///   border rule ([`SCAN_END_CYCLES_PER_CELL`]); the next scan's
+    ///   beams may follow without a pause.
+    ///
+    /// Sized for the second with beams one frame's bus time apart, but at
+    /// least [`MIN_BEAM_CYCLES`] (a beam costs the scoring task more than
+    /// that), at most what the beam log can track. With two buffers, the
+    /// release build lost the second beam of every row from the third on
+    /// at beam periods up to 250 us, with the SPI able to deliver one
+    /// every 146 us.
     pub const FRAME_BUFFERS: usize = {
-        let frame_cycles =
-            (GEOMETRY.cells() as u64 * 16 * SYSCLK_HZ as u64).div_ceil(SPI_HZ as u64);
+        let cells = GEOMETRY.cells() as u64;
+        let frame_cycles = (cells * 16 * SYSCLK_HZ as u64).div_ceil(SPI_HZ as u64);
         let beam = if frame_cycles > MIN_BEAM_CYCLES {
             frame_cycles
         } else {
             MIN_BEAM_CYCLES
         };
-        let n = 2 + (2 * COLS as u64 * ROW_END_CYCLES_PER_COL).div_ceil(beam) as usize;
+        let burst = COLS as u64 * (2 * ROW_END_CYCLES_PER_COL + SCAN_END_CYCLES_PER_CELL * cells);
+        let n = 2 + burst.div_ceil(beam) as usize;
         if n < super::BEAM_LOG - 2 {
             n
         } else {
             super::BEAM_LOG - 2
         }
     };
-    /// Cycles per column the end of a row takes at most, with margin (see
-    /// [`FRAME_BUFFERS`]; 670 measured).
+    /// A row's magnitudes, decisions and lines, cycles per column with
+    /// margin: on the chip model 490 instructions with a few defects per
+    /// row, 670 with every position a defect (16 defect lines, one
+    /// object), about 780 at a scan's end, where the score lines are
+    /// promoted to keep lines. Mostly DTCM and the stack: few stalls.
     pub const ROW_END_CYCLES_PER_COL: u64 = 1_000;
+    /// The last row's vertical distances at the end of a scan, cycles per
+    /// column and cell: about 3 instructions (690 per 15x15 column on the
+    /// chip model) and two words read from the row buffers, up to 16 stall
+    /// cycles by the bus cost model with the D-cache off (scripts/twin-cost.py).
+    pub const SCAN_END_CYCLES_PER_CELL: u64 = 20;
     /// Cycles below which no beam is scored, whatever the map size:
     /// sequencing, the engine's bookkeeping, the interrupts and the tasks.
     pub const MIN_BEAM_CYCLES: u64 = 3_000;
+    /// Samples per frame buffer: the map's cells rounded up to 16 (32
+    /// bytes), so that every buffer starts word- and line-aligned.
+    pub const FRAME_SAMPLES: usize = GEOMETRY.cells().next_multiple_of(16);
     /// Beams scored between two yields of the scoring task.
     pub const SCORE_BURST: u32 = 8;
     const _: () = assert!(

@@ -11,26 +11,27 @@ use core::cell::UnsafeCell;
 use cvm_core::MAX_CELLS;
 use cvm_fw_app::driver::FrameStore;
 
-/// `N` frame buffers of native `u16` samples, as a bus that delivers
-/// samples leaves them (the H743's 16-bit SPI frames with DMA; the
-/// emulated board's scan file holds them in that order too): nothing to
-/// decode.
+/// `N` frame buffers of `C` native `u16` samples each, as a bus that
+/// delivers samples leaves them (the H743's 16-bit SPI frames with DMA;
+/// the emulated board's scan file holds them in that order too): nothing
+/// to decode. `C` is at least the map's cells; an even `C` keeps every
+/// buffer word-aligned, which the sum pass's block copy needs.
 #[repr(C, align(32))]
-pub struct SampleBuffers<const N: usize>(UnsafeCell<[[u16; MAX_CELLS]; N]>);
+pub struct SampleBuffers<const N: usize, const C: usize = MAX_CELLS>(UnsafeCell<[[u16; C]; N]>);
 
 // SAFETY: see the module docs; each buffer has one owner at a time.
-unsafe impl<const N: usize> Sync for SampleBuffers<N> {}
+unsafe impl<const N: usize, const C: usize> Sync for SampleBuffers<N, C> {}
 
-impl<const N: usize> SampleBuffers<N> {
+impl<const N: usize, const C: usize> SampleBuffers<N, C> {
     pub const fn new() -> Self {
-        SampleBuffers(UnsafeCell::new([[0; MAX_CELLS]; N]))
+        SampleBuffers(UnsafeCell::new([[0; C]; N]))
     }
 
     /// # Safety
     /// The caller must own buffer `k` (it is `Filling`, or the scoring side
     /// holds its record) and hold no other reference to it.
     #[allow(clippy::mut_from_ref)]
-    pub unsafe fn buffer(&self, k: usize) -> &mut [u16; MAX_CELLS] {
+    pub unsafe fn buffer(&self, k: usize) -> &mut [u16; C] {
         // SAFETY: the caller upholds exclusive ownership of buffer `k`.
         unsafe { &mut (*self.0.get())[k % N] }
     }
@@ -46,20 +47,20 @@ impl<const N: usize> SampleBuffers<N> {
         // SAFETY: the caller owns buffer `k`; a `u16` array is valid as
         // twice as many bytes, and any byte values make valid `u16`s.
         let samples = unsafe { self.buffer(k) };
-        let n = cells.min(MAX_CELLS);
+        let n = cells.min(C);
         unsafe { core::slice::from_raw_parts_mut(samples.as_mut_ptr().cast::<u8>(), 2 * n) }
     }
 }
 
 /// The scoring side's view of [`SampleBuffers`].
-pub struct Samples<'b, const N: usize, R: FnMut(usize)> {
-    pub bufs: &'b SampleBuffers<N>,
+pub struct Samples<'b, const N: usize, const C: usize, R: FnMut(usize)> {
+    pub bufs: &'b SampleBuffers<N, C>,
     pub cells: usize,
     /// Hands a buffer back to the acquisition side.
     pub release: R,
 }
 
-impl<const N: usize, R: FnMut(usize)> FrameStore for Samples<'_, N, R> {
+impl<const N: usize, const C: usize, R: FnMut(usize)> FrameStore for Samples<'_, N, C, R> {
     fn frame(&mut self, buf: usize) -> Option<&[u16]> {
         // SAFETY: the scoring side holds `buf`'s record (FrameStore contract).
         let samples = unsafe { self.bufs.buffer(buf) };

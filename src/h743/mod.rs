@@ -62,12 +62,12 @@ use tasks::{score_task, uart_task};
 
 use crate::config::BEAM_LOG;
 use crate::config::h743::FIRMWARE_VERSION;
-use crate::config::h743::FRAME_BUFFERS;
 use crate::config::h743::{
     BAUD, COLS, CORE, J1, J2, KEEP_RESERVE, MAX_COLS, MAX_DEFECT_LINES_PER_ROW,
     POWER_THRESHOLD_UNITS, QUEUE_BYTES, READ_TIMEOUT_US, ROWS, SCORES, SPI_DIV, SPI_HZ, SYSCLK_HZ,
     THRESHOLD_UNITS, WATCHDOG_US,
 };
+use crate::config::h743::{FRAME_BUFFERS, FRAME_SAMPLES};
 use crate::frames::SampleBuffers;
 use crate::sink::SharedQueue;
 
@@ -134,7 +134,7 @@ static SCORER: DtcmScorer =
 const ROWS_IN_AXI: bool = 2 * ROW_WORDS * 4
     <= AXI_SRAM_BYTES
         - QUEUE_BYTES
-        - core::mem::size_of::<SampleBuffers<FRAME_BUFFERS>>()
+        - core::mem::size_of::<SampleBuffers<FRAME_BUFFERS, FRAME_SAMPLES>>()
         - AXI_OTHER_BYTES;
 const AXI_SRAM_BYTES: usize = 512 * 1024;
 /// The rest of AXI SRAM's statics: about 3 KB today (the UART line, the
@@ -183,7 +183,7 @@ type Queue = LineQueue<QUEUE_BYTES>;
 
 static ACQ: Mutex<CriticalSectionRawMutex, RefCell<Acq>> = Mutex::new(RefCell::new(Acq::new()));
 #[unsafe(link_section = ".dma_buffers")]
-static FRAMES: SampleBuffers<FRAME_BUFFERS> = SampleBuffers::new();
+static FRAMES: SampleBuffers<FRAME_BUFFERS, FRAME_SAMPLES> = SampleBuffers::new();
 /// Zero-initialised (`.bss`, not 48 KB of `.data` in flash); `main` sets
 /// its reserve before any task runs.
 static QUEUE: SharedQueue<QUEUE_BYTES> = Mutex::new(RefCell::new(Queue::new(0)));

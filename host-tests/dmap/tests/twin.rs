@@ -197,10 +197,10 @@ fn twin_matches_stream_square_15x15() {
 /// output is `dmap stream`'s for each scan. The scoring task does a row's
 /// decisions and lines in one go when the row below it is complete (about
 /// 150 000 cycles here), and the last two rows of a scan at its end (about
-/// 640 000 cycles: ten beams' time). With two frame buffers the second
+/// 600 000 cycles: ten beams' time). With two frame buffers the second
 /// beam of every row from the third on was lost at beam periods up to
 /// 250 us; here two buffers lose 2 beams of the first scan, and buffers
-/// for one row's burst (8) lose 3.
+/// for one row's burst (8) lose 3 of the second.
 #[test]
 fn twin_default_geometry_scores_every_beam_at_the_spi_limit() {
     let (rows, cols, j) = (3, 300, 15);

@@ -32,6 +32,10 @@ OP_WFE = 0xBF20
 OP_WFI = 0xBF30
 OP_SEV = 0xBF40
 OP_CPSIE_I = 0xB662
+# MSR PRIMASK, Rn (T1: 0xF380 | n, then SYSm 0x10): how the critical-section
+# crate restores the interrupt mask, which may unmask interrupts.
+OP_MSR_RN = 0xF380
+OP_MSR_PRIMASK_2 = 0x8810
 OP_B_SELF = 0xE7FE
 
 FRAME_REGS = (UC_ARM_REG_R0, UC_ARM_REG_R1, UC_ARM_REG_R2, UC_ARM_REG_R3,
@@ -272,12 +276,15 @@ class Core:
 
     def watch_opcodes(self, text_ranges):
         """Code hooks on the few instructions whose effect Unicorn does not
-        show: SEV and CPSIE I (an interrupt may be taken), `b .` (a core
-        stuck for good, after a panic: fast-forward to the next event)."""
+        show: SEV, and CPSIE I and MSR PRIMASK (an interrupt may be taken
+        once they have run); `b .` (a core stuck for good, after a panic:
+        fast-forward to the next event) is found by the block hook."""
         for start, data in text_ranges:
             for i in range(0, len(data) - 1, 2):
                 hw = data[i] | data[i + 1] << 8
-                if hw in (OP_SEV, OP_CPSIE_I):
+                msr = (hw & 0xFFF0 == OP_MSR_RN and i + 3 < len(data)
+                       and data[i + 2] | data[i + 3] << 8 == OP_MSR_PRIMASK_2)
+                if hw in (OP_SEV, OP_CPSIE_I) or msr:
                     a = start + i
                     self.uc.hook_add(UC_HOOK_CODE, self._on_watched, begin=a, end=a)
 
@@ -285,8 +292,12 @@ class Core:
         hw = struct.unpack("<H", uc.mem_read(addr, 2))[0]
         if hw == OP_SEV:
             self.event = True
-        elif hw == OP_CPSIE_I:
-            # Takes effect after this instruction: stop at the block's end.
+        elif hw == OP_CPSIE_I or hw & 0xFFF0 == OP_MSR_RN:
+            # Takes effect after this instruction: stop at the block's end,
+            # where a pending interrupt is taken if the mask is now clear.
+            # (Without this, an interrupt that became pending inside a
+            # critical section waited for the model's next event or time
+            # slice, up to 20 000 cycles, after the section ended.)
             self.request_check()
 
     def reset(self):

@@ -1,11 +1,12 @@
 """Unit tests of the chip model's parts against RM0433 behaviour worked out
 by hand: `cd host-tests/twin && python3 -m unittest discover -s tests`."""
 
+import struct
 import unittest
 
 from h743twin import system
 from h743twin.bus import Bus
-from h743twin.core import CLOCK_HZ, Nvic, Reset, Stop, count_thumb
+from h743twin.core import CLOCK_HZ, Core, Nvic, Reset, Stop, count_thumb
 from h743twin.dma import Dma, REQ_SPI1_RX
 from h743twin.serial import Spi, Usart
 
@@ -70,6 +71,43 @@ class Thumb(unittest.TestCase):
         # movs r0,#1 (16) ; ldr.w r0,[r1] (32: 0xF8D1 0x0000) ; bx lr (16)
         code = bytes.fromhex("0120" "d1f80000" "7047")
         self.assertEqual(count_thumb(code), 3)
+
+
+class Interrupts(unittest.TestCase):
+    # Vector table (SP, reset, 14 unused, IRQ0) and, from 0x44 on (llvm-mc,
+    # thumbv7em):
+    #   reset:  cpsid i; movw r1, #0xE100; movt r1, #0xE000; movs r2, #1
+    #           str r2, [r1]            @ NVIC_ISER0: IRQ0 enabled
+    #           str r2, [r1, #0x100]    @ NVIC_ISPR0: IRQ0 pending, masked
+    #           b 1f
+    #   1:      movs r3, #10
+    #   2:      subs r3, #1; bne 2b     @ a few blocks with PRIMASK set
+    #           movs r0, #0; msr primask, r0; b 3f
+    #   3:      movs r4, #1
+    #   4:      adds r5, #1; b 4b
+    #   irq0:   movw r1, #0; movt r1, #0x2000; str r4, [r1]; bx lr
+    CODE = bytes.fromhex(
+        "72b64ef20011cef2000101220a60c1f80021ffe70a23013bfdd1002080f31088"
+        "ffe701240135fde740f20001c2f200010c607047")
+
+    def test_pending_interrupt_is_taken_when_msr_primask_unmasks_it(self):
+        # The critical-section crate ends a section with MSR PRIMASK, not
+        # CPSIE I: the interrupt must come right after it (r4 still 0), not
+        # at the model's next time slice (20 000 cycles on).
+        image = (struct.pack("<2I", 0x2000_1000, 0x0800_0045) + bytes(14 * 4)
+                 + struct.pack("<I", 0x0800_006D) + self.CODE)
+        core = Core(Bus())
+        core.load([(0x0800_0000, image)])
+        core.watch_opcodes([(0x0800_0000, image)])
+        core.reset()
+        entered = None
+        while core.cycles < 30_000:
+            core.run_until(30_000)
+            if core.wake_if_pending() and entered is None:
+                entered = core.cycles
+        self.assertIsNotNone(entered)
+        self.assertLess(entered, 100)
+        self.assertEqual(core.uc.mem_read(0x2000_0000, 4), bytes(4))
 
 
 class Rcc(unittest.TestCase):
