@@ -137,8 +137,8 @@ const ROWS_IN_AXI: bool = 2 * ROW_WORDS * 4
         - core::mem::size_of::<SampleBuffers<FRAME_BUFFERS, FRAME_SAMPLES>>()
         - AXI_OTHER_BYTES;
 const AXI_SRAM_BYTES: usize = 512 * 1024;
-/// The rest of AXI SRAM's statics: about 3 KB today (the UART line, the
-/// acquisition log, the task futures, `.data`).
+/// The rest of AXI SRAM's statics: about 4 KB today (the UART line, the
+/// acquisition log, the task futures, the rest of `.data`).
 const AXI_OTHER_BYTES: usize = 16 * 1024;
 const AXI_ROW_WORDS: usize = if ROWS_IN_AXI {
     2 * ROW_WORDS
