@@ -203,11 +203,25 @@ fn twin_matches_stream_square_15x15() {
 /// for one row's burst (8) lose 3 of the second.
 #[test]
 fn twin_default_geometry_scores_every_beam_at_the_spi_limit() {
-    let (rows, cols, j) = (3, 300, 15);
+    back_to_back_scans_at(15, "150");
+}
+
+/// The same for 9x9 maps, whose frame takes 52 us: beams 58 us apart, 55
+/// frame buffers of 96 samples, row buffer B in AXI SRAM with A.
+#[test]
+fn twin_9x9_scores_every_beam_at_the_spi_limit() {
+    back_to_back_scans_at(9, "58");
+}
+
+/// Two scans of 3 x 300 beams of `j` x `j` maps back to back, `beam_us`
+/// apart, through the firmware built for 3 rows: every beam scored, the
+/// output `dmap stream`'s for each scan.
+fn back_to_back_scans_at(j: usize, beam_us: &str) {
+    let (rows, cols) = (3, 300);
     let dir = tempfile::tempdir().unwrap();
     let mut expected = Vec::new();
     let mut all = Vec::new();
-    for (k, seed) in [1515, 1516].into_iter().enumerate() {
+    for (k, seed) in [j as u64 * 101, j as u64 * 101 + 1].into_iter().enumerate() {
         let data = scan_samples(rows, cols, j, j, seed);
         let scan = dir.path().join(format!("scan{k}.npy"));
         write_scan_u16(&scan, rows, cols, Geometry::new(j, j).unwrap(), &data).unwrap();
@@ -238,7 +252,7 @@ fn twin_default_geometry_scores_every_beam_at_the_spi_limit() {
         .arg(&elf)
         .arg("--scan")
         .arg(&twin_scan)
-        .args(["--beam-us", "150", "--scans", "2"])
+        .args(["--beam-us", beam_us, "--scans", "2"])
         .env("PYTHONPATH", &twin)
         .output()
         .expect("running the chip model");
