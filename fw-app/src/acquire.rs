@@ -71,6 +71,13 @@ enum Slot {
 #[derive(Clone, Debug)]
 pub struct Acquisition<const BUFS: usize, const LOG: usize> {
     bufs: [Buf; BUFS],
+    /// Buffers `Filling` (0 or 1): the SPI is busy while it is not 0.
+    filling: usize,
+    /// Where the search for a free buffer starts: after the last one
+    /// handed out. The scoring side releases buffers in the order they
+    /// were filled, so the first one looked at is free unless all are in
+    /// use, and the DRDY interrupt does not scan dozens of buffers.
+    next: usize,
     log: [Slot; LOG],
     head: usize,
     len: usize,
@@ -87,6 +94,8 @@ impl<const BUFS: usize, const LOG: usize> Acquisition<BUFS, LOG> {
     pub const fn new() -> Self {
         Acquisition {
             bufs: [Buf::Free; BUFS],
+            filling: 0,
+            next: 0,
             log: [Slot::Done(BeamRecord::Lost {
                 sync: false,
                 cause: LostCause::Overrun,
@@ -114,7 +123,18 @@ impl<const BUFS: usize, const LOG: usize> Acquisition<BUFS, LOG> {
     }
 
     fn spi_busy(&self) -> bool {
-        self.bufs.contains(&Buf::Filling)
+        self.filling > 0
+    }
+
+    /// A free buffer, looked for from `next` on, round the end.
+    fn free_buffer(&self) -> Option<usize> {
+        let start = self.next.min(BUFS);
+        let (before, after) = self.bufs.split_at(start);
+        let free = |b: &Buf| *b == Buf::Free;
+        match after.iter().position(free) {
+            Some(i) => Some(start + i),
+            None => before.iter().position(free),
+        }
     }
 
     fn slot(&self, k: usize) -> usize {
@@ -127,9 +147,12 @@ impl<const BUFS: usize, const LOG: usize> Acquisition<BUFS, LOG> {
         self.counts.drdy = self.counts.drdy.wrapping_add(1);
         if !self.spi_busy()
             && self.len + 2 <= LOG
-            && let Some(buf) = self.bufs.iter().position(|b| *b == Buf::Free)
+            && let Some(buf) = self.free_buffer()
+            && let Some(b) = self.bufs.get_mut(buf)
         {
-            self.bufs[buf] = Buf::Filling;
+            *b = Buf::Filling;
+            self.filling += 1;
+            self.next = buf + 1;
             let at = self.slot(self.len);
             self.log[at] = Slot::Filling { sync, buf };
             self.len += 1;
@@ -169,12 +192,15 @@ impl<const BUFS: usize, const LOG: usize> Acquisition<BUFS, LOG> {
         if buf >= BUFS {
             return;
         }
-        for k in 0..self.len {
+        // Newest first: the record being filled is the last but for the
+        // beams lost while it was read.
+        for k in (0..self.len).rev() {
             let at = self.slot(k);
             if let Slot::Filling { sync, buf: b } = self.log[at] {
                 if b != buf {
                     continue;
                 }
+                self.filling = self.filling.saturating_sub(1);
                 if ok {
                     self.counts.frames_read = self.counts.frames_read.wrapping_add(1);
                     self.log[at] = Slot::Done(BeamRecord::Frame { sync, buf });

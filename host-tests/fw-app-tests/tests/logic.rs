@@ -375,6 +375,85 @@ fn full_beam_log_folds_lost_beams_into_a_run() {
     assert_eq!(acq.take_next(), None);
 }
 
+/// Many buffers released out of order: a DRDY gets a free buffer whichever
+/// it is (the search starts after the last one handed out and goes round
+/// the end), never a busy one, and none while a read is still running.
+#[test]
+fn any_free_buffer_is_used_and_one_read_runs_at_a_time() {
+    let mut acq = Acquisition::<4, 16>::new();
+    let mut held = vec![];
+    for _ in 0..4 {
+        let b = acq.drdy(false).expect("a free buffer");
+        assert!(!held.contains(&b), "buffer {b} handed out twice");
+        acq.read_done(b, true);
+        held.push(b);
+    }
+    assert_eq!(acq.drdy(false), None, "every buffer busy: overrun");
+    for _ in 0..4 {
+        assert!(matches!(acq.take_next(), Some(BeamRecord::Frame { .. })));
+    }
+    assert!(matches!(
+        acq.take_next(),
+        Some(BeamRecord::Lost { run: 1, .. })
+    ));
+    // Release the second buffer only: it is the one a DRDY gets.
+    acq.release(held[1]);
+    assert_eq!(acq.drdy(false), Some(held[1]));
+    // A read runs: the next DRDY is lost even with free buffers.
+    acq.release(held[0]);
+    acq.release(held[2]);
+    assert_eq!(acq.drdy(true), None, "the SPI is still reading");
+    acq.read_done(held[1], true);
+    let b = acq.drdy(false).expect("two buffers free");
+    assert!(b == held[0] || b == held[2], "got busy buffer {b}");
+    // A failed read frees its buffer for the next DRDY.
+    acq.read_done(b, false);
+    let c = acq.drdy(false).expect("two buffers free");
+    assert!(c == held[0] || c == held[2], "got busy buffer {c}");
+    acq.read_done(c, true);
+    let counts = *acq.counts();
+    assert_eq!(
+        (
+            counts.drdy,
+            counts.frames_read,
+            counts.overruns,
+            counts.spi_errors
+        ),
+        (9, 6, 2, 1)
+    );
+    assert_eq!(
+        acq.take_next(),
+        Some(BeamRecord::Frame {
+            sync: false,
+            buf: held[1]
+        })
+    );
+    assert_eq!(
+        acq.take_next(),
+        Some(BeamRecord::Lost {
+            sync: true,
+            cause: LostCause::Overrun,
+            run: 1
+        })
+    );
+    assert_eq!(
+        acq.take_next(),
+        Some(BeamRecord::Lost {
+            sync: false,
+            cause: LostCause::SpiError,
+            run: 1
+        })
+    );
+    assert_eq!(
+        acq.take_next(),
+        Some(BeamRecord::Frame {
+            sync: false,
+            buf: c
+        })
+    );
+    assert_eq!(acq.take_next(), None);
+}
+
 fn run(seq: &mut Sequencer<u32>, beams: &[(bool, Payload<u32>)]) -> Vec<Action<u32>> {
     let mut acts = vec![];
     for &(sync, p) in beams {
