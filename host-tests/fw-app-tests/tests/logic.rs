@@ -454,6 +454,25 @@ fn any_free_buffer_is_used_and_one_read_runs_at_a_time() {
     assert_eq!(acq.take_next(), None);
 }
 
+/// The only free buffer comes after busy ones, on either side of where
+/// the search starts: it is the one a DRDY gets.
+#[test]
+fn the_only_free_buffer_is_found_past_busy_ones() {
+    let mut acq = Acquisition::<4, 16>::new();
+    for k in 0..4 {
+        assert_eq!(acq.drdy(false), Some(k));
+        acq.read_done(k, true);
+        assert!(matches!(acq.take_next(), Some(BeamRecord::Frame { buf, .. }) if buf == k));
+    }
+    acq.release(0);
+    assert_eq!(acq.drdy(false), Some(0), "round the end");
+    acq.read_done(0, true);
+    acq.release(2);
+    assert_eq!(acq.drdy(false), Some(2), "past busy buffer 1");
+    acq.read_done(2, true);
+    assert_eq!(acq.drdy(false), None, "all busy again");
+}
+
 fn run(seq: &mut Sequencer<u32>, beams: &[(bool, Payload<u32>)]) -> Vec<Action<u32>> {
     let mut acts = vec![];
     for &(sync, p) in beams {
