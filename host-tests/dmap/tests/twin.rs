@@ -19,7 +19,8 @@ const COLS: usize = 12;
 /// A scan with a planted bright blob, a dark map and a saturated map over
 /// a random background.
 fn write_scan(path: &Path, j1: usize, j2: usize, seed: u64) {
-    write_scan_sized(path, ROWS, COLS, j1, j2, seed);
+    let data = scan_samples(ROWS, COLS, j1, j2, seed);
+    write_scan_u16(path, ROWS, COLS, Geometry::new(j1, j2).unwrap(), &data).unwrap();
 }
 
 /// The samples of [`write_scan`] with `rows` x `cols` beams, in raster
@@ -52,12 +53,6 @@ fn scan_samples(rows: usize, cols: usize, j1: usize, j2: usize, seed: u64) -> Ve
         }
     }
     data
-}
-
-/// [`write_scan`] with `rows` x `cols` beams.
-fn write_scan_sized(path: &Path, rows: usize, cols: usize, j1: usize, j2: usize, seed: u64) {
-    let data = scan_samples(rows, cols, j1, j2, seed);
-    write_scan_u16(path, rows, cols, Geometry::new(j1, j2).unwrap(), &data).unwrap();
 }
 
 fn dmap(args: &[&str]) -> Output {
