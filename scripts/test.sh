@@ -8,6 +8,10 @@ bash scripts/setup.sh
 
 step() { printf '\n== %s\n' "$*" >&2; }
 
+step "structure: no import circles, no oversized files or functions"
+(cd scripts && python3 -m unittest -q tests.test_check_structure)
+python3 scripts/check-structure.py
+
 step "format"
 cargo fmt --all -- --check
 for crate in host-tests host-tests/fuzz nopanic; do
