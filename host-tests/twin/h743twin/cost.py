@@ -23,7 +23,7 @@ The accesses are found by decoding each instruction the scoring path runs
 (Capstone) and computing its addresses from the registers before it runs,
 not with Unicorn's memory hooks: a read hook on a load inside a Thumb IT
 block leaves Unicorn's IT state set after the block, so that a later
-instruction runs as if conditional (unicorn-engine/unicorn#2309; the
+instruction runs as if conditional (the
 firmware then goes wrong, e.g. an invalid instruction at a branch).
 
 The same accesses are also run through a model of the M7's D-cache
