@@ -12,7 +12,7 @@ out=${1:-out/demo}
 threshold=${THRESHOLD:-0.5}
 pitch_um=334   # the prototype preset's scan pitch
 start=$(date +%s)
-command -v python3 > /dev/null || { echo "demo.sh: needs python3 (standard library only) for the object summary" >&2; exit 1; }
+command -v python3 > /dev/null || { echo "demo.sh: needs python3 (standard library only) to match the objects with the truth" >&2; exit 1; }
 bash scripts/setup.sh
 
 echo "== building the host tools and the emulated firmware" >&2
@@ -50,7 +50,7 @@ echo "-------"
 # differences reach one position out), in mm at the scan pitch.
 sed -n '1,2p;/^  objects:/p;/^    object /p;/totals:/p;/line errors/p' "$out/listen.txt"
 echo "the firmware's objects against the planted defects (truth rows/cols, reported extent, error before and after the correction):"
-python3 scripts/fw_objects.py "$out/uart.txt" "$out/truth.npy" > "$out/objects.txt"
+bash scripts/measure.sh objects "$out/uart.txt" "$out/truth.npy" "$pitch_um" > "$out/objects.txt"
 cat "$out/objects.txt"
 if grep -q '^2/2 defects found, 0 false objects, 2 objects' "$out/objects.txt"; then objects=ok; else objects=WRONG; fi
 sed -n 's/.*beams=\([0-9]*\).*instructions_per_beam=\([0-9]*\).*/emulated Cortex-M4: \1 beams, \2 instructions per beam (normalise, embed, gradient, decide, encode)/p' "$out/firmware.log"

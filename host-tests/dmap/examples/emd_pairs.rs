@@ -1,4 +1,4 @@
-//! Exact EMD of map pairs, timed: the Rust side of `scripts/emd_vs_pot.py`.
+//! Exact EMD of map pairs, timed: the Rust side of `scripts/measure.sh emd-vs-pot`.
 //!
 //! Input: a scan-layout `.npy` of shape `(pairs, 2, J1, J2)` (position
 //! `(p, 0)` and `(p, 1)` are the two maps of pair `p`). Output: a float64

@@ -1,6 +1,6 @@
 //! The emulated firmware (QEMU mps2-an386) and the host pipeline print the
 //! same bytes for the same scan and settings. Needs `qemu-system-arm` and
-//! the `thumbv7em-none-eabihf` target (scripts/emulate-setup.sh installs
+//! the `thumbv7em-none-eabihf` target (scripts/setup.sh installs
 //! both).
 
 use cvm_reference::Geometry;

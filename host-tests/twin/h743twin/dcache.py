@@ -1,5 +1,5 @@
 """A model of the Cortex-M7's data cache for the bus cost model
-(scripts/twin-cost.py): tags only, no data. The H743's D-cache is 16 KiB,
+(h743twin.cost): tags only, no data. The H743's D-cache is 16 KiB,
 4-way set associative, with 32-byte lines. Replacement is taken to be
 least recently used, and allocation on both reads and writes (the ARMv7-M
 default attributes of the SRAM region are write-back, write-allocate).

@@ -1,7 +1,6 @@
-#!/usr/bin/env python3
 """Bus cost model of the H743's per-beam scoring path, on the chip model:
-`python3 scripts/twin-cost.py ELF J1 J2` (run from the repository root;
-scripts/twin-cost.sh builds the ELFs and runs it for 9x9 and 15x15).
+`python3 -m h743twin.cost ELF J1 J2` (from host-tests/twin;
+`scripts/measure.sh twin-cost` builds the ELFs and runs it for 9x9 and 15x15).
 
 The chip model counts instructions (one cycle each, no wait states). This
 script also counts every data load and store the scoring path makes (the
@@ -24,11 +23,11 @@ The accesses are found by decoding each instruction the scoring path runs
 (Capstone) and computing its addresses from the registers before it runs,
 not with Unicorn's memory hooks: a read hook on a load inside a Thumb IT
 block leaves Unicorn's IT state set after the block, so that a later
-instruction runs as if conditional (unicorn-engine/unicorn#2309; the
+instruction runs as if conditional (the
 firmware then goes wrong, e.g. an invalid instruction at a branch).
 
 The same accesses are also run through a model of the M7's D-cache
-(h743twin/dcache.py: 16 KiB, 4-way set associative, 32-byte lines, least
+(dcache.py: 16 KiB, 4-way set associative, 32-byte lines, least
 recently used replacement), as if the firmware enabled it with one MPU region making
 `.dma_buffers` (the DMA's frame buffers and UART line) non-cacheable and
 the ARMv7-M default attributes elsewhere: AXI SRAM and SRAM1-4
@@ -44,20 +43,17 @@ REGION=FILL/WRITEBACK`)."""
 
 import argparse
 import bisect
-import os
 import sys
 
-sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "host-tests", "twin"))
+import capstone
+from capstone import arm_const as csarm
+from elftools.elf.elffile import ELFFile
+from unicorn import UC_HOOK_CODE
+from unicorn import arm_const as ucarm
 
-import capstone  # noqa: E402
-from capstone import arm_const as csarm  # noqa: E402
-from elftools.elf.elffile import ELFFile  # noqa: E402
-from unicorn import UC_HOOK_CODE  # noqa: E402
-from unicorn import arm_const as ucarm  # noqa: E402
-
-from h743twin.dcache import DCache  # noqa: E402
-from h743twin.machine import cycles_of_ms  # noqa: E402
-from h743twin.profile import SCORING, add_scan_args, boot_for_scan, stage_of  # noqa: E402
+from .dcache import DCache
+from .machine import cycles_of_ms
+from .profile import SCORING, add_scan_args, boot_for_scan, stage_of
 
 REGIONS = (  # name, start, end
     ("ITCM", 0x0000_0000, 0x0001_0000),
@@ -124,7 +120,7 @@ def objects_of(path):
                       if s["st_info"]["type"] == "STT_OBJECT" and s["st_size"])
         syms = {s.name: s["st_value"] for s in elf.get_section_by_name(".symtab").iter_symbols()}
     if "__sdma_buffers" not in syms or "__edma_buffers" not in syms:
-        sys.exit(f"twin-cost: {path} has no .dma_buffers bounds (__sdma_buffers, __edma_buffers)")
+        sys.exit(f"h743twin.cost: {path} has no .dma_buffers bounds (__sdma_buffers, __edma_buffers)")
     dma = (syms["__sdma_buffers"], syms["__edma_buffers"])
     starts = [a for a, _, _ in objs]
 
@@ -234,7 +230,7 @@ class Accesses:
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(prog="twin-cost")
+    ap = argparse.ArgumentParser(prog="h743twin.cost")
     add_scan_args(ap)
     ap.add_argument("--dtcm", default="", help="statics (substrings) to cost as if in DTCM")
     ap.add_argument("--cost", action="append", default=[], help="REGION=READ/WRITE stall cycles")
