@@ -11,11 +11,13 @@ pub mod pipeline;
 pub mod power;
 pub mod protocol;
 pub mod scorer;
+pub mod settings;
 pub mod stream;
 pub mod tables;
 
 pub use config::{Config, ConfigError, Geometry, Kernels, MAX_CELLS, MAX_J, Weights};
 pub use objects::{Object, Objects};
-pub use pipeline::{Pipeline, Settings};
+pub use pipeline::Pipeline;
 pub use scorer::{Bounds, Formats, FrameError, Scorer, magnitude};
+pub use settings::Settings;
 pub use stream::{Engine, Position, PositionScore, RowSummary, RowView, Totals};

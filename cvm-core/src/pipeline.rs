@@ -4,35 +4,10 @@
 //! what makes their output byte-identical.
 
 use crate::objects::Objects;
-use crate::protocol::{
-    HeaderInfo, LineSink, ResetCause, encode_end, encode_header, encode_object, encode_row,
-};
+use crate::protocol::{HeaderInfo, LineSink, encode_end, encode_header, encode_object, encode_row};
 use crate::scorer::Scorer;
+pub use crate::settings::Settings;
 use crate::stream::{Engine, EngineError, Position, PushOutcome, RowView, Totals};
-
-/// What the pipeline reports besides the scores.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Settings {
-    /// Columns (beams per row) of the scan.
-    pub cols: u32,
-    /// Integer magnitude at or above which a position is a defect.
-    pub threshold: u32,
-    /// Power magnitude (`Q15`) at or above which a position is a defect
-    /// ([`crate::power::POWER_OFF`]: never).
-    pub power_threshold: u32,
-    /// Emit per-position score (`S`) lines.
-    pub scores: bool,
-    /// At most this many defect (`D`) lines per row, the strongest; the row
-    /// line carries the full count, so a truncated list is visible, and the
-    /// header the cap (`dcap`). 0 (no per-position lines; the objects
-    /// describe the defects) is the boards' default.
-    pub max_defect_lines_per_row: u16,
-    pub firmware_version: &'static str,
-    /// Why the board last started (`rst`; [`ResetCause::PowerOn`] on the host).
-    pub reset_cause: ResetCause,
-    /// Starts since power-on, this one included (`boots`; 1 on the host).
-    pub boots: u32,
-}
 
 pub struct Pipeline<'a, const MAX_COLS: usize> {
     engine: Engine<'a, MAX_COLS>,

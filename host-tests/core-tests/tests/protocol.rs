@@ -143,6 +143,35 @@ proptest! {
         prop_assert_eq!(protocol::parse(&s.0[0].0), Ok(Line::End(protocol::EndInfo { totals: t, dropped: v[11] })));
     }
 
+    /// Any object the labeller can close (rows and columns in order, a
+    /// channel among the decision bits) decodes to itself; the parser sits
+    /// beside the encoder, so the two cannot drift apart unnoticed.
+    #[test]
+    fn object_line_round_trips(v in prop::collection::vec(any::<u32>(), 10), power in any::<u16>(), cr in any::<u64>(), cc in any::<u64>(), channels in 0u8..4) {
+        let o = cvm_core::Object {
+            id: v[0],
+            row0: v[1].min(v[2]),
+            row1: v[1].max(v[2]),
+            col0: v[3].min(v[4]),
+            col1: v[3].max(v[4]),
+            area: v[5],
+            peak: v[6],
+            peak_row: v[7],
+            peak_col: v[8],
+            peak_mag: v[9],
+            peak_power: power,
+            channels: channels << 4,
+            centroid_row_q8: cr,
+            centroid_col_q8: cc,
+        };
+        let mut s = Lines::default();
+        protocol::encode_object(&o, &mut s);
+        let (line, p) = &s.0[0];
+        prop_assert_eq!(*p, Priority::Keep);
+        prop_assert!(line.len() <= MAX_LINE);
+        prop_assert_eq!(protocol::parse(line), Ok(Line::Object(o)));
+    }
+
     /// Changing any one byte of a line (its newline aside, which delimits
     /// lines in the stream) is detected: CRC-16 catches every error burst
     /// of up to 16 bits, and a damaged trailer fails its own syntax.

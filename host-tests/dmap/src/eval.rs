@@ -3,6 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
+use crate::objects::components;
 use crate::stream::fmt_num;
 use anyhow::{Result, bail};
 use clap::Args;
@@ -106,38 +107,6 @@ pub fn metrics(values: &[f64], truth: &[bool]) -> Metrics {
         nan_defect: nand,
         nan_free: nanf,
     }
-}
-
-/// 8-connected components of a mask, each as its list of (row, col), in
-/// raster order of their first pixel.
-pub fn components(mask: &[bool], rows: usize, cols: usize) -> Vec<Vec<(usize, usize)>> {
-    let mut label = vec![usize::MAX; mask.len()];
-    let mut out = Vec::new();
-    for start in 0..mask.len() {
-        if !mask[start] || label[start] != usize::MAX {
-            continue;
-        }
-        let id = out.len();
-        let mut comp = Vec::new();
-        let mut stack = vec![start];
-        label[start] = id;
-        while let Some(i) = stack.pop() {
-            let (r, c) = (i / cols, i % cols);
-            comp.push((r, c));
-            for nr in r.saturating_sub(1)..=(r + 1).min(rows - 1) {
-                for nc in c.saturating_sub(1)..=(c + 1).min(cols - 1) {
-                    let j = nr * cols + nc;
-                    if mask[j] && label[j] == usize::MAX {
-                        label[j] = id;
-                        stack.push(j);
-                    }
-                }
-            }
-        }
-        comp.sort_unstable();
-        out.push(comp);
-    }
-    out
 }
 
 /// Bounding box (rows, cols) in positions of a set of pixels.
@@ -478,19 +447,6 @@ mod tests {
                 }
             }
         }
-    }
-
-    #[test]
-    fn components_are_eight_connected() {
-        // Two diagonal pixels form one component; a far pixel another.
-        #[rustfmt::skip]
-        let mask = [
-            true,  false, false, false,
-            false, true,  false, false,
-            false, false, false, true,
-        ];
-        let c = components(&mask, 3, 4);
-        assert_eq!(c, vec![vec![(0, 0), (1, 1)], vec![(2, 3)]]);
     }
 
     #[test]

@@ -10,8 +10,6 @@
 //! detected object that shares no position with any truth component is a
 //! false object.
 
-use crate::eval::components;
-
 /// Bounding box and area of a set of positions.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Extent {
@@ -237,6 +235,38 @@ pub fn to_json(r: &ObjectReport, pitch_mm: f64) -> serde_json::Value {
     })
 }
 
+/// 8-connected components of a mask, each as its list of (row, col), in
+/// raster order of their first pixel.
+pub fn components(mask: &[bool], rows: usize, cols: usize) -> Vec<Vec<(usize, usize)>> {
+    let mut label = vec![usize::MAX; mask.len()];
+    let mut out = Vec::new();
+    for start in 0..mask.len() {
+        if !mask[start] || label[start] != usize::MAX {
+            continue;
+        }
+        let id = out.len();
+        let mut comp = Vec::new();
+        let mut stack = vec![start];
+        label[start] = id;
+        while let Some(i) = stack.pop() {
+            let (r, c) = (i / cols, i % cols);
+            comp.push((r, c));
+            for nr in r.saturating_sub(1)..=(r + 1).min(rows - 1) {
+                for nc in c.saturating_sub(1)..=(c + 1).min(cols - 1) {
+                    let j = nr * cols + nc;
+                    if mask[j] && label[j] == usize::MAX {
+                        label[j] = id;
+                        stack.push(j);
+                    }
+                }
+            }
+        }
+        comp.sort_unstable();
+        out.push(comp);
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -324,5 +354,18 @@ mod tests {
         // At the score itself a position counts (>=, the board's rule).
         assert_eq!(evaluate(&v, &truth, rows, cols, 9.0).detected, 3);
         assert_eq!(evaluate(&v, &truth, rows, cols, 9.5).detected, 0);
+    }
+
+    #[test]
+    fn components_are_eight_connected() {
+        // Two diagonal pixels form one component; a far pixel another.
+        #[rustfmt::skip]
+        let mask = [
+            true,  false, false, false,
+            false, true,  false, false,
+            false, false, false, true,
+        ];
+        let c = components(&mask, 3, 4);
+        assert_eq!(c, vec![vec![(0, 0), (1, 1)], vec![(2, 3)]]);
     }
 }

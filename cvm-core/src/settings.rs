@@ -1,0 +1,80 @@
+//! The settings value of a scan: what the pipeline needs besides the
+//! scorer, and what the header line reports about the board's start.
+//!
+//! It is its own module so that the pipeline (which acts on it) and the
+//! line protocol (whose header carries it) both read it without reading
+//! each other. The host resolves it once from its options; a board builds
+//! it at start-up, and a command channel may later get and set the same
+//! value between scans.
+
+/// Why the board last started, as the header's `rst` carries it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ResetCause {
+    /// Power-on or brown-out (`por`); also `dmap stream` and the emulated board.
+    PowerOn,
+    /// A watchdog (`wdg`).
+    Watchdog,
+    /// A software reset: after a panic, or a debugger's request (`sw`).
+    Software,
+    /// The reset pin (`pin`).
+    Pin,
+    /// Anything else (`other`).
+    Other,
+}
+
+impl ResetCause {
+    /// Every cause, in the order of the protocol document.
+    pub const ALL: [ResetCause; 5] = [
+        ResetCause::PowerOn,
+        ResetCause::Watchdog,
+        ResetCause::Software,
+        ResetCause::Pin,
+        ResetCause::Other,
+    ];
+
+    /// The value of `rst=`.
+    pub const fn as_str(self) -> &'static str {
+        match self {
+            ResetCause::PowerOn => "por",
+            ResetCause::Watchdog => "wdg",
+            ResetCause::Software => "sw",
+            ResetCause::Pin => "pin",
+            ResetCause::Other => "other",
+        }
+    }
+
+    /// The cause whose `rst=` value is `s`.
+    pub(crate) fn parse(s: &[u8]) -> Option<Self> {
+        ResetCause::ALL
+            .into_iter()
+            .find(|c| c.as_str().as_bytes() == s)
+    }
+}
+
+/// The settings of a scan: the runtime values a board scans with (the
+/// thresholds, which lines it emits, the scan's width) and the facts about
+/// its start that the header reports. The scoring itself (geometry,
+/// kernels, formats) is the [`crate::Scorer`]'s, fixed when it is built.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Settings {
+    /// Columns (beams per row) of the scan.
+    pub cols: u32,
+    /// Integer magnitude at or above which a position is a defect.
+    pub threshold: u32,
+    /// Power magnitude (`Q15`) at or above which a position is a defect
+    /// ([`crate::power::POWER_OFF`]: never).
+    pub power_threshold: u32,
+    /// Emit per-position score (`S`) lines.
+    pub scores: bool,
+    /// At most this many defect (`D`) lines per row, the strongest; the row
+    /// line carries the full count, so a truncated list is visible, and the
+    /// header the cap (`dcap`). 0 (no per-position lines; the objects
+    /// describe the defects) is the boards' default.
+    pub max_defect_lines_per_row: u16,
+    pub firmware_version: &'static str,
+    /// Why the board last started (`rst`; [`ResetCause::PowerOn`] on the host).
+    pub reset_cause: ResetCause,
+    /// Starts since power-on, this one included (`boots`; 1 on the host).
+    pub boots: u32,
+}

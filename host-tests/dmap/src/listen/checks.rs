@@ -1,0 +1,158 @@
+//! The checks a scan's lines must pass beyond their CRC: an object that
+//! fits its box and the scan, and a finished scan whose lines agree with
+//! one another and with its end line.
+
+use super::scan::{LineError, ScanResult, q8};
+use cvm_core::objects::Object;
+
+/// Cross-checks a finished scan: every row has its row line, every
+/// listed defect arrived, every position has a score when scores are on.
+pub(super) fn check_complete(s: &mut ScanResult, line_no: usize) {
+    let rows = s.n_rows() as u32;
+    // Gaps between the rows received, not every missing row: an end line
+    // may claim billions of rows.
+    let missing = gaps(s.rows.keys().copied(), rows);
+    let count: u64 = missing.iter().map(|&(a, b)| u64::from(b - a) + 1).sum();
+    if count > 0 {
+        s.add_problem(LineError {
+            line: line_no,
+            what: format!("no row line for {count} row(s): {}", ranges(&missing)),
+        });
+    }
+    let listed: u64 = s.rows.values().map(|r| r.defects as u64).sum::<u64>() - s.unlisted_defects;
+    if listed != s.defects.len() as u64 {
+        s.add_problem(LineError {
+            line: line_no,
+            what: format!(
+                "row lines list {listed} defect line(s), {} arrived",
+                s.defects.len()
+            ),
+        });
+    }
+    if let Some(e) = s.end {
+        let (claimed, arrived) = (u64::from(e.totals.objects), s.objects_arrived);
+        if claimed != arrived {
+            s.add_problem(LineError {
+                line: line_no,
+                what: format!(
+                    "end line counts {claimed} object(s), {arrived} object line(s) arrived"
+                ),
+            });
+        } else if s.objects.len() as u64 == arrived {
+            // Every defective position is in one object or counted in `unobj`.
+            let covered: u64 = s.objects.iter().map(|o| u64::from(o.area)).sum();
+            let left_out = u64::from(e.totals.unobjected);
+            if covered + left_out != u64::from(e.totals.defects) {
+                s.add_problem(LineError {
+                    line: line_no,
+                    what: format!(
+                        "objects cover {covered} position(s) and {left_out} were left out of every object, but the end line counts {} defect(s)",
+                        e.totals.defects
+                    ),
+                });
+            }
+        }
+    }
+    let misplaced = s.end.map_or(0, |e| e.totals.misplaced);
+    if misplaced > 0 {
+        s.add_problem(LineError {
+            line: line_no,
+            what: format!(
+                "{misplaced} map(s) were scored at a wrong position (a short row: beams without DRDY); \
+                 scores next to the short row are unreliable"
+            ),
+        });
+    }
+    if s.scores_enabled {
+        let dropped = s.end.map_or(0, |e| e.dropped);
+        let expected = rows as usize * s.cols;
+        let (with, without) = s.coverage();
+        if with + without < expected {
+            s.add_problem(LineError {
+                line: line_no,
+                what: format!(
+                    "{} of {expected} positions have no score ({dropped} score line(s) reported dropped by the firmware)",
+                    expected - with - without
+                ),
+            });
+        }
+    }
+}
+
+/// What is impossible about an object of a scan of `cols` columns, if
+/// anything: a box past the last column, an area of 0 or beyond its box,
+/// a peak outside its box or below the threshold, no channel, a centroid
+/// outside its box.
+pub(super) fn object_fault(o: &Object, cols: usize) -> Option<String> {
+    let (h, w) = (
+        u64::from(o.row1 - o.row0) + 1,
+        u64::from(o.col1 - o.col0) + 1,
+    );
+    let inside = |r: u32, c: u32| (o.row0..=o.row1).contains(&r) && (o.col0..=o.col1).contains(&c);
+    let box_q8 = |v: u64, a: u32, b: u32| (u64::from(a) << 8..=u64::from(b) << 8).contains(&v);
+    if o.col1 as usize >= cols {
+        Some(format!(
+            "columns {}-{} run past the scan's {cols} columns",
+            o.col0, o.col1
+        ))
+    } else if o.area == 0 || u64::from(o.area) > h * w {
+        Some(format!("area {} does not fit its {h}x{w} box", o.area))
+    } else if !inside(o.peak_row, o.peak_col) {
+        Some(format!(
+            "peak at row {} column {} outside its box",
+            o.peak_row, o.peak_col
+        ))
+    } else if o.peak < 1 << 16 {
+        Some(format!(
+            "peak strength {} below the threshold (65536)",
+            o.peak
+        ))
+    } else if o.channels == 0 {
+        Some("no channel fired".to_string())
+    } else if !box_q8(o.centroid_row_q8, o.row0, o.row1)
+        || !box_q8(o.centroid_col_q8, o.col0, o.col1)
+    {
+        Some(format!(
+            "centroid ({:.2}, {:.2}) outside its box",
+            q8(o.centroid_row_q8),
+            q8(o.centroid_col_q8)
+        ))
+    } else {
+        None
+    }
+}
+
+/// The ranges of `0..end` not in `present` (ascending).
+fn gaps(present: impl Iterator<Item = u32>, end: u32) -> Vec<(u32, u32)> {
+    let mut out = Vec::new();
+    let mut next = 0;
+    for k in present.take_while(|&k| k < end) {
+        if k > next {
+            out.push((next, k - 1));
+        }
+        next = k + 1;
+    }
+    if next < end {
+        out.push((next, end - 1));
+    }
+    out
+}
+
+/// `1-3, 7` style list, at most a dozen ranges.
+fn ranges(v: &[(u32, u32)]) -> String {
+    let mut out: Vec<String> = v
+        .iter()
+        .take(12)
+        .map(|&(a, b)| {
+            if a == b {
+                a.to_string()
+            } else {
+                format!("{a}-{b}")
+            }
+        })
+        .collect();
+    if v.len() > 12 {
+        out.push(format!("and {} more ranges", v.len() - 12));
+    }
+    out.join(", ")
+}

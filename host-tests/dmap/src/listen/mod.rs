@@ -1,0 +1,30 @@
+//! `dmap listen`: decodes the firmware's result lines (from a file, stdin or
+//! a serial port), checks every CRC, reports damaged lines by number and
+//! keeps going, and rebuilds each scan's score images, defect objects and
+//! summary.
+//!
+//! A line is decoded by `cvm_core::protocol::parse`, beside its encoder;
+//! this module holds what a stream of lines needs besides: the stream
+//! decoder (`decoder`, one handler per line type, and `checks`), what it
+//! rebuilds of a scan (`scan`), the line reader (`reader`), the two
+//! reports (`text`, `json`), and the command (`args`, `run`).
+
+mod args;
+mod checks;
+mod decoder;
+mod json;
+mod reader;
+mod run;
+mod scan;
+mod text;
+
+pub use args::ListenArgs;
+pub use decoder::{DEFAULT_MAX_SCANS, Decoder, MAX_DEFECTS, MAX_ERRORS, MAX_KEPT, MAX_SCANS};
+pub use json::{object_json, scan_json, summary_json, totals_json};
+pub use reader::{LINE_BUFFER, NextLine, decode, decode_with, next_line};
+pub use run::run;
+pub use scan::{
+    Defect, LineError, MAX_IMAGE_POSITIONS, MAX_PROBLEMS, ObjectSize, ScanResult, channel_names,
+    image_refusal, q8, strength_ratio,
+};
+pub use text::{TEXT_OBJECTS, object_text, summary_text, summary_text_with};
