@@ -1,5 +1,5 @@
 //! Spread measures against hand-computed maps, their invariances, and the
-//! integer form proposed for the device (docs/spread-study.md) against the
+//! integer forms proposed for the device (docs/spread-study.md) against the
 //! f64 definition, with its overflow bound checked on the extreme maps.
 
 mod common;
@@ -205,6 +205,73 @@ fn integer_form_fits_its_bounds_on_the_extreme_16x16_maps() {
     q8_agrees(9, 9, &[0; 81]);
 }
 
+/// The device form of [`outside_core`]: `floor(2^16 (P - core) / P)` by
+/// long division in base 2^8, every partial remainder below
+/// `P * 2^8 <= 256 * 65535 * 2^8 < 2^32`. The brightest cell is in the
+/// core, so `P - core < P` and the quotient fits 16 bits.
+fn q16_outside(j1: usize, j2: usize, map: &[u16], half: usize) -> Option<u16> {
+    let p: u32 = map.iter().map(|&a| u32::from(a)).sum();
+    if p == 0 {
+        return None;
+    }
+    let mut peak = 0;
+    for (c, &a) in map.iter().enumerate() {
+        if a > map[peak] {
+            peak = c;
+        }
+    }
+    let (p1, p2) = (peak / j2, peak % j2);
+    let mut core = 0u32;
+    for i1 in p1.saturating_sub(half)..(p1 + half + 1).min(j1) {
+        for i2 in p2.saturating_sub(half)..(p2 + half + 1).min(j2) {
+            core += u32::from(map[i1 * j2 + i2]);
+        }
+    }
+    let (mut q, mut r) = (0u32, p - core);
+    for _ in 0..2 {
+        r = r.checked_shl(8).filter(|_| r < 1 << 24).unwrap();
+        q = (q << 8) | (r / p);
+        r %= p;
+    }
+    Some(u16::try_from(q).unwrap())
+}
+
+fn q16_agrees(j1: usize, j2: usize, map: &[u16], half: usize) {
+    let g = geometry((j1, j2));
+    let f: Vec<f64> = map.iter().map(|&a| f64::from(a)).collect();
+    match (q16_outside(j1, j2, map, half), outside_core(g, &f, half)) {
+        (None, None) => {}
+        (Some(q), Some(x)) => {
+            let scaled = 65536.0 * x;
+            assert!(
+                f64::from(q) <= scaled + 1e-6 && scaled < f64::from(q) + 1.0 + 1e-6,
+                "{j1}x{j2}: {q} vs {scaled}"
+            );
+        }
+        other => panic!("dark disagreement {other:?}"),
+    }
+}
+
+#[test]
+fn outside_core_integer_form_by_hand_and_at_full_scale() {
+    // Full scale everywhere on 16x16: the first cell is the brightest, its
+    // 5x5 core clips to 3x3, 247 / 256 outside: 63232 in Q16.
+    let full = vec![65535u16; 256];
+    assert_eq!(q16_outside(16, 16, &full, 2), Some(63232));
+    // A peak inside with everything else at full scale just below it:
+    // the largest share outside a 5x5 core, 231 / 256 of nearly equal cells.
+    let mut inner = vec![65534u16; 256];
+    inner[8 * 16 + 8] = 65535;
+    q16_agrees(16, 16, &inner, 2);
+    // One cell lit: nothing outside. Two cells 1:3, the smaller outside.
+    let mut two = vec![0u16; 81];
+    two[0] = 100;
+    assert_eq!(q16_outside(9, 9, &two, 2), Some(0));
+    two[80] = 300;
+    assert_eq!(q16_outside(9, 9, &two, 2), Some(16384));
+    q16_agrees(9, 9, &[0; 81], 1);
+}
+
 fn u16_map(cells: usize) -> impl Strategy<Value = Vec<u16>> {
     prop_oneof![
         prop::collection::vec(0u16..=65535, cells),
@@ -221,6 +288,9 @@ proptest! {
         (j, map) in prop::sample::select(GEOMETRIES).prop_flat_map(|j| (Just(j), u16_map(j.0 * j.1)))
     ) {
         q8_agrees(j.0, j.1, &map);
+        for half in 0..3 {
+            q16_agrees(j.0, j.1, &map, half);
+        }
     }
 
     #[test]
