@@ -152,3 +152,69 @@ fn a_disc_changes_only_the_positions_it_touches_and_the_truth_marks_them() {
     cfg.part.scatterers[0].share = 0.0;
     assert_eq!(simulate(&cfg, &|| {}).unwrap().data, clean.data);
 }
+
+#[test]
+fn halo_is_centred_where_the_deflected_spot_lands() {
+    // Prototype lens, beam 3 mm off its axis, so the spot lands off the
+    // array's centre. The rays leaving the clean part give each ray's
+    // focal-plane point (u, v) = f (dx, dy) / dz and weight w; a disc
+    // covering the whole beam sends s = 0.25 of every ray into a halo of
+    // 0.04 rad, 2 mm at f = 50 mm, combined with the 0.5 mm spot. So the
+    // map is the clean map times 1 - s plus, for every ray,
+    // w s gy(a) gx(b): Gaussian cell integrals around (u, -v).
+    let mut cfg = preset::prototype(true);
+    cfg.raster.rays = 1024;
+    cfg.laser = Laser::NONE;
+    let (x, y) = (3.0, 0.5);
+    let body = cfg.part.body();
+    let mut tracer = Tracer::new(&body, &cfg.receiver, cfg.trace);
+    tracer.exits = Some(Vec::new());
+    let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(4);
+    let mut unused = vec![0.0; 81];
+    beam_map(
+        &cfg,
+        &mut tracer,
+        x,
+        y,
+        &mut rng,
+        &mut Vec::new(),
+        &mut unused,
+    );
+    let exits = tracer.exits.take().unwrap();
+    let f = cfg.receiver.focal;
+    let landing: Vec<(f64, f64, f64)> = exits
+        .iter()
+        .map(|e| (f * e.1.x / e.1.z, f * e.1.y / e.1.z, e.2))
+        .collect();
+    let w: f64 = landing.iter().map(|l| l.2).sum();
+    let u0 = landing.iter().map(|l| l.2 * l.0).sum::<f64>() / w;
+    assert!(u0.abs() > 1.0, "the spot should land off centre, u0 = {u0}");
+
+    let (clean, _) = noise_free_map(&cfg, x, y);
+    cfg.part.scatterers = vec![Scatterer {
+        x,
+        y,
+        radius: 2.0,
+        share: 0.25,
+        width: 0.04,
+    }];
+    let (hit, _) = noise_free_map(&cfg, x, y);
+    let sigma = (f * 0.04f64).hypot(cfg.receiver.spot);
+    let phi = |t: f64| 0.5 * (1.0 + cvm_sim::trace::erf(t / sigma / 2f64.sqrt()));
+    let cell = |k: usize, centre: f64| {
+        let lo = (k as f64 - 4.5) * cfg.receiver.pixel;
+        phi(lo + cfg.receiver.pixel - centre) - phi(lo - centre)
+    };
+    let mut worst = 0.0f64;
+    for a in 0..9 {
+        for b in 0..9 {
+            let halo = hit[a * 9 + b] - 0.75 * clean[a * 9 + b];
+            let want: f64 = landing
+                .iter()
+                .map(|&(u, v, w)| w * 0.25 * cell(a, -v) * cell(b, u))
+                .sum();
+            worst = worst.max((halo - want).abs());
+        }
+    }
+    assert!(worst < 1e-12, "largest difference {worst}");
+}
