@@ -18,6 +18,8 @@ use cvm_sim::{Config, Scan, Scatterer, preset};
 const RASTER: usize = 39;
 const FREE_PARTS: u64 = 20;
 const DEFECT_PARTS: u64 = 5;
+/// Reference parts for today's calibration rule, apart from the others.
+const CALIBRATION: [u64; 2] = [500, 501];
 const SHARES: [f64; 4] = [0.05, 0.10, 0.20, 0.30];
 const SIZES: [f64; 3] = [1.0, 2.0, 3.0];
 /// Halo rms angle: the forward lobe of inclusions of about ten wavelengths.
@@ -197,6 +199,24 @@ fn study(geo: Geo) {
     let t = std::time::Instant::now();
     // Defect-free parts: the distribution of the measure and of every rule.
     let mut spread_all = Vec::new();
+    // Thresholds as `dmap calibrate` sets them today, on two reference
+    // parts of their own: the maximum plus three robust standard
+    // deviations (1.4826 MAD) of the reference scores.
+    let mut thr = vec![0.0f64; RULES.len()];
+    let mut reference = vec![Vec::new(); RULES.len()];
+    for k in CALIBRATION {
+        let scan = cvm_sim::simulate(&geo.part(k), &|| {}).unwrap();
+        for (i, v) in rules(&score(&scan)).into_iter().enumerate() {
+            reference[i].extend(v);
+        }
+    }
+    for (i, v) in reference.iter_mut().enumerate() {
+        let med = quantile(v, 0.5);
+        let mut dev: Vec<f64> = v.iter().map(|x| (x - med).abs()).collect();
+        thr[i] = quantile(v, 1.0) + 3.0 * 1.4826 * quantile(&mut dev, 0.5);
+    }
+    let mut false_positions = vec![0usize; RULES.len()];
+    let mut false_parts = vec![0usize; RULES.len()];
     let mut free_max = vec![0.0f64; RULES.len()];
     let mut free_q999 = vec![Vec::new(); RULES.len()];
     let mut part_max = vec![Vec::new(); RULES.len()];
@@ -207,6 +227,9 @@ fn study(geo: Geo) {
         for (i, v) in rules(&s).into_iter().enumerate() {
             let m = v.iter().cloned().fold(0.0, f64::max);
             free_max[i] = free_max[i].max(m);
+            let over = v.iter().filter(|&&x| x >= thr[i]).count();
+            false_positions[i] += over;
+            false_parts[i] += usize::from(over > 0);
             part_max[i].push(m);
             free_q999[i].extend(v);
         }
@@ -246,6 +269,7 @@ fn study(geo: Geo) {
     // one pitch of its truth region) over the defect-free maximum.
     // sep[rule][size][share] = separations of the instances.
     let mut sep = vec![vec![vec![Vec::new(); SHARES.len()]; SIZES.len()]; RULES.len()];
+    let mut found = vec![vec![vec![0usize; SHARES.len()]; SIZES.len()]; RULES.len()];
     let mut beam_share = vec![0.0; SIZES.len()];
     let mut spread_peak = vec![vec![Vec::new(); SHARES.len()]; SIZES.len()];
     for (si, &size) in SIZES.iter().enumerate() {
@@ -270,6 +294,7 @@ fn study(geo: Geo) {
                 for (ri, v) in rv.iter().enumerate() {
                     let peak = region.iter().map(|&p| v[p]).fold(0.0, f64::max);
                     sep[ri][si][ai].push(peak / free_max[ri]);
+                    found[ri][si][ai] += usize::from(peak >= thr[ri]);
                 }
                 let sp = region.iter().map(|&p| s.spread[p]).fold(0.0, f64::max);
                 spread_peak[si][ai].push(sp);
@@ -304,6 +329,30 @@ fn study(geo: Geo) {
                 .collect();
             println!("| {name} | {size} | {} |", cells.join(" | "));
         }
+    }
+    println!(
+        "\nthreshold of today's rule (max + 3 robust sd on two reference parts): false positions on the {FREE_PARTS} unseen parts (parts with any), halos found of {DEFECT_PARTS} per share, sizes 1 / 2 / 3\n"
+    );
+    println!(
+        "| rule | threshold / unseen max | false positions (parts) | 5 % | 10 % | 20 % | 30 % |"
+    );
+    println!("|---|---|---|---|---|---|---|");
+    for (ri, name) in RULES.iter().enumerate() {
+        let cells: Vec<String> = (0..SHARES.len())
+            .map(|ai| {
+                let f: Vec<String> = (0..SIZES.len())
+                    .map(|si| found[ri][si][ai].to_string())
+                    .collect();
+                f.join(" / ")
+            })
+            .collect();
+        println!(
+            "| {name} | {:.2} | {} ({}) | {} |",
+            thr[ri] / free_max[ri],
+            false_positions[ri],
+            false_parts[ri],
+            cells.join(" | ")
+        );
     }
     eprintln!("{}: {:.0} s", geo.name(), t.elapsed().as_secs_f64());
 }
