@@ -1,4 +1,5 @@
-//! Exact f64 reference implementations of the deflection-map distances.
+//! Exact f64 reference implementations of the deflection-map distances and
+//! of the spread measures of a single map.
 //!
 //! Everything here is plain `f64`, written from the equations of the method's
 //! paper (Eq. 1, 5, 6, 8, 9, 10) and the conventions fixed in the project's
@@ -22,6 +23,7 @@ mod mean_dir;
 mod min_cost_flow;
 mod normalise;
 mod sat;
+mod spread;
 mod transport;
 
 pub use brute::{cvm_brute, lcd_brute};
@@ -35,4 +37,5 @@ pub use mean_dir::{MeanDir, mean_dir, mean_direction};
 pub use min_cost_flow::min_cost_transport;
 pub use normalise::{Normalised, normalise};
 pub use sat::{SummedAreaTable, cvm_sat};
+pub use spread::{local_deviation, neighbour_gradient, outside_core, spread_moment};
 pub use transport::{transport_simplex, transport_simplex_checked};

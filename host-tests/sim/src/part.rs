@@ -6,6 +6,7 @@
 //! latest entry and left through the one with the earliest exit; a ray that
 //! has left a convex body never meets it again.
 
+use crate::scatter::Scatterer;
 use crate::vec3::Vec3;
 
 /// One convex solid of the intersection.
@@ -173,13 +174,15 @@ impl SurfaceDefect {
     }
 }
 
-/// The part: its shape, refractive index, inclusions and surface defects.
+/// The part: its shape, refractive index, inclusions, surface defects and
+/// scattering regions.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Part {
     pub shape: Shape,
     pub index: f64,
     pub bubbles: Vec<Bubble>,
     pub defects: Vec<SurfaceDefect>,
+    pub scatterers: Vec<Scatterer>,
 }
 
 /// Where a line meets the glass boundary.
@@ -197,6 +200,7 @@ pub struct Body {
     pub index: f64,
     pub bubbles: Vec<Bubble>,
     pub defects: Vec<SurfaceDefect>,
+    pub scatterers: Vec<Scatterer>,
     /// Smallest z of the glass, for placing the beam source.
     pub z_min: f64,
     /// Largest z of the glass, for placing the receiver.
@@ -303,6 +307,9 @@ impl Part {
             if d.face == Face::Edge {
                 return Err("surface defects sit on the front or back face".into());
             }
+        }
+        for s in &self.scatterers {
+            s.validate()?;
         }
         Ok(())
     }
@@ -453,6 +460,7 @@ impl Part {
             index: self.index,
             bubbles: self.bubbles.clone(),
             defects: self.defects.clone(),
+            scatterers: self.scatterers.clone(),
             z_min: 0.0,
             z_max,
         }
@@ -532,6 +540,7 @@ mod tests {
             index: 1.5,
             bubbles: vec![],
             defects: vec![],
+            scatterers: vec![],
         }
     }
 

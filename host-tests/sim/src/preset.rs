@@ -53,6 +53,7 @@ pub fn paper_sim(defect_free: bool) -> Config {
             index: 1.5,
             bubbles,
             defects: vec![],
+            scatterers: vec![],
         },
         receiver: Receiver {
             focal: 50.0,
@@ -104,6 +105,7 @@ pub fn prototype(defect_free: bool) -> Config {
             index: 1.5,
             bubbles: vec![],
             defects,
+            scatterers: vec![],
         },
         receiver: Receiver {
             focal: 50.0,

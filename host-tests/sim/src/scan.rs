@@ -214,12 +214,13 @@ pub fn simulate(cfg: &Config, progress: &(dyn Fn() + Sync)) -> Result<Scan, Stri
 /// Ground truth: a position is defective when a defect lies within
 /// `footprint * waist` of the beam axis, measured where the undisturbed
 /// chief ray crosses the defect (its depth for a bubble, its face for a
-/// surface defect).
+/// surface defect, the front face for a scattering disc).
 pub fn truth_mask(cfg: &Config) -> Vec<bool> {
     let body = cfg.part.body();
     let clean = Part {
         defects: vec![],
         bubbles: vec![],
+        scatterers: vec![],
         ..cfg.part.clone()
     }
     .body();
@@ -252,7 +253,12 @@ pub fn truth_mask(cfg: &Config) -> Vec<bool> {
                 let q = if s.face == Face::Front { p1 } else { p2 };
                 s.distance(q.x, q.y) < reach
             });
-            mask[row * cfg.raster.cols + col] = hit_bubble || hit_surface;
+            // A scattering disc sits on the front face, like a front surface defect.
+            let hit_scatter = body
+                .scatterers
+                .iter()
+                .any(|s| (p1.x - s.x).hypot(p1.y - s.y) < s.radius + reach);
+            mask[row * cfg.raster.cols + col] = hit_bubble || hit_surface || hit_scatter;
         }
     }
     mask

@@ -22,6 +22,7 @@ fn part(shape: Shape, bubbles: Vec<Bubble>) -> Part {
         index: 1.5,
         bubbles,
         defects: vec![],
+        scatterers: vec![],
     }
 }
 
