@@ -17,13 +17,13 @@
 //!
 //! # Why nothing overflows
 //!
-//! [`Scorer::new`](crate::scorer::Scorer::new) takes the finest `f` and, for it, the finest `p1` for
-//! which every bound below holds (`p2` is the finest that fits `i32`), and
-//! refuses the configuration ([`ConfigError::Range`]) if none does. Let
-//! `ε = 8 / 2 = 4` bound the rounding error of a sum of at most 8 rounded
-//! terms, `r2max`, `r1max` the largest coefficient magnitudes and `‖R'q‖_F`
-//! the Frobenius norms of the block-diagonal integer factors (at least their
-//! spectral norms).
+//! [`Scorer::new`](crate::scorer::Scorer::new) takes the finest `f` and,
+//! for it, the finest `p1` for which every bound below holds (`p2` is the
+//! finest that fits `i32`), and refuses the configuration
+//! ([`ConfigError::Range`]) if none does. Let `ε = 8 / 2 = 4` bound the
+//! rounding error of a sum of at most 8 rounded terms, `r2max`, `r1max` the
+//! largest coefficient magnitudes and `‖R'q‖_F` the Frobenius norms of the
+//! block-diagonal integer factors (at least their spectral norms).
 //!
 //! * Conversion: normalised `|v| <= S`, so `|v << k| <= S' < 2^31` and
 //!   `m <= 2^(2+f) <= 2^30`; raw `|v << (f+2)| < 2^17 2^13 = 2^30`. A product
@@ -134,8 +134,9 @@ pub const fn paper_formats(
     Err(ConfigError::Range)
 }
 
-/// The fixed-point formats of a configuration ([`Scorer::formats`](crate::scorer::Scorer::formats); the
-/// table in the module docs).
+/// The fixed-point formats of a configuration
+/// ([`Scorer::formats`](crate::scorer::Scorer::formats); the table in the
+/// module docs).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Formats {
     /// `f`: the input `y` is in `Q(f)`.

@@ -17,11 +17,12 @@
 //!
 //! The factors depend on the geometry and `K` only. They are computed in
 //! f64 when the configuration is attached to a table
-//! ([`Scorer::with_factors`](crate::scorer::Scorer::with_factors), at start-up: up to 8 704 words, too
-//! many for the `Scorer` that every firmware builds as a constant), and
-//! stored two rows at a time in groups of three columns, so that the
-//! per-map loop reads three inputs and the six coefficients of both rows
-//! that use them with two `LDM`s (`padded_words`).
+//! ([`Scorer::with_factors`](crate::scorer::Scorer::with_factors), at
+//! start-up: up to 8 704 words, too many for the `Scorer` that every
+//! firmware builds as a constant), and stored two rows at a time in groups
+//! of three columns, so that the per-map loop reads three inputs and the
+//! six coefficients of both rows that use them with two `LDM`s
+//! (`padded_words`).
 //!
 //! # Formats and why nothing overflows
 //!

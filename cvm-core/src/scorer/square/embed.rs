@@ -6,9 +6,9 @@ use crate::scorer::square::kernel::{pairs_of_rows, smmulr};
 
 /// Embeds the folded blocks of `z` in place: block by block, `E = R z`,
 /// word `i` of a block overwriting its input `z_i` once no later row needs
-/// it. `table` holds [`Blocks::table_words`] words, `z` at least
-/// `N + 3` ([`FOLD_WORDS`]). Returns false (and leaves `z` partly embedded) if
-/// either is too short.
+/// it. `table` holds [`Blocks::table_words`] words, `z` at least `N + 3`
+/// ([`FOLD_WORDS`](crate::scorer::square::FOLD_WORDS)). Returns false (and
+/// leaves `z` partly embedded) if either is too short.
 pub fn embed(g: &Blocks, table: &[i32], z: &mut [i32]) -> bool {
     let n = g.j1 * g.j2;
     if z.len() < n + 3 {

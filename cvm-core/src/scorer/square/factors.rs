@@ -1,7 +1,8 @@
 //! The square kernels' formats and factor table: the folded quadratic
 //! form of each block, exact in integers, the finest formats for which
-//! the bounds of the module docs hold, and the f64 Cholesky factor of each
-//! block, quantised and laid out as the per-map loop reads it.
+//! the bounds of the `square` module docs hold, and the f64 Cholesky
+//! factor of each block, quantised and laid out as the per-map loop reads
+//! it.
 
 use crate::config::MAX_J;
 use crate::scorer::square::blocks::{Blocks, MAX_BLOCK, MAX_H, padded_words};
@@ -104,8 +105,8 @@ const fn diagonals(g: &Blocks, kmax: usize) -> (f64, f64) {
 }
 
 /// The finest input format `f` and factor format `p` for which every bound
-/// of the module docs holds (`X` below 2^31, every partial sum below 2^31,
-/// `‖E‖ < 2^30`); `None` if none does.
+/// of the `square` module docs holds (`X` below 2^31, every partial sum
+/// below 2^31, `‖E‖ < 2^30`); `None` if none does.
 pub const fn formats(g: &Blocks, kmax: usize, normalise: bool) -> Option<(i32, u32)> {
     let n = (g.j1 * g.j2) as f64;
     let (gmax, mmax) = diagonals(g, kmax);
