@@ -122,7 +122,7 @@ rm -f "$stage/host-tests/dmap/tests/emulate.rs" "$stage/host-tests/dmap/tests/tw
     "$stage/host-tests/dmap/tests/twin_reset.rs"
 
 # Functions of each pass (cargo-mutants matches these against the
-# mutant's name, e.g. "cvm-core/src/scorer.rs:412:5: replace Scorer::scale
+# mutant's name, e.g. "cvm-core/src/scorer/normalise.rs:72:5: replace Scorer::scale
 # -> (u32, i32) with (0, 0)" or "replace + with - in rows").
 fn_re() { printf '(replace|in) (%s)( |$)' "$1"; }
 embed_fns='sum_and_saturation|words_sum|copy_words|mul_hi_round|tri|rows|rows_model|cols|cols_model|above2|sum_copy_blocks|embed'
