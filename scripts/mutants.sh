@@ -20,12 +20,12 @@
 #   stream    cvm-core/src/stream.rs (gradient, border rule, flags,
 #             decisions, row summaries), against core-tests and
 #             fw-app-tests
-#   embed     the per-map passes of cvm-core/src/scorer/embed.rs (sum and
-#             saturation, conversion, row and column passes)
+#   embed     the paper kernels' per-map passes in cvm-core/src/scorer/
+#             (sum and saturation, conversion, row and column passes)
 #   scorer    normalisation, flags, score conversion, distances and the
-#             gradient magnitude in cvm-core/src/scorer.rs
+#             gradient magnitude in cvm-core/src/scorer/
 #   square    the square kernels' factors and per-map embedding,
-#             cvm-core/src/scorer/square.rs (its portable code: the
+#             cvm-core/src/scorer/square/ (its portable code: the
 #             Cortex-M assembly is checked by the emulated board's tests)
 #   protocol  the line encoder and CRC in cvm-core/src/protocol.rs
 #   pipeline  cvm-core/src/pipeline.rs
@@ -33,7 +33,7 @@
 #             cvm-core/src/power.rs and objects.rs
 #   tables    what is built once per configuration: factor tables,
 #             formats, score units (tables.rs, config.rs, flags.rs and the
-#             rest of scorer.rs and embed.rs), against core-tests and
+#             rest of scorer/ but square/), against core-tests and
 #             fw-app-tests
 #   parser    the line parser in cvm-core/src/protocol.rs (the rest of
 #             the file), against those and dmap's tests
@@ -122,13 +122,21 @@ rm -f "$stage/host-tests/dmap/tests/emulate.rs" "$stage/host-tests/dmap/tests/tw
     "$stage/host-tests/dmap/tests/twin_reset.rs"
 
 # Functions of each pass (cargo-mutants matches these against the
-# mutant's name, e.g. "cvm-core/src/scorer.rs:412:5: replace Scorer::scale
+# mutant's name, e.g. "cvm-core/src/scorer/normalise.rs:72:5: replace Scorer::scale
 # -> (u32, i32) with (0, 0)" or "replace + with - in rows").
 fn_re() { printf '(replace|in) (%s)( |$)' "$1"; }
 embed_fns='sum_and_saturation|words_sum|copy_words|mul_hi_round|tri|rows|rows_model|cols|cols_model|above2|sum_copy_blocks|embed'
-scorer_fns='Scorer::(normalise|normalise_power|converter|prepare|prepare_with|prepare_replacing|prepare_into|prepare_map|prepare_map_near|sum_pass|scale|distance|square_distance|to_score)|recip_sample|shr_sample|fill|squared_difference|squared_difference_blocks|reciprocal|magnitude'
+scorer_fns='Scorer::(normalise|normalise_power|converter|prepare|prepare_with|prepare_into|prepare_map|sum_pass|scale|distance|square_distance|to_score)|recip_sample|shr_sample|fill|squared_difference|squared_difference_blocks|reciprocal|magnitude'
 protocol_fns='crc16|LineBuf::[a-z0-9_]+|encode_score|encode_header|encode_row|encode_end|end_fields|HeaderInfo<.*>::new'
 core_tests=(--test-package cvm-core-tests --test-package cvm-fw-app-tests)
+# The scorer's files but the square kernels' (the passes above split them
+# by function); the Cortex-M variants are not compiled on the host.
+paper_files=()
+for f in scorer.rs scorer/{setup,formats,error,normalise,prepare,score,magnitude,sum,words,embed}.rs \
+    scorer/{sum,words}/portable.rs scorer/embed/{factor,layout,passes}.rs scorer/embed/passes/portable.rs; do
+    paper_files+=(--file "cvm-core/src/$f")
+done
+square_files=(--file cvm-core/src/scorer/square.rs --file 'cvm-core/src/scorer/square/**/*.rs')
 
 status=0
 baselined=
@@ -139,19 +147,19 @@ for pass in "${passes[@]}"; do
     acquire) args=(--timeout "${MUTANTS_TIMEOUT:-30}" --package cvm-fw-app --test-package cvm-fw-app-tests
         --file fw-app/src/acquire.rs --file fw-app/src/driver.rs) ;;
     stream) args=(--package cvm-core "${core_tests[@]}" --file cvm-core/src/stream.rs) ;;
-    embed) args=(--package cvm-core "${core_tests[@]}" --file cvm-core/src/scorer/embed.rs
+    embed) args=(--package cvm-core "${core_tests[@]}" "${paper_files[@]}"
         --re "$(fn_re "$embed_fns")") ;;
-    scorer) args=(--package cvm-core "${core_tests[@]}" --file cvm-core/src/scorer.rs
+    scorer) args=(--package cvm-core "${core_tests[@]}" "${paper_files[@]}"
         --re "$(fn_re "$scorer_fns")") ;;
-    square) args=(--package cvm-core "${core_tests[@]}" --file cvm-core/src/scorer/square.rs) ;;
+    square) args=(--package cvm-core "${core_tests[@]}" "${square_files[@]}") ;;
     protocol) args=(--package cvm-core "${core_tests[@]}" --file cvm-core/src/protocol.rs
         --re "$(fn_re "$protocol_fns")") ;;
     pipeline) args=(--package cvm-core "${core_tests[@]}" --file cvm-core/src/pipeline.rs) ;;
     decision) args=(--package cvm-core "${core_tests[@]}" --file cvm-core/src/power.rs
         --file cvm-core/src/objects.rs) ;;
     tables) args=(--package cvm-core "${core_tests[@]}" --file cvm-core/src/tables.rs
-        --file cvm-core/src/config.rs --file cvm-core/src/flags.rs --file cvm-core/src/scorer.rs
-        --file cvm-core/src/scorer/embed.rs --exclude-re "$(fn_re "$embed_fns|$scorer_fns")") ;;
+        --file cvm-core/src/config.rs --file cvm-core/src/flags.rs "${paper_files[@]}"
+        --exclude-re "$(fn_re "$embed_fns|$scorer_fns")") ;;
     parser) args=(--package cvm-core "${core_tests[@]}" --test-package dmap
         --file cvm-core/src/protocol.rs --exclude-re "$(fn_re "$protocol_fns")") ;;
     emufile) args=(--package cvm-fw-app --test-package cvm-fw-app-tests --test-package dmap
@@ -161,8 +169,8 @@ for pass in "${passes[@]}"; do
         --exclude cvm-core/src/pipeline.rs --exclude cvm-core/src/power.rs
         --exclude cvm-core/src/objects.rs --exclude cvm-core/src/tables.rs
         --exclude cvm-core/src/config.rs --exclude cvm-core/src/flags.rs
-        --exclude cvm-core/src/scorer.rs --exclude cvm-core/src/scorer/embed.rs
-        --exclude cvm-core/src/scorer/square.rs --exclude cvm-core/src/protocol.rs) ;;
+        --exclude cvm-core/src/scorer.rs --exclude 'cvm-core/src/scorer/**/*.rs'
+        --exclude cvm-core/src/protocol.rs) ;;
     *)
         echo "unknown pass '$pass'" >&2
         exit 2

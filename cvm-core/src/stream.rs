@@ -9,7 +9,7 @@
 //! `(r-1, c)`: the new map is embedded straight into that slot, and the
 //! vertical component of `(r, c)`, the distance between the two, is summed
 //! by the embedding's last pass word by word before it overwrites each word
-//! ([`Scorer::prepare_replacing`]). The horizontal component of
+//! ([`Scorer::prepare_map`]). The horizontal component of
 //! `(r+1, c-1)` is computed next from slots `c-2` and `c`. So the window is
 //! two rows of state and no map in flight, and row `r` is final (and
 //! emitted) when row `r+1` is complete.
@@ -494,7 +494,7 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
         let prepared = match (frame, self.bufs[b].get_mut(start..start + self.words)) {
             (Some(f), Some(slot)) => {
                 self.scorer
-                    .prepare_map_near(f, slot, near, &mut self.scratch, fuse)
+                    .prepare_map(f, slot, near, &mut self.scratch, fuse)
             }
             _ => Err(FrameError::Length),
         };

@@ -278,9 +278,10 @@ fn one_scratch_serves_every_scorer_in_any_order() {
         let mut state = vec![i32::MIN; w];
         scorer.prepare_with(&a, &mut state, &mut shared).unwrap();
         assert_eq!(state, fresh_a, "{j1}x{j2} {args:?}");
-        let (_, score) = scorer
-            .prepare_replacing(&b, &mut state, &mut shared)
-            .unwrap();
+        let score = scorer
+            .prepare_map(&b, &mut state, &mut [], &mut shared, true)
+            .unwrap()
+            .score;
         assert_eq!(state, fresh_b, "{j1}x{j2} {args:?}");
         assert_eq!(
             score,

@@ -80,9 +80,10 @@ fn flags_match_the_frame_for_every_entry_point() {
                     assert_eq!(scorer.prepare(&frame, &mut state), Ok(want), "{what}");
                     let mut x = vec![0i32; cells];
                     assert_eq!(scorer.normalise(&frame, &mut x), Ok(want), "{what}");
-                    let (fl, _) = scorer
-                        .prepare_replacing(&frame, &mut held, &mut scratch)
-                        .unwrap();
+                    let fl = scorer
+                        .prepare_map(&frame, &mut held, &mut [], &mut scratch, true)
+                        .unwrap()
+                        .flags;
                     assert_eq!(fl, want, "replacing: {what}");
                     for (bit, n) in [flags::DARK, flags::SATURATED].iter().zip(&mut checked) {
                         *n += usize::from(want & bit != 0);

@@ -82,9 +82,11 @@ fn aligned_and_unaligned_frames_embed_the_same() {
                 let mut scratch = Scratch::new();
                 let mut a = vec![0i32; scorer.state_words()];
                 let mut b = vec![i32::MIN; scorer.state_words()];
-                let pa = scorer.prepare_map(on, &mut a, &mut scratch, false).unwrap();
+                let pa = scorer
+                    .prepare_map(on, &mut a, &mut [], &mut scratch, false)
+                    .unwrap();
                 let pb = scorer
-                    .prepare_map(off, &mut b, &mut scratch, false)
+                    .prepare_map(off, &mut b, &mut [], &mut scratch, false)
                     .unwrap();
                 let what = format!("{j1}x{j2} case {case}");
                 assert_eq!(a, b, "{what}");
@@ -95,7 +97,7 @@ fn aligned_and_unaligned_frames_embed_the_same() {
                 // And the same as a frame in its own allocation.
                 let mut c = vec![0i32; scorer.state_words()];
                 scorer
-                    .prepare_map(&frame, &mut c, &mut scratch, false)
+                    .prepare_map(&frame, &mut c, &mut [], &mut scratch, false)
                     .unwrap();
                 assert_eq!(a, c, "{what}");
                 lengths[cells % 2] += 1;

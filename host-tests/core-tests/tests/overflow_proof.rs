@@ -1,5 +1,5 @@
 //! The paper kernels' fixed-point formats follow from the overflow proof
-//! in `cvm-core/src/scorer.rs` ("Why nothing overflows"), restated here
+//! in `cvm-core/src/scorer/formats.rs` ("Why nothing overflows"), restated here
 //! from its text and evaluated on factors computed independently of the
 //! core: the axis kernels by enumerating boxes (the reference crate's box
 //! rule), folded by explicit change-of-basis matrices, factored by the
