@@ -24,7 +24,8 @@
 use core::cell::RefCell;
 
 use defmt::warn;
-use embassy_stm32::gpio::Output;
+use embassy_stm32::Peri;
+use embassy_stm32::gpio::{Level, Output, Speed};
 use embassy_stm32::interrupt;
 use embassy_stm32::interrupt::InterruptExt;
 use embassy_stm32::pac;
@@ -32,11 +33,15 @@ use embassy_stm32::pac::dma::vals::{Dir, Dmdis, Pl, Size};
 use embassy_stm32::pac::spi::vals::{
     Comm, Cpha, Cpol, Fthlv, Lsbfirst, Master, Mbr, Sp, Ssiop, Ssom, Udrcfg, Udrdet,
 };
+use embassy_stm32::peripherals::{PA5, PA6, PD14, SPI1};
+use embassy_stm32::spi;
+use embassy_stm32::time::Hertz;
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 
 use super::read_deadline::{self, ReadDeadline};
-use super::{ACQ, BEAMS, CELLS, FRAMES};
+use super::shared::{ACQ, BEAMS, CELLS, FRAMES};
+use crate::config::h743::{READ_TIMEOUT_US, SPI_DIV, SPI_HZ};
 
 /// DMA1 stream 1 (and DMAMUX1 channel 1), in LISR/LIFCR.
 const STREAM: usize = 1;
@@ -65,9 +70,29 @@ enum ReadEnd {
 }
 
 /// The reader, shared by the three interrupts that start and end reads;
-/// `main` puts it here before DRDY is enabled.
-pub static READER: Mutex<CriticalSectionRawMutex, RefCell<Option<FrameReader>>> =
+/// [`install`] puts it here before DRDY is enabled.
+static READER: Mutex<CriticalSectionRawMutex, RefCell<Option<FrameReader>>> =
     Mutex::new(RefCell::new(None));
+
+/// Sets up SPI1, DMA1 stream 1 and TIM13 for reads from the detector
+/// (SCK = `SPI_HZ`, CS idle high) and puts the reader where the
+/// interrupts find it.
+pub fn install(
+    spi: Peri<'static, SPI1>,
+    sck: Peri<'static, PA5>,
+    miso: Peri<'static, PA6>,
+    cs: Peri<'static, PD14>,
+) {
+    // embassy sets up the pins, the bus and the kernel clocks (the driver
+    // is forgotten: its drop would turn SPI1 off); `configure` then writes
+    // every register field the reads depend on.
+    let mut cfg = spi::Config::default();
+    cfg.frequency = Hertz(SPI_HZ);
+    core::mem::forget(spi::Spi::new_blocking_rxonly(spi, sck, miso, cfg));
+    let cs = Output::new(cs, Level::High, Speed::VeryHigh);
+    let reader = FrameReader::new(SPI_DIV, READ_TIMEOUT_US, cs);
+    READER.lock(|r| r.replace(Some(reader)));
+}
 
 /// The read's deadline (TIM13). Its vector can be entered with no expiry
 /// behind it (a pend that raced `ReadDeadline::stop`), so the timer's own
@@ -222,7 +247,7 @@ fn configure(div: Mbr) {
 
 /// SPI1 configured once; then one [`FrameReader::start`] and one
 /// [`FrameReader::end`] per frame.
-pub struct FrameReader {
+struct FrameReader {
     div: Mbr,
     counts: ReadCounts,
     deadline: ReadDeadline,
@@ -246,7 +271,7 @@ impl FrameReader {
     /// kernel clock / `div`; a read that takes more than `timeout_us`
     /// microseconds is a [`ReadError::Timeout`]; `cs` is the detector's
     /// chip select (high: idle).
-    pub fn new(div: Mbr, timeout_us: u32, cs: Output<'static>) -> Self {
+    fn new(div: Mbr, timeout_us: u32, cs: Output<'static>) -> Self {
         pac::RCC.ahb1enr().modify(|w| w.set_dma1en(true));
         configure(div);
         pac::DMAMUX1
