@@ -151,10 +151,9 @@ pub mod h743 {
     ///
     /// Sized for the second with beams one frame's bus time apart, but at
     /// least [`MIN_BEAM_CYCLES`] (a beam costs the scoring task more than
-    /// that), at most what the beam log can track. With two buffers, the
-    /// release build lost the second beam of every row from the third on
-    /// at beam periods up to 250 us, with the SPI able to deliver one
-    /// every 146 us.
+    /// that), at most what the beam log can track. (Two buffers lose beams
+    /// well below the SPI's rate: docs/firmware.md, "SPI1 configuration and
+    /// measured costs".)
     pub const FRAME_BUFFERS: usize = {
         let cells = GEOMETRY.cells() as u64;
         let frame_cycles = (cells * 16 * SYSCLK_HZ as u64).div_ceil(SPI_HZ as u64);
@@ -171,16 +170,17 @@ pub mod h743 {
             super::BEAM_LOG - 2
         }
     };
-    /// A row's magnitudes, decisions and lines, cycles per column with
-    /// margin: on the chip model 490 instructions with a few defects per
-    /// row, 670 with every position a defect (16 defect lines, one
-    /// object), about 780 at a scan's end, where the score lines are
-    /// promoted to keep lines. Mostly DTCM and the stack: few stalls.
+    /// A row's magnitudes, decisions and lines, cycles per column: the
+    /// chip model's count at a scan's end (where the score lines are
+    /// promoted to keep lines, the dearest case) with a margin; mostly
+    /// DTCM and the stack, so few stalls (figures: docs/firmware.md, "SPI1
+    /// configuration and measured costs").
     pub const ROW_END_CYCLES_PER_COL: u64 = 1_000;
     /// The last row's vertical distances at the end of a scan, cycles per
-    /// column and cell: about 3 instructions (690 per 15x15 column on the
-    /// chip model) and two words read from the row buffers, up to 16 stall
-    /// cycles by the bus cost model with the D-cache off (scripts/twin-cost.py).
+    /// column and cell: a few instructions and two words read from the row
+    /// buffers, whose stalls with the D-cache off dominate (figures from
+    /// the chip model and its bus cost model: docs/firmware.md, "SPI1
+    /// configuration and measured costs").
     pub const SCAN_END_CYCLES_PER_CELL: u64 = 20;
     /// Cycles below which no beam is scored, whatever the map size:
     /// sequencing, the engine's bookkeeping, the interrupts and the tasks.
@@ -205,26 +205,4 @@ pub mod h743 {
     /// every [`IDLE_END_MS`] / 5.
     pub const WATCHDOG_US: u32 = 1_000_000;
     pub const FEED_MS: u64 = 100;
-
-    /// Pins (NUCLEO-H743ZI2 Zio connector names in docs/firmware.md's
-    /// wiring table). Changing one means changing its peripheral type in
-    /// `h743::Pins` too.
-    #[macro_export]
-    macro_rules! pins {
-        ($p:ident) => {
-            $crate::h743::Pins {
-                spi: $p.SPI1,
-                sck: $p.PA5,  // D13
-                miso: $p.PA6, // D12
-                cs: $p.PD14,  // D10
-                drdy: $p.PE9, // D6, EXTI9 (EXTI9_5 interrupt)
-                drdy_exti: $p.EXTI9,
-                line_sync: $p.PE11, // D5
-                uart: $p.USART3,
-                uart_tx: $p.PD8, // ST-LINK VCP (PD9, its RX, is unused)
-                uart_tx_dma: $p.DMA1_CH2,
-                iwdg: $p.IWDG1,
-            }
-        };
-    }
 }

@@ -41,6 +41,7 @@ use crate::frames::{SampleBuffers, Samples};
 use crate::sink::{QueueSink, SharedQueue};
 use cycles::Stopwatch;
 use host::{eprint, exit};
+use semihosting::fs::File;
 use semihosting::io::Read as _;
 
 const ROW_WORDS: usize = row_words(MAX_COLS, MAX_J, MAX_J);
@@ -108,7 +109,6 @@ async fn uart_task(mut uart: uart::Uart0) {
     }
 }
 
-/// The queue as the pipeline's line sink.
 /// Waits until the UART task has sent everything queued.
 async fn drain() {
     while !QUEUE.lock(|q| q.borrow().is_empty()) {
@@ -118,8 +118,8 @@ async fn drain() {
     }
 }
 
-#[embassy_executor::task]
-async fn scan_task(syst: cortex_m::peripheral::SYST) {
+/// Opens the scan file named on the command line and reads its header.
+fn open_scan() -> (File, ScanHeader) {
     let mut file = match host::open_scan() {
         Ok(f) => f,
         Err(what) => fail(EXIT_INPUT, what),
@@ -138,6 +138,12 @@ async fn scan_task(syst: cortex_m::peripheral::SYST) {
             "more columns than the emulated board holds (1024)",
         );
     }
+    (file, header)
+}
+
+/// The scoring side for the scan `header` describes: its tables (and the
+/// square kernels' factors), the row buffers and the pipeline.
+fn scan_driver(header: &ScanHeader) -> ScanDriver<'static, MAX_COLS> {
     let scorer: &'static Scorer = match Scorer::new(&header.config) {
         Ok(s) => match s.with_factors(FACTORS.take()) {
             Ok(s) => SCORER.init(s),
@@ -179,9 +185,15 @@ async fn scan_task(syst: cortex_m::peripheral::SYST) {
         Ok(p) => p,
         Err(_) => fail(EXIT_INTERNAL, "pipeline refused its buffers"),
     };
-    let mut driver = ScanDriver::new(pipeline, header.cols, header.rows);
+    ScanDriver::new(pipeline, header.cols, header.rows)
+}
 
-    let cells = scorer.cells();
+#[embassy_executor::task]
+async fn scan_task(syst: cortex_m::peripheral::SYST) {
+    let (mut file, header) = open_scan();
+    let mut driver = scan_driver(&header);
+
+    let cells = header.config.geometry.cells();
     let n = 2 * cells;
     let mut acq: Acquisition<FRAME_BUFFERS, BEAM_LOG> = Acquisition::new();
     let released: [core::cell::Cell<bool>; FRAME_BUFFERS] = Default::default();
@@ -250,6 +262,17 @@ async fn scan_task(syst: cortex_m::peripheral::SYST) {
     }
     drain().await;
 
+    finish(&driver, &stopwatch, beam, acq.counts().spi_errors)
+}
+
+/// Reports the run on the host's stderr and exits: successfully when no
+/// line was dropped and no beam lost.
+fn finish(
+    driver: &ScanDriver<'static, MAX_COLS>,
+    stopwatch: &Stopwatch,
+    beam: u64,
+    spi_errors: u32,
+) -> ! {
     let seq = *driver.sequence_counts();
     let q = QUEUE.lock(|q| *q.borrow().counts());
     let instr = stopwatch.instructions();
@@ -268,7 +291,7 @@ async fn scan_task(syst: cortex_m::peripheral::SYST) {
         q.accepted,
         q.dropped_scores + q.dropped_keep,
     ));
-    let ok = q.dropped_keep == 0 && q.dropped_scores == 0 && acq.counts().spi_errors == 0;
+    let ok = q.dropped_keep == 0 && q.dropped_scores == 0 && spi_errors == 0;
     exit(if ok { EXIT_OK } else { EXIT_INTERNAL })
 }
 

@@ -5,7 +5,7 @@
 //! scoring side reads them without decoding. `CR1.MASRX` suspends the clock
 //! instead of overrunning when the RX FIFO fills. Every way a read can go
 //! wrong (an overrun, a DMA transfer error, a read that does not finish in
-//! time) is a [`ReadError`] value, and the peripheral and the stream are
+//! time, a mode fault) is a [`ReadError`] value, and the peripheral and the stream are
 //! stopped and cleared before the next read, so one bad frame never wedges
 //! acquisition. (embassy's SPI driver is not used for the transfer: its
 //! `read` reports no error on this chip and its DMA handler panics on a
@@ -18,23 +18,30 @@
 //! wakes the scoring task. All three interrupts have the same priority, so
 //! none preempts another, and the first to end a read makes the others'
 //! late calls do nothing. (An acquisition task in its own interrupt
-//! executor did the same with two wake-ups and two polls per beam, about
-//! 230 instructions more on the chip model.)
+//! executor did the same with two wake-ups and two polls per beam:
+//! docs/firmware.md, "SPI1 configuration and measured costs".)
 
 use core::cell::RefCell;
 
 use defmt::warn;
-use embassy_stm32::gpio::Output;
+use embassy_stm32::Peri;
+use embassy_stm32::gpio::{Level, Output, Speed};
 use embassy_stm32::interrupt;
 use embassy_stm32::interrupt::InterruptExt;
 use embassy_stm32::pac;
 use embassy_stm32::pac::dma::vals::{Dir, Dmdis, Pl, Size};
-use embassy_stm32::pac::spi::vals::{Comm, Fthlv, Master, Mbr};
+use embassy_stm32::pac::spi::vals::{
+    Comm, Cpha, Cpol, Fthlv, Lsbfirst, Master, Mbr, Sp, Ssiop, Ssom, Udrcfg, Udrdet,
+};
+use embassy_stm32::peripherals::{PA5, PA6, PD14, SPI1};
+use embassy_stm32::spi;
+use embassy_stm32::time::Hertz;
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 
-use super::read_deadline::ReadDeadline;
-use super::{ACQ, BEAMS, CELLS, FRAMES};
+use super::read_deadline::{self, ReadDeadline};
+use super::shared::{ACQ, BEAMS, CELLS, FRAMES};
+use crate::config::h743::{READ_TIMEOUT_US, SPI_DIV, SPI_HZ};
 
 /// DMA1 stream 1 (and DMAMUX1 channel 1), in LISR/LIFCR.
 const STREAM: usize = 1;
@@ -49,11 +56,13 @@ pub enum ReadError {
     Dma,
     /// The frame did not arrive in time (the SPI or the DMA stalled).
     Timeout,
+    /// SPI1 saw its slave select active and left master mode (MODF).
+    ModeFault,
 }
 
 /// How a read ended.
 #[derive(Clone, Copy)]
-pub(super) enum ReadEnd {
+enum ReadEnd {
     Complete,
     Error,
     /// The read's deadline ran out first (`read_deadline`).
@@ -61,9 +70,39 @@ pub(super) enum ReadEnd {
 }
 
 /// The reader, shared by the three interrupts that start and end reads;
-/// `main` puts it here before DRDY is enabled.
-pub static READER: Mutex<CriticalSectionRawMutex, RefCell<Option<FrameReader>>> =
+/// [`install`] puts it here before DRDY is enabled.
+static READER: Mutex<CriticalSectionRawMutex, RefCell<Option<FrameReader>>> =
     Mutex::new(RefCell::new(None));
+
+/// Sets up SPI1, DMA1 stream 1 and TIM13 for reads from the detector
+/// (SCK = `SPI_HZ`, CS idle high) and puts the reader where the
+/// interrupts find it.
+pub fn install(
+    spi: Peri<'static, SPI1>,
+    sck: Peri<'static, PA5>,
+    miso: Peri<'static, PA6>,
+    cs: Peri<'static, PD14>,
+) {
+    // embassy sets up the pins, the bus and the kernel clocks (the driver
+    // is forgotten: its drop would turn SPI1 off); `configure` then writes
+    // every register field the reads depend on.
+    let mut cfg = spi::Config::default();
+    cfg.frequency = Hertz(SPI_HZ);
+    core::mem::forget(spi::Spi::new_blocking_rxonly(spi, sck, miso, cfg));
+    let cs = Output::new(cs, Level::High, Speed::VeryHigh);
+    let reader = FrameReader::new(SPI_DIV, READ_TIMEOUT_US, cs);
+    READER.lock(|r| r.replace(Some(reader)));
+}
+
+/// The read's deadline (TIM13). Its vector can be entered with no expiry
+/// behind it (a pend that raced `ReadDeadline::stop`), so the timer's own
+/// flag decides, not the entry.
+#[interrupt]
+fn TIM8_UP_TIM13() {
+    if read_deadline::take_expiry() {
+        end(ReadEnd::Timeout);
+    }
+}
 
 #[interrupt]
 fn DMA1_STREAM1() {
@@ -98,20 +137,33 @@ pub fn start(buf: usize) {
 }
 
 /// Ends the read in progress, if any, as `how` says (DMA and TIM13
-/// interrupts).
-pub(super) fn end(how: ReadEnd) {
+/// interrupts). Out of line: inlined into both handlers it doubles in
+/// flash.
+#[inline(never)]
+fn end(how: ReadEnd) {
     if let Some(ended) = READER.lock(|r| r.borrow_mut().as_mut().and_then(|r| r.end(how))) {
         report(ended);
     }
 }
 
 /// An ended read's result to the acquisition log; wakes the scoring task.
-fn report((buf, result, counts): (usize, Result<(), ReadError>, ReadCounts)) {
+fn report((buf, result): (usize, Result<(), ReadError>)) {
     ACQ.lock(|a| a.borrow_mut().read_done(buf, result.is_ok()));
     BEAMS.signal(());
     if let Err(e) = result {
-        warn!("frame lost: {} ({})", e, counts);
+        lost(e);
     }
+}
+
+/// Logs a lost frame with the failure counts so far. Out of line, once
+/// for the three interrupts: a rare path. The counts are read here rather
+/// than returned by every `end`, where the larger value cost every beam a
+/// memcpy.
+#[cold]
+#[inline(never)]
+fn lost(e: ReadError) {
+    let counts = READER.lock(|r| r.borrow().as_ref().map(|r| r.counts));
+    warn!("frame lost: {} ({})", e, counts.unwrap_or_default());
 }
 
 fn clear_flags(w: &mut pac::dma::regs::Ixr) {
@@ -122,9 +174,81 @@ fn clear_flags(w: &mut pac::dma::regs::Ixr) {
     w.set_feif(STREAM, true);
 }
 
+fn clear_spi_flags(w: &mut pac::spi::regs::Ifcr) {
+    w.set_eotc(true);
+    w.set_txtfc(true);
+    w.set_udrc(true);
+    w.set_ovrc(true);
+    w.set_crcec(true);
+    w.set_tifrec(true);
+    w.set_modfc(true);
+    w.set_tserfc(true);
+    w.set_suspc(true);
+}
+
+/// Writes every SPI1 field a read depends on, whole registers, so that
+/// nothing is inherited from `embassy_stm32::spi` (which leaves SSIOP
+/// active-high, SSOE set, COMM full-duplex, SSI clear and SPE set) or from
+/// a mode fault (which clears MASTER and SPE). Leaves SPE = 0 and RXDMAEN
+/// = 0: each read sets them (docs/firmware.md, "SPI1 configuration and
+/// measured costs").
+fn configure(div: Mbr) {
+    let spi = pac::SPI1;
+    // SPE = 0 first: CFG1 and CFG2 ignore writes while it is set. SSI = 1
+    // is the inactive level of the internal slave select once CFG2 below
+    // makes it active-low; a master whose slave select is active raises
+    // MODF as soon as SPE is set.
+    spi.cr1().write(|w| {
+        w.set_ssi(true);
+        w.set_masrx(true);
+    });
+    // A fault left over from before (embassy's own configuration, or the
+    // one this call recovers from) would keep MASTER from sticking.
+    spi.ifcr().write(clear_spi_flags);
+    spi.cfg1().write(|w| {
+        w.set_dsize(16 - 1);
+        w.set_fthlv(Fthlv::ONE_FRAME);
+        // Slave-only fields, at their reset values.
+        w.set_udrcfg(Udrcfg::CONSTANT);
+        w.set_udrdet(Udrdet::START_OF_FRAME);
+        w.set_rxdmaen(false);
+        w.set_txdmaen(false);
+        // CRC off; CRCSIZE at its reset value.
+        w.set_crcsize(8 - 1);
+        w.set_crcen(false);
+        w.set_mbr(div);
+    });
+    spi.cfg2().write(|w| {
+        w.set_mssi(0);
+        w.set_midi(0);
+        w.set_ioswp(false);
+        w.set_comm(Comm::RECEIVER);
+        w.set_sp(Sp::MOTOROLA);
+        w.set_master(Master::MASTER);
+        // Mode 0, MSB first: the detector's samples as native `u16`.
+        w.set_lsbfirst(Lsbfirst::MSBFIRST);
+        w.set_cpha(Cpha::FIRST_EDGE);
+        w.set_cpol(Cpol::IDLE_LOW);
+        // Software slave select, active low, held inactive by SSI = 1;
+        // the NSS pin is neither read nor driven (CS is a GPIO).
+        w.set_ssm(true);
+        w.set_ssiop(Ssiop::ACTIVE_LOW);
+        w.set_ssoe(false);
+        w.set_ssom(Ssom::ASSERTED);
+        // Keep SCK driven (idle low) between frames, not floating.
+        w.set_afcntr(true);
+    });
+    spi.cr2().write(|_| {});
+    // No SPI1 interrupt: the DMA stream and TIM13 end every read.
+    spi.ier().write(|_| {});
+    // SPI, not I2S.
+    spi.i2scfgr().write(|_| {});
+}
+
 /// SPI1 configured once; then one [`FrameReader::start`] and one
 /// [`FrameReader::end`] per frame.
-pub struct FrameReader {
+struct FrameReader {
+    div: Mbr,
     counts: ReadCounts,
     deadline: ReadDeadline,
     cs: Output<'static>,
@@ -138,6 +262,7 @@ pub struct ReadCounts {
     pub overruns: u32,
     pub dma_errors: u32,
     pub timeouts: u32,
+    pub mode_faults: u32,
 }
 
 impl FrameReader {
@@ -146,39 +271,25 @@ impl FrameReader {
     /// kernel clock / `div`; a read that takes more than `timeout_us`
     /// microseconds is a [`ReadError::Timeout`]; `cs` is the detector's
     /// chip select (high: idle).
-    pub fn new(div: Mbr, timeout_us: u32, cs: Output<'static>) -> Self {
+    fn new(div: Mbr, timeout_us: u32, cs: Output<'static>) -> Self {
         pac::RCC.ahb1enr().modify(|w| w.set_dma1en(true));
-        let spi = pac::SPI1;
-        spi.cr1().modify(|w| w.set_spe(false));
-        spi.cfg1().modify(|w| {
-            w.set_dsize(16 - 1);
-            w.set_fthlv(Fthlv::ONE_FRAME);
-            w.set_rxdmaen(true);
-            w.set_txdmaen(false);
-            w.set_mbr(div);
-        });
-        spi.cfg2().modify(|w| {
-            w.set_comm(Comm::RECEIVER);
-            w.set_master(Master::MASTER);
-            w.set_ssm(true);
-            // Keep SCK driven (idle low) between frames, not floating.
-            w.set_afcntr(true);
-        });
-        spi.cr1().modify(|w| {
-            w.set_ssi(true);
-            w.set_masrx(true);
-        });
+        configure(div);
         pac::DMAMUX1
             .ccr(STREAM)
             .write(|w| w.set_dmareq_id(REQ_SPI1_RX));
-        let irq = interrupt::DMA1_STREAM1;
-        irq.set_priority(interrupt::Priority::P5);
-        // SAFETY: the handler above only touches DMA1's flags and the
-        // mutex-protected reader and acquisition log.
-        unsafe { irq.enable() };
+        let deadline = ReadDeadline::new(timeout_us);
+        // The deadline's interrupt has the DMA stream's priority: neither
+        // preempts the other.
+        for irq in [interrupt::DMA1_STREAM1, interrupt::TIM8_UP_TIM13] {
+            irq.set_priority(interrupt::Priority::P5);
+            // SAFETY: the handlers above only touch DMA1's flags, TIM13
+            // and the mutex-protected reader and acquisition log.
+            unsafe { irq.enable() };
+        }
         FrameReader {
+            div,
             counts: ReadCounts::default(),
-            deadline: ReadDeadline::new(timeout_us),
+            deadline,
             cs,
             reading: None,
         }
@@ -192,6 +303,8 @@ impl FrameReader {
         let st = pac::DMA1.st(STREAM);
         let n = samples.len().min(u16::MAX as usize) as u16;
         self.cs.set_low();
+        // RM0433's order: the SPI's DMA request, then the stream, then SPE.
+        spi.cfg1().modify(|w| w.set_rxdmaen(true));
         st.par().write_value(spi.rxdr16().as_ptr() as u32);
         st.m0ar().write_value(samples.as_mut_ptr() as u32);
         st.ndtr().write(|w| w.set_ndt(n));
@@ -215,14 +328,20 @@ impl FrameReader {
     }
 
     /// Ends the read in progress as `how` says: stops SPI1, the stream and
-    /// the deadline, releases CS, counts a failure. Returns the buffer, the
-    /// result and the failure counts, or `None` when no read was running.
-    fn end(&mut self, how: ReadEnd) -> Option<(usize, Result<(), ReadError>, ReadCounts)> {
+    /// the deadline, releases CS, counts a failure. Returns the buffer and
+    /// the result, or `None` when no read was running.
+    fn end(&mut self, how: ReadEnd) -> Option<(usize, Result<(), ReadError>)> {
         let buf = self.reading.take()?;
-        let overrun = pac::SPI1.sr().read().ovr();
+        let sr = pac::SPI1.sr().read();
         self.stop();
         self.cs.set_high();
+        if sr.modf() {
+            // MODF cleared SPE and MASTER; `stop` cleared the flag.
+            configure(self.div);
+        }
+        let overrun = sr.ovr();
         let result = match how {
+            _ if sr.modf() => Err(ReadError::ModeFault),
             ReadEnd::Timeout => Err(ReadError::Timeout),
             ReadEnd::Error => Err(ReadError::Dma),
             ReadEnd::Complete if overrun => Err(ReadError::Overrun),
@@ -232,19 +351,22 @@ impl FrameReader {
             Err(ReadError::Overrun) => self.counts.overruns = self.counts.overruns.wrapping_add(1),
             Err(ReadError::Dma) => self.counts.dma_errors = self.counts.dma_errors.wrapping_add(1),
             Err(ReadError::Timeout) => self.counts.timeouts = self.counts.timeouts.wrapping_add(1),
+            Err(ReadError::ModeFault) => {
+                self.counts.mode_faults = self.counts.mode_faults.wrapping_add(1)
+            }
             Ok(()) => {}
         }
-        Some((buf, result, self.counts))
+        Some((buf, result))
     }
 
-    /// Ends the transfer whatever its state: SPE = 0 aborts a running or
-    /// suspended transfer and flushes the FIFOs (RM0433 §50.4.9), the
-    /// stream is disabled, and every flag of both is cleared.
+    /// Ends the transfer whatever its state, in RM0433's close order for
+    /// an SPI with DMA: the stream off, then SPE = 0 (which aborts a
+    /// running or suspended transfer and flushes the FIFOs), then the SPI's
+    /// DMA request off; then every flag of both is cleared.
     fn stop(&mut self) {
         self.deadline.stop();
         let spi = pac::SPI1;
         let dma = pac::DMA1;
-        spi.cr1().modify(|w| w.set_spe(false));
         dma.st(STREAM).cr().modify(|w| w.set_en(false));
         // EN reads 1 until the stream has finished its current item.
         for _ in 0..64 {
@@ -252,17 +374,15 @@ impl FrameReader {
                 break;
             }
         }
+        spi.cr1().modify(|w| w.set_spe(false));
+        spi.cfg1().modify(|w| w.set_rxdmaen(false));
         dma.ifcr(0).write(clear_flags);
-        spi.ifcr().write(|w| {
-            w.set_eotc(true);
-            w.set_txtfc(true);
-            w.set_ovrc(true);
-            w.set_suspc(true);
-            w.set_udrc(true);
-            w.set_modfc(true);
-            w.set_tifrec(true);
-        });
-        // An end the other interrupt raised meanwhile is for this read.
+        spi.ifcr().write(clear_spi_flags);
+        // The read-back completes the flag clear at the DMA before the
+        // NVIC write below: otherwise the stream's line could pend the
+        // interrupt again after it. An end the other interrupt raised
+        // meanwhile is for this read.
+        let _ = dma.isr(0).read();
         interrupt::DMA1_STREAM1.unpend();
     }
 }

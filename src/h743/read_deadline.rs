@@ -2,12 +2,13 @@
 //!
 //! A one-shot count of `READ_TIMEOUT_US` microseconds starts with every
 //! read and is stopped when the read ends; if it runs out first, its
-//! interrupt ends the read as a timeout. A hardware timer instead of
-//! embassy-time's `with_timeout` because the read finishes long before its
-//! deadline nearly always: `with_timeout` queued an alarm per frame that
-//! still fired after the read, woke the acquisition task for nothing and
-//! cost 451 instructions per beam on the chip model (docs/firmware.md);
-//! starting and stopping TIM13 costs a few register writes. Its interrupt has the priority of the DRDY and DMA interrupts.
+//! interrupt (in `frame_reader`, beside the other two that end reads) asks
+//! [`take_expiry`] and ends the read as a timeout. A hardware timer
+//! instead of embassy-time's `with_timeout` because the read finishes long
+//! before its deadline nearly always: `with_timeout` queued an alarm per
+//! frame that still fired after the read and woke the acquisition task for
+//! nothing (docs/firmware.md, "SPI1 configuration and measured costs");
+//! starting and stopping TIM13 costs a few register writes.
 
 use embassy_stm32::interrupt;
 use embassy_stm32::interrupt::InterruptExt;
@@ -15,7 +16,6 @@ use embassy_stm32::pac;
 use embassy_stm32::pac::timer::vals::Urs;
 
 use super::clocks::APB1_TIMER_HZ;
-use super::frame_reader::{ReadEnd, end};
 
 /// One count per microsecond.
 const PRESCALER: u32 = APB1_TIMER_HZ / 1_000_000;
@@ -24,13 +24,18 @@ const _: () = assert!(
     "TIM13 must count whole microseconds"
 );
 
-#[interrupt]
-fn TIM8_UP_TIM13() {
+/// Whether the deadline ran out since the last [`ReadDeadline::stop`]; if
+/// so, clears it. For TIM13's interrupt: an entry without UIF is a pend
+/// that raced the end of the previous read and must not end this one.
+pub fn take_expiry() -> bool {
     let t = pac::TIM13;
+    if !t.sr().read().uif() {
+        return false;
+    }
     // One-shot: the update event has already cleared CEN.
     t.cr1().write(|_| {});
     t.sr().write(|_| {});
-    end(ReadEnd::Timeout);
+    true
 }
 
 /// TIM13, set up for reads of at most `timeout_us` microseconds.
@@ -38,6 +43,7 @@ pub struct ReadDeadline(());
 
 impl ReadDeadline {
     /// `timeout_us` is at least 1 and at most 65 536 (16-bit counter).
+    /// The caller sets the interrupt's priority and enables it.
     pub fn new(timeout_us: u32) -> Self {
         pac::RCC.apb1lenr().modify(|w| w.set_tim13en(true));
         let t = pac::TIM13;
@@ -50,12 +56,6 @@ impl ReadDeadline {
         t.egr().write(|w| w.set_ug(true));
         t.sr().write(|_| {});
         t.dier().write(|w| w.set_uie(true));
-        let irq = interrupt::TIM8_UP_TIM13;
-        // The DMA stream's priority: neither preempts the other.
-        irq.set_priority(interrupt::Priority::P5);
-        // SAFETY: the handler only touches TIM13 and what `frame_reader::end`
-        // touches (the mutex-protected reader and acquisition log).
-        unsafe { irq.enable() };
         ReadDeadline(())
     }
 
@@ -75,6 +75,10 @@ impl ReadDeadline {
         let t = pac::TIM13;
         t.cr1().write(|w| w.set_urs(Urs::COUNTER_ONLY));
         t.sr().write(|_| {});
+        // The read-back makes the flag clear reach TIM13 before the NVIC
+        // write: the M7 may otherwise complete the NVIC write first, and
+        // the timer's line, still high, would pend the interrupt again.
+        let _ = t.sr().read();
         interrupt::TIM8_UP_TIM13.unpend();
     }
 }

@@ -1,6 +1,7 @@
 //! The two tasks, both in thread mode: scoring and UART. (Frames are read
 //! from interrupts: `frame_reader`.)
 
+use cvm_core::protocol::MAX_LINE;
 use cvm_fw_app::driver::ScanDriver;
 use defmt::{error, info, warn};
 use embassy_stm32::mode::Async;
@@ -9,17 +10,23 @@ use embassy_stm32::usart::UartTx;
 use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_time::{Duration, Instant, with_timeout};
 
-use super::{ACQ, BEAMS, CELLS, FRAMES, KICK, QUEUE, ROOM, TX_LINE};
+use super::memory::Noload;
+use super::shared::{ACQ, BEAMS, CELLS, FRAMES, KICK, QUEUE, ROOM};
 use crate::config::h743::{FEED_MS, IDLE_END_MS, MAX_COLS, SCORE_BURST};
 use crate::frames::Samples;
 use crate::sink::QueueSink;
+
+/// The DMA source of the line being sent: in AXI SRAM, which DMA1
+/// reaches, not on the DTCM stack, which it does not.
+#[unsafe(link_section = ".dma_buffers")]
+static TX_LINE: Noload<[u8; MAX_LINE]> = Noload::new();
 
 /// Sends queued lines with DMA.
 #[embassy_executor::task]
 pub async fn uart_task(mut uart: UartTx<'static, Async>) {
     let mut errors: u32 = 0;
-    // SAFETY: this task is TX_LINE's only user, and it is spawned once.
-    let line = unsafe { &mut *TX_LINE.0.get() };
+    // SAFETY: this task is TX_LINE's only user, and its pool holds one.
+    let line = unsafe { TX_LINE.take_zeroed() };
     loop {
         let n = QUEUE.lock(|q| q.borrow_mut().pop_into(line));
         let Some(n) = n else {
@@ -131,12 +138,12 @@ fn report_scan(driver: &ScanDriver<'static, MAX_COLS>) {
     let s = driver.sequence_counts();
     let a = ACQ.lock(|a| *a.borrow().counts());
     let q = QUEUE.lock(|q| *q.borrow().counts());
-    // A defmt message masks interrupts while it is encoded and written:
-    // one of ten values held the DRDY and DMA interrupts off for 3 900
-    // cycles (10 us) on the chip model, three values hold them off for at
-    // most 1 850, and interrupts are served between messages. A read that
-    // ends while they are held off is taken late, and the next beam is
-    // lost if it comes before (docs/firmware.md, "Beam rate").
+    // A defmt message masks interrupts while it is encoded and written,
+    // for longer the more values it carries; interrupts are served between
+    // messages. A read that ends while they are held off is taken late,
+    // and the next beam is lost if it comes before: hence several short
+    // messages (docs/firmware.md, "Beam rate"; the figures in "SPI1
+    // configuration and measured costs").
     info!(
         "scan done: rows {} frames {} missing {}",
         t.rows, t.frames, t.missing
