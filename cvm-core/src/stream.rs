@@ -68,15 +68,11 @@ impl PositionScore {
     }
 }
 
-/// `floor(2^16 s / thr)`, saturating at `u32::MAX`. A threshold of 0 makes
-/// every position with data a defect of that channel, infinitely far past
-/// it: its strength is `u32::MAX`, so that a defect's strength is at least
-/// `2^16` (exactly at the threshold) for every threshold, 0 included.
+/// `floor(2^16 s / thr)`, saturating. A threshold of 0 (every position
+/// with data fires) gives `u32::MAX`: a defect's strength is at least
+/// `2^16` whatever the threshold.
 pub fn strength(s: u32, thr: u32) -> u32 {
-    if thr == 0 {
-        return u32::MAX;
-    }
-    let v = ((s as u64) << 16) / thr as u64;
+    let v = ((s as u64) << 16).checked_div(thr as u64).unwrap_or(u64::MAX);
     v.min(u32::MAX as u64) as u32
 }
 
