@@ -27,15 +27,15 @@
 #   square    the square kernels' factors and per-map embedding,
 #             cvm-core/src/scorer/square/ (its portable code: the
 #             Cortex-M assembly is checked by the emulated board's tests)
-#   protocol  the line encoder and CRC in cvm-core/src/protocol.rs
-#   pipeline  cvm-core/src/pipeline.rs
+#   protocol  the line encoders and CRC in cvm-core/src/protocol/
+#   pipeline  cvm-core/src/pipeline.rs and settings.rs
 #   decision  the power channel and the object labeller,
 #             cvm-core/src/power.rs and objects.rs
 #   tables    what is built once per configuration: factor tables,
 #             formats, score units (tables.rs, config.rs, flags.rs and the
 #             rest of scorer/ but square/), against core-tests and
 #             fw-app-tests
-#   parser    the line parser in cvm-core/src/protocol.rs (the rest of
+#   parser    the line parsers in cvm-core/src/protocol/ (the rest of
 #             the file), against those and dmap's tests
 #   emufile   the emulated board's scan-file header, fw-app/src/emufile.rs,
 #             against fw-app-tests and dmap's tests
@@ -152,16 +152,16 @@ for pass in "${passes[@]}"; do
     scorer) args=(--package cvm-core "${core_tests[@]}" "${paper_files[@]}"
         --re "$(fn_re "$scorer_fns")") ;;
     square) args=(--package cvm-core "${core_tests[@]}" "${square_files[@]}") ;;
-    protocol) args=(--package cvm-core "${core_tests[@]}" --file cvm-core/src/protocol.rs
+    protocol) args=(--package cvm-core "${core_tests[@]}" --file 'cvm-core/src/protocol/**/*.rs'
         --re "$(fn_re "$protocol_fns")") ;;
-    pipeline) args=(--package cvm-core "${core_tests[@]}" --file cvm-core/src/pipeline.rs) ;;
+    pipeline) args=(--package cvm-core "${core_tests[@]}" --file cvm-core/src/pipeline.rs --file cvm-core/src/settings.rs) ;;
     decision) args=(--package cvm-core "${core_tests[@]}" --file cvm-core/src/power.rs
         --file cvm-core/src/objects.rs) ;;
     tables) args=(--package cvm-core "${core_tests[@]}" --file cvm-core/src/tables.rs
         --file cvm-core/src/config.rs --file cvm-core/src/flags.rs "${paper_files[@]}"
         --exclude-re "$(fn_re "$embed_fns|$scorer_fns")") ;;
     parser) args=(--package cvm-core "${core_tests[@]}" --test-package dmap
-        --file cvm-core/src/protocol.rs --exclude-re "$(fn_re "$protocol_fns")") ;;
+        --file 'cvm-core/src/protocol/**/*.rs' --exclude-re "$(fn_re "$protocol_fns")") ;;
     emufile) args=(--package cvm-fw-app --test-package cvm-fw-app-tests --test-package dmap
         --file fw-app/src/emufile.rs) ;;
     rest) args=(--package cvm-core --package cvm-fw-app --test-workspace=true
@@ -170,7 +170,7 @@ for pass in "${passes[@]}"; do
         --exclude cvm-core/src/objects.rs --exclude cvm-core/src/tables.rs
         --exclude cvm-core/src/config.rs --exclude cvm-core/src/flags.rs
         --exclude cvm-core/src/scorer.rs --exclude 'cvm-core/src/scorer/**/*.rs'
-        --exclude cvm-core/src/protocol.rs) ;;
+        --exclude 'cvm-core/src/protocol/**/*.rs' --exclude cvm-core/src/settings.rs) ;;
     *)
         echo "unknown pass '$pass'" >&2
         exit 2

@@ -117,7 +117,7 @@ fn emulated_firmware_matches_host_pipeline_square_16x16() {
 }
 
 /// The Cortex-M row and column passes are generated per axis length
-/// (`cvm-core/src/scorer/passes_arm.s`): `j1 x (17 - j1)` runs each of the
+/// (`cvm-core/src/scorer/embed/passes/passes_arm.s`): `j1 x (17 - j1)` runs each of the
 /// 16 row passes and the 16 column passes once, on the board's code.
 #[test]
 fn emulated_firmware_matches_host_pipeline_every_axis_length() {
