@@ -1,6 +1,9 @@
 """Memory map and peripheral dispatch of the STM32H743 (RM0433 §2.3).
 
-Memories are plain Unicorn memory. The private peripheral bus and the
+Memories are plain Unicorn memory; SRAM1-3 answer only while their clocks
+are on in RCC_AHB2ENR (RM0433 §8.7.39 and §2.3: they come out of reset
+with their clocks off), and an access with the clock off stops the run as
+the bus fault it is on the chip. The private peripheral bus and the
 peripheral space are MMIO: every access goes to the model that owns the
 address, and an access that no model claims stops the run with the address
 and the PC, so the model never returns made-up values.
@@ -9,6 +12,7 @@ and the PC, so the model never returns made-up values.
 import heapq
 import sys
 
+from unicorn import UC_HOOK_MEM_PROT, UC_MEM_FETCH_PROT, UC_MEM_WRITE_PROT, UC_PROT_ALL, UC_PROT_NONE
 from unicorn.arm_const import UC_ARM_REG_PC
 
 from .core import Reset, Stop
@@ -22,6 +26,9 @@ MEMORIES = (
     ("SRAM4", 0x3800_0000, 64 << 10),
     ("Backup SRAM", 0x3880_0000, 4 << 10),
 )
+# Name, base, size and RCC_AHB2ENR enable bit of the D2 SRAMs.
+SRAM_CLOCKS = (("SRAM1", 0x3000_0000, 128 << 10, 29), ("SRAM2", 0x3002_0000, 128 << 10, 30),
+               ("SRAM3", 0x3004_0000, 32 << 10, 31))
 PERIPH_BASE = 0x4000_0000
 PERIPH_SIZE = 0x2000_0000
 PPB_BASE = 0xE000_0000
@@ -73,6 +80,20 @@ class Bus:
         uc.mmio_map(PERIPH_BASE, PERIPH_SIZE, self._read, PERIPH_BASE,
                     self._write, PERIPH_BASE)
         uc.mmio_map(PPB_BASE, PPB_SIZE, self._read, PPB_BASE, self._write, PPB_BASE)
+        uc.hook_add(UC_HOOK_MEM_PROT, self._on_gated)
+
+    def sram_clocks_changed(self):
+        """Applies RCC_AHB2ENR.SRAMxEN to SRAM1-3 (all off without an RCC)."""
+        for _, base, size, bit in SRAM_CLOCKS:
+            on = self.rcc is not None and self.rcc.enabled(0xDC, bit)
+            self.core.uc.mem_protect(base, size, UC_PROT_ALL if on else UC_PROT_NONE)
+
+    def _on_gated(self, uc, access, addr, size, value, _):
+        name = next((n for n, base, sz, _ in SRAM_CLOCKS if base <= addr < base + sz), "memory")
+        kind = {UC_MEM_WRITE_PROT: "write", UC_MEM_FETCH_PROT: "fetch"}.get(access, "read")
+        self._fail(Stop(f"bus fault: {name} {kind} at {addr:#010x} while its clock is off "
+                        f"(RCC_AHB2ENR.{name}EN = 0) at pc {uc.reg_read(UC_ARM_REG_PC):#010x}"))
+        return False
 
     # --- the model clock's event queue
     def at(self, cycle, fn, owner="chip"):

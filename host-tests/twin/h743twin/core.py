@@ -387,6 +387,8 @@ class Core:
                 raise Stop(f"invalid instruction near {pc:#010x}")
             if e.errno == UC_ERR_EXCEPTION:
                 raise Stop(f"unhandled CPU exception at {pc:#010x}: {e}")
+            if self.bus.error is not None:
+                raise self.bus.error  # a memory hook said why
             raise Stop(f"{e} at pc {pc:#010x}") from None
         self.pc = uc.reg_read(UC_ARM_REG_PC) | 1
         if self.sleeping == "stuck":

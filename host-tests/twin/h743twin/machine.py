@@ -53,6 +53,8 @@ class Machine:
         bus.clocks = {}
         self.rcc = bus.add(0x5802_4400, 0x400, system.Rcc(rsr))
         bus.rcc = self.rcc
+        self.rcc.on_ahb2enr = bus.sram_clocks_changed
+        bus.sram_clocks_changed()  # off after every reset
         self.pwr = bus.add(0x5802_4800, 0x400, system.Pwr())
         self.flash = bus.add(0x5200_2000, 0x1000, system.Flash())
         self.syscfg = bus.add(0x5800_0400, 0x400, system.Syscfg(), clock=(0xF4, 1, "SYSCFG"))

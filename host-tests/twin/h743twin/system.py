@@ -86,6 +86,7 @@ class Rcc(Registers):
         super().__init__()
         self.r[0xD0] = rsr
         self.r[0x130] = rsr
+        self.on_ahb2enr = None  # fn() when the SRAM1-3 clocks may change
 
     def written(self, word):
         r = self.r
@@ -105,6 +106,8 @@ class Rcc(Registers):
             r[0x74] = (r[0x74] & ~2) | ((r[0x74] & 1) << 1)
         elif word == 0x70:  # BDCR: LSERDY follows LSEON
             r[0x70] = (r[0x70] & ~2) | ((r[0x70] & 1) << 1)
+        elif word == 0xDC and self.on_ahb2enr is not None:
+            self.on_ahb2enr()
         elif word == 0xD0:
             if r[0xD0] & RSR_RMVF:
                 r[0xD0] = 0
