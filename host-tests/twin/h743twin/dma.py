@@ -95,7 +95,7 @@ class Dma:
 
     def _serve(self, req):
         for n, s in enumerate(self.streams):
-            if s.cr & 1 and (self.mux[n] & 0x7F) == req and n not in self.stalled:
+            if s.cr & 1 and (self.mux[n] & 0xFF) == req and n not in self.stalled:
                 active = self.sources.get(req)
                 while s.cr & 1 and active and active():
                     self._move(n, s)
@@ -204,7 +204,7 @@ class Dma:
                 s.total = s.ndtr
                 s.moved = 0
                 self._update(n)
-                self.poll(self.mux[n] & 0x7F)
+                self.poll(self.mux[n] & 0xFF)
             self._update(n)
         elif s.cr & 1:
             raise Stop(f"DMA1 stream {n}: register {reg * 4:#x} written while enabled")

@@ -67,9 +67,9 @@ class Machine:
                                       clock=(0xE0, i, f"GPIO{port}"))
         self.iwdg = bus.add(0x5800_4800, 0x400, system.Iwdg(bus, self.dbgmcu, self.debugger))
         self.tim12 = bus.add(0x4000_1800, 0x400, system.Timer(
-            bus, nvic, TIM12_IRQ, self.rcc.apb1_timer_hz, bits=16), clock=(0xE8, 6, "TIM12"))
+            bus, nvic, TIM12_IRQ, self.rcc.apb1_timer_hz, bits=16, channels=2), clock=(0xE8, 6, "TIM12"))
         self.tim13 = bus.add(0x4000_1C00, 0x400, system.Timer(
-            bus, nvic, TIM13_IRQ, self.rcc.apb1_timer_hz, bits=16), clock=(0xE8, 7, "TIM13"))
+            bus, nvic, TIM13_IRQ, self.rcc.apb1_timer_hz, bits=16, channels=1), clock=(0xE8, 7, "TIM13"))
         self.dma = bus.add(0x4002_0000, 0x400, Dma(bus, nvic), clock=(0xD8, 0, "DMA1"))
         bus.add(0x4002_0800, 0x400, Dmamux(self.dma))
         slave = self.detector if self.detector else NoSlave()
