@@ -54,6 +54,11 @@ class Bus:
         self.accesses = 0
         self.clocks = {}
         self.rcc = None
+        # Posted writes (see `posted_write`): peripheral base -> pc of a
+        # write not yet known to have landed; interrupt -> its peripheral.
+        self.posted = {}
+        self.irq_owner = {}
+        self.unordered_unpends = []  # (irq, pc of the NVIC write, pc of the peripheral write)
 
     def add(self, base, size, model, clock=None):
         """`clock`: (RCC enable register offset, bit, name) that must be set
@@ -141,6 +146,7 @@ class Bus:
             if model is None:
                 raise KeyError
             self._check_clock(base, addr, uc)
+            self.landed(base)
             return model.read(addr - base, size) & ((1 << (8 * size)) - 1)
         except KeyError:
             self._fail(Unmodelled(f"read of unmodelled register {addr:#010x} "
@@ -162,12 +168,36 @@ class Bus:
             if model is None:
                 raise KeyError
             self._check_clock(base, addr, uc)
+            self.posted_write(base, uc.reg_read(UC_ARM_REG_PC))
             model.write(addr - base, size, value)
         except KeyError:
             self._fail(Unmodelled(f"write of {value:#x} to unmodelled register {addr:#010x} "
                                   f"({size} bytes) at pc {uc.reg_read(UC_ARM_REG_PC):#010x}"))
         except (Stop, Reset) as e:
             self._fail(e)
+
+    # --- the M7's write buffer, as an ordering check
+    # A store to a peripheral leaves the core through the AXI/AHB/APB
+    # bridges and lands later; a store to the NVIC does not wait for it.
+    # Clearing a peripheral's flag and then unpending its interrupt can
+    # thus see the flag still set and the interrupt pend again (ARM's
+    # Cortex-M7 programming guidance: a DSB, or a read back from the
+    # peripheral, in between). The model applies writes at once, so it
+    # cannot show the race; it records every unpend that lacks the ordering.
+    def posted_write(self, base, pc):
+        self.posted[base] = pc
+
+    def landed(self, base):
+        """A read from the peripheral: its earlier writes have landed."""
+        self.posted.pop(base, None)
+
+    def barrier(self):
+        self.posted.clear()
+
+    def unpend(self, irq, pc):
+        base = self.irq_owner.get(irq)
+        if base is not None and base in self.posted:
+            self.unordered_unpends.append((irq, pc, self.posted[base]))
 
     def _fail(self, e):
         if self.error is None:
@@ -186,6 +216,11 @@ class Bus:
 
     def core_write(self, addr, size, value):
         off = addr - 0xE000_E000
+        if 0x280 <= off < 0x300 and self.irq_owner:  # NVIC_ICPRn
+            pc = self.core.uc.reg_read(UC_ARM_REG_PC)
+            for bit in range(32):
+                if value >> bit & 1:
+                    self.unpend(32 * ((off - 0x280) // 4) + bit, pc)
         if 0x100 <= off < 0x500:
             self.core.nvic.write(off, size, value)
         elif 0xD00 <= off < 0xF80:

@@ -10,7 +10,7 @@ from unicorn.arm_const import UC_ARM_REG_PC, UC_ARM_REG_PRIMASK
 from . import system
 from .bus import Bus
 from .core import CLOCK_HZ, Core, Reset, Stop
-from .dma import Dma, Dmamux
+from .dma import STREAM_IRQS, Dma, Dmamux
 from .serial import Spi, Usart
 
 # The embassy time driver runs on TIM12 (time-driver-any picks it on this chip).
@@ -79,6 +79,9 @@ class Machine:
             bus, nvic, self.dma, self.rcc, lambda b, t: self.uart.append((b, t))),
             clock=(0xE8, 18, "USART3"))
         self.gpio["D"].listeners.append(self._gpiod_changed)
+        bus.posted = {}
+        bus.irq_owner = {TIM12_IRQ: 0x4000_1800, TIM13_IRQ: 0x4000_1C00, 35: 0x4001_3000,
+                         39: 0x4000_4800, **{irq: 0x4002_0000 for irq in STREAM_IRQS}}
 
     def _gpiod_changed(self, pin, level):
         if pin == 14 and self.detector:
@@ -303,6 +306,10 @@ def _stats(self):
         "iwdg_frozen_in_debug": self.dbgmcu.iwdg1_frozen(),
         "resets": [{"cause": c, "ms": round(t * 1e3 / CLOCK_HZ, 3)} for c, t in self.resets],
         "exti_edges": self.exti.edges,
+        "spi_mode_faults": self.spi.mode_faults,
+        # Interrupts unpended while a write to their peripheral may still
+        # be in the write buffer (no read-back, no DSB): see bus.posted_write.
+        "unordered_unpends": len(self.bus.unordered_unpends),
         "sysclk_hz": self.rcc.sysclk_hz(),
         "fault": core.fault,
         "stack_bytes": self.stack[1] - self.stack[0] if self.stack else None,

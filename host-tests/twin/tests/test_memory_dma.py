@@ -164,5 +164,47 @@ class StreamDisable(unittest.TestCase):
         self.assertEqual(self.flags(), 0)
 
 
+class PostedWrites(unittest.TestCase):
+    """The write-buffer ordering check (bus.posted_write): unpending TIM13's
+    interrupt (NVIC_ICPR1 bit 12) right after a write to TIM13."""
+
+    TIM13 = 0x4000_1C00
+    ICPR1 = 0xE000_E284
+
+    def setUp(self):
+        self.bus, self.core = world()
+        self.bus.add(self.TIM13, 0x400, system.Timer(self.bus, self.core.nvic, 44, lambda: 200e6, bits=16,
+                                                     channels=1))
+        self.bus.irq_owner = {44: self.TIM13}
+
+    def clear_sr(self):
+        self.bus._write(self.core.uc, self.TIM13 + 0x10 - 0x4000_0000, 4, 0, 0x4000_0000)
+
+    def unpend(self):
+        self.bus.core_write(self.ICPR1, 4, 1 << 12)
+
+    def test_unpend_right_after_the_write_is_recorded(self):
+        self.clear_sr()
+        self.unpend()
+        self.assertEqual([irq for irq, _, _ in self.bus.unordered_unpends], [44])
+
+    def test_read_back_orders_it(self):
+        self.clear_sr()
+        self.bus._read(self.core.uc, self.TIM13 + 0x10 - 0x4000_0000, 4, 0x4000_0000)
+        self.unpend()
+        self.assertEqual(self.bus.unordered_unpends, [])
+
+    def test_dsb_orders_it(self):
+        self.clear_sr()
+        self.bus.barrier()
+        self.unpend()
+        self.assertEqual(self.bus.unordered_unpends, [])
+
+    def test_another_interrupts_unpend_is_not_concerned(self):
+        self.clear_sr()
+        self.bus.core_write(self.ICPR1, 4, 1 << 13)
+        self.assertEqual(self.bus.unordered_unpends, [])
+
+
 if __name__ == "__main__":
     unittest.main()
