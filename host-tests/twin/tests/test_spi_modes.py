@@ -24,7 +24,6 @@ DSIZE16 = 15
 MBR_DIV8 = 2 << 28
 RXDMAEN = 1 << 14
 AFCNTR = 1 << 31
-SSOM = 1 << 30
 FRAME_CYCLES = 16 * CLOCK_HZ // 25_000_000  # 16 bits at 200 MHz / 8
 
 
@@ -205,10 +204,10 @@ class FirmwareSequence(unittest.TestCase):
 
     def embassy_init(self, spi):
         # Spi::new_blocking_rxonly: IFCR all ones, then CFG2 with SSOE,
-        # SSM (no NSS pin), MASTER, full duplex, SSOM, AFCNTR and SSIOP =
+        # SSM (no NSS pin), MASTER, full duplex, AFCNTR and SSIOP =
         # active high (Config::default), CFG1 8-bit frames, CR1 SSI = 0, SPE.
         spi.write(0x18, 4, 0xFFFF_FFFF)
-        spi.write(0x0C, 4, SSOE | SSM | MASTER | SSOM | AFCNTR | SSIOP)
+        spi.write(0x0C, 4, SSOE | SSM | MASTER | AFCNTR | SSIOP)
         spi.write(0x08, 4, 7 | MBR_DIV8)
         spi.write(0x04, 4, 0)
         spi.write(0x00, 4, SPE)
