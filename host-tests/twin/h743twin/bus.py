@@ -1,8 +1,8 @@
 """Memory map and peripheral dispatch of the STM32H743 (RM0433 §2.3).
 
 Memories are plain Unicorn memory; SRAM1-3 answer only while their clocks
-are on in RCC_AHB2ENR (RM0433 §8.7.39 and §2.3: they come out of reset
-with their clocks off), and an access with the clock off stops the run as
+are on in RCC_AHB2ENR (RM0433 RCC_AHB2ENR.SRAMxEN: they come out of
+reset with their clocks off), and an access with the clock off stops the run as
 the bus fault it is on the chip. The private peripheral bus and the
 peripheral space are MMIO: every access goes to the model that owns the
 address, and an access that no model claims stops the run with the address

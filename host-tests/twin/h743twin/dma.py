@@ -9,7 +9,7 @@ writes, SRAM1-3 while their clocks are off) gets a transfer error, as on
 the chip. Flash is readable (RM0433 Fig. 1: DMA1 reaches the AXI bus
 matrix, and flash sits on it). A stream disabled by software in the
 middle of a transfer stops after the current item and sets TCIF (RM0433
-§15.3.13, DMA transfer suspension); NDTR keeps what was left.
+§15.3, DMA transfer suspension); NDTR keeps what was left.
 """
 
 from .core import Stop

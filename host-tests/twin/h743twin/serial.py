@@ -8,10 +8,10 @@ until TSIZE frames are in. A frame that finds the RX FIFO full is lost with
 OVR, unless MASRX is set, which suspends the clock (SUSP) until SUSPC or
 CSTART. The slave's answer comes from the detector model.
 
-Slave select (RM0433 §50.4.7, §50.4.13, SPI_CR1/CFG2 in §50.11): the
-internal SS input is SSI when SSM = 1, else the NSS pin (which a master
-with SSOE = 1 drives itself, so it never sees it active); it is active
-when its level equals SSIOP. A master whose SS input is active while SPE is
+Slave select (RM0433 §50.4, slave select management and error flags;
+SPI_CR1, SPI_CFG2): the internal SS input is SSI when SSM = 1, else the
+NSS pin (which a master with SSOE = 1 drives itself, so it never sees it
+active); it is active when its level equals SSIOP. A master whose SS input is active while SPE is
 set has a mode fault: MODF is set, SPE and MASTER are cleared (the SPI is
 now a disabled slave, so CSTART starts nothing), and SPE cannot be set
 again until MODF is cleared through IFCR.MODFC. A slave on this board

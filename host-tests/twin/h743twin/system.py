@@ -457,7 +457,7 @@ class Timer:
         self.t0 = 0
         self.gen = 0
         # TIM13 (one channel) has no CR2 or SMCR, TIM12 (two) no CCMR2
-        # (RM0433 §40.4-§40.5 register maps); both have OR and TISEL.
+        # (RM0433's TIM12 and TIM13/TIM14 register maps); both have OR and TISEL.
         self.channels = channels
         self.other = {0x50: 0, 0x68: 0}
 
