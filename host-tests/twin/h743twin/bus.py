@@ -1,6 +1,9 @@
 """Memory map and peripheral dispatch of the STM32H743 (RM0433 §2.3).
 
-Memories are plain Unicorn memory. The private peripheral bus and the
+Memories are plain Unicorn memory; SRAM1-3 answer only while their clocks
+are on in RCC_AHB2ENR (RM0433 RCC_AHB2ENR.SRAMxEN: they come out of
+reset with their clocks off), and an access with the clock off stops the run as
+the bus fault it is on the chip. The private peripheral bus and the
 peripheral space are MMIO: every access goes to the model that owns the
 address, and an access that no model claims stops the run with the address
 and the PC, so the model never returns made-up values.
@@ -9,6 +12,7 @@ and the PC, so the model never returns made-up values.
 import heapq
 import sys
 
+from unicorn import UC_HOOK_MEM_PROT, UC_MEM_FETCH_PROT, UC_MEM_WRITE_PROT, UC_PROT_ALL, UC_PROT_NONE
 from unicorn.arm_const import UC_ARM_REG_PC
 
 from .core import Reset, Stop
@@ -22,6 +26,9 @@ MEMORIES = (
     ("SRAM4", 0x3800_0000, 64 << 10),
     ("Backup SRAM", 0x3880_0000, 4 << 10),
 )
+# Name, base, size and RCC_AHB2ENR enable bit of the D2 SRAMs.
+SRAM_CLOCKS = (("SRAM1", 0x3000_0000, 128 << 10, 29), ("SRAM2", 0x3002_0000, 128 << 10, 30),
+               ("SRAM3", 0x3004_0000, 32 << 10, 31))
 PERIPH_BASE = 0x4000_0000
 PERIPH_SIZE = 0x2000_0000
 PPB_BASE = 0xE000_0000
@@ -47,6 +54,11 @@ class Bus:
         self.accesses = 0
         self.clocks = {}
         self.rcc = None
+        # Posted writes (see `posted_write`): peripheral base -> pc of a
+        # write not yet known to have landed; interrupt -> its peripheral.
+        self.posted = {}
+        self.irq_owner = {}
+        self.unordered_unpends = []  # (irq, pc of the NVIC write, pc of the peripheral write)
 
     def add(self, base, size, model, clock=None):
         """`clock`: (RCC enable register offset, bit, name) that must be set
@@ -73,6 +85,20 @@ class Bus:
         uc.mmio_map(PERIPH_BASE, PERIPH_SIZE, self._read, PERIPH_BASE,
                     self._write, PERIPH_BASE)
         uc.mmio_map(PPB_BASE, PPB_SIZE, self._read, PPB_BASE, self._write, PPB_BASE)
+        uc.hook_add(UC_HOOK_MEM_PROT, self._on_gated)
+
+    def sram_clocks_changed(self):
+        """Applies RCC_AHB2ENR.SRAMxEN to SRAM1-3 (all off without an RCC)."""
+        for _, base, size, bit in SRAM_CLOCKS:
+            on = self.rcc is not None and self.rcc.enabled(0xDC, bit)
+            self.core.uc.mem_protect(base, size, UC_PROT_ALL if on else UC_PROT_NONE)
+
+    def _on_gated(self, uc, access, addr, size, value, _):
+        name = next((n for n, base, sz, _ in SRAM_CLOCKS if base <= addr < base + sz), "memory")
+        kind = {UC_MEM_WRITE_PROT: "write", UC_MEM_FETCH_PROT: "fetch"}.get(access, "read")
+        self._fail(Stop(f"bus fault: {name} {kind} at {addr:#010x} while its clock is off "
+                        f"(RCC_AHB2ENR.{name}EN = 0) at pc {uc.reg_read(UC_ARM_REG_PC):#010x}"))
+        return False
 
     # --- the model clock's event queue
     def at(self, cycle, fn, owner="chip"):
@@ -120,6 +146,7 @@ class Bus:
             if model is None:
                 raise KeyError
             self._check_clock(base, addr, uc)
+            self.landed(base)
             return model.read(addr - base, size) & ((1 << (8 * size)) - 1)
         except KeyError:
             self._fail(Unmodelled(f"read of unmodelled register {addr:#010x} "
@@ -141,12 +168,36 @@ class Bus:
             if model is None:
                 raise KeyError
             self._check_clock(base, addr, uc)
+            self.posted_write(base, uc.reg_read(UC_ARM_REG_PC))
             model.write(addr - base, size, value)
         except KeyError:
             self._fail(Unmodelled(f"write of {value:#x} to unmodelled register {addr:#010x} "
                                   f"({size} bytes) at pc {uc.reg_read(UC_ARM_REG_PC):#010x}"))
         except (Stop, Reset) as e:
             self._fail(e)
+
+    # --- the M7's write buffer, as an ordering check
+    # A store to a peripheral leaves the core through the AXI/AHB/APB
+    # bridges and lands later; a store to the NVIC does not wait for it.
+    # Clearing a peripheral's flag and then unpending its interrupt can
+    # thus see the flag still set and the interrupt pend again (ARM's
+    # Cortex-M7 programming guidance: a DSB, or a read back from the
+    # peripheral, in between). The model applies writes at once, so it
+    # cannot show the race; it records every unpend that lacks the ordering.
+    def posted_write(self, base, pc):
+        self.posted[base] = pc
+
+    def landed(self, base):
+        """A read from the peripheral: its earlier writes have landed."""
+        self.posted.pop(base, None)
+
+    def barrier(self):
+        self.posted.clear()
+
+    def unpend(self, irq, pc):
+        base = self.irq_owner.get(irq)
+        if base is not None and base in self.posted:
+            self.unordered_unpends.append((irq, pc, self.posted[base]))
 
     def _fail(self, e):
         if self.error is None:
@@ -165,6 +216,11 @@ class Bus:
 
     def core_write(self, addr, size, value):
         off = addr - 0xE000_E000
+        if 0x280 <= off < 0x300 and self.irq_owner:  # NVIC_ICPRn
+            pc = self.core.uc.reg_read(UC_ARM_REG_PC)
+            for bit in range(32):
+                if value >> bit & 1:
+                    self.unpend(32 * ((off - 0x280) // 4) + bit, pc)
         if 0x100 <= off < 0x500:
             self.core.nvic.write(off, size, value)
         elif 0xD00 <= off < 0xF80:

@@ -36,6 +36,7 @@ OP_CPSIE_I = 0xB662
 # crate restores the interrupt mask, which may unmask interrupts.
 OP_MSR_RN = 0xF380
 OP_MSR_PRIMASK_2 = 0x8810
+OP_DSB = (0xF3BF, 0x8F4F)  # DSB SY
 OP_B_SELF = 0xE7FE
 
 FRAME_REGS = (UC_ARM_REG_R0, UC_ARM_REG_R1, UC_ARM_REG_R2, UC_ARM_REG_R3,
@@ -277,16 +278,25 @@ class Core:
     def watch_opcodes(self, text_ranges):
         """Code hooks on the few instructions whose effect Unicorn does not
         show: SEV, and CPSIE I and MSR PRIMASK (an interrupt may be taken
-        once they have run); `b .` (a core stuck for good, after a panic:
+        once they have run), DSB (the bus's posted writes have landed);
+        `b .` (a core stuck for good, after a panic:
         fast-forward to the next event) is found by the block hook."""
         for start, data in text_ranges:
             for i in range(0, len(data) - 1, 2):
                 hw = data[i] | data[i + 1] << 8
                 msr = (hw & 0xFFF0 == OP_MSR_RN and i + 3 < len(data)
                        and data[i + 2] | data[i + 3] << 8 == OP_MSR_PRIMASK_2)
+                dsb = (hw == OP_DSB[0] and i + 3 < len(data)
+                       and data[i + 2] | data[i + 3] << 8 == OP_DSB[1])
                 if hw in (OP_SEV, OP_CPSIE_I) or msr:
                     a = start + i
                     self.uc.hook_add(UC_HOOK_CODE, self._on_watched, begin=a, end=a)
+                elif dsb:
+                    a = start + i
+                    self.uc.hook_add(UC_HOOK_CODE, self._on_dsb, begin=a, end=a)
+
+    def _on_dsb(self, uc, addr, size, _):
+        self.bus.barrier()
 
     def _on_watched(self, uc, addr, size, _):
         hw = struct.unpack("<H", uc.mem_read(addr, 2))[0]
@@ -387,6 +397,8 @@ class Core:
                 raise Stop(f"invalid instruction near {pc:#010x}")
             if e.errno == UC_ERR_EXCEPTION:
                 raise Stop(f"unhandled CPU exception at {pc:#010x}: {e}")
+            if self.bus.error is not None:
+                raise self.bus.error  # a memory hook said why
             raise Stop(f"{e} at pc {pc:#010x}") from None
         self.pc = uc.reg_read(UC_ARM_REG_PC) | 1
         if self.sleeping == "stuck":

@@ -5,7 +5,11 @@ A transfer moves one item per request, at once (the model has no bus
 latency). Peripheral-to-memory and memory-to-peripheral streams with equal
 peripheral and memory sizes are modelled; anything else stops the run. A
 stream whose memory address is not reachable by DMA1 (ITCM, DTCM, flash
-writes) gets a transfer error, as on the chip.
+writes, SRAM1-3 while their clocks are off) gets a transfer error, as on
+the chip. Flash is readable (RM0433 Fig. 1: DMA1 reaches the AXI bus
+matrix, and flash sits on it). A stream disabled by software in the
+middle of a transfer stops after the current item and sets TCIF (RM0433
+§15.3, DMA transfer suspension); NDTR keeps what was left.
 """
 
 from .core import Stop
@@ -20,11 +24,24 @@ REQ_USART3_TX = 46
 TCIF, HTIF, TEIF, DMEIF, FEIF = 0x20, 0x10, 0x08, 0x04, 0x01
 
 
-def dma_reachable(addr, length):
-    """AXI SRAM, SRAM1-4 and the peripherals; not the TCMs (RM0433 Fig. 1)."""
+FLASH = (0x0800_0000, 0x0820_0000)
+# SRAM1, SRAM2, SRAM3 and their RCC_AHB2ENR enable bits.
+SRAM123 = ((0x3000_0000, 0x3002_0000, 29), (0x3002_0000, 0x3004_0000, 30),
+           (0x3004_0000, 0x3004_8000, 31))
+
+
+def dma_reachable(addr, length, write=True, rcc=None):
+    """AXI SRAM, SRAM1-4 and the peripherals, and flash for reads; not the
+    TCMs (RM0433 Fig. 1). SRAM1-3 answer only with their clocks on
+    (RCC_AHB2ENR.SRAMxEN), when `rcc` is given."""
     end = addr + length
-    for lo, hi in ((0x2400_0000, 0x2408_0000), (0x3000_0000, 0x3004_8000),
-                   (0x3800_0000, 0x3801_0000), (0x4000_0000, 0x6000_0000)):
+    if not write and FLASH[0] <= addr and end <= FLASH[1]:
+        return True
+    for lo, hi, bit in SRAM123:
+        if lo <= addr and end <= hi:
+            return rcc is None or rcc.enabled(0xDC, bit)
+    for lo, hi in ((0x2400_0000, 0x2408_0000), (0x3800_0000, 0x3801_0000),
+                   (0x4000_0000, 0x6000_0000)):
         if lo <= addr and end <= hi:
             return True
     return False
@@ -78,7 +95,7 @@ class Dma:
 
     def _serve(self, req):
         for n, s in enumerate(self.streams):
-            if s.cr & 1 and (self.mux[n] & 0x7F) == req and n not in self.stalled:
+            if s.cr & 1 and (self.mux[n] & 0xFF) == req and n not in self.stalled:
                 active = self.sources.get(req)
                 while s.cr & 1 and active and active():
                     self._move(n, s)
@@ -92,18 +109,19 @@ class Dma:
         direction = (s.cr >> 6) & 3
         mem = s.m0ar + (s.moved * size if s.cr >> 10 & 1 else 0)
         per = s.par + (s.moved * size if s.cr >> 9 & 1 else 0)
-        if self.fail_next.pop(n, False) or not dma_reachable(mem, size):
+        if direction not in (0, 1):
+            raise Stop(f"DMA1 stream {n}: memory-to-memory is not modelled")
+        reachable = dma_reachable(mem, size, write=direction == 0, rcc=self.bus.rcc)
+        if self.fail_next.pop(n, False) or not reachable:
             self._error(n, s)
             return
         uc = self.bus.core.uc
         if direction == 0:  # peripheral to memory
             value = self._per_read(per, size)
             uc.mem_write(mem, value.to_bytes(size, "little"))
-        elif direction == 1:
+        else:
             value = int.from_bytes(bytes(uc.mem_read(mem, size)), "little")
             self._per_write(per, size, value)
-        else:
-            raise Stop(f"DMA1 stream {n}: memory-to-memory is not modelled")
         s.moved += 1
         s.ndtr -= 1
         self.transfers += 1
@@ -180,11 +198,13 @@ class Dma:
             s.cr = value
             if was and not value & 1:
                 self.stalled.discard(n)  # a disabled stream starts afresh
+                if s.ndtr:
+                    self._flag(n, TCIF)
             if value & 1 and not was:
                 s.total = s.ndtr
                 s.moved = 0
                 self._update(n)
-                self.poll(self.mux[n] & 0x7F)
+                self.poll(self.mux[n] & 0xFF)
             self._update(n)
         elif s.cr & 1:
             raise Stop(f"DMA1 stream {n}: register {reg * 4:#x} written while enabled")

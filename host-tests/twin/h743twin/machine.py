@@ -10,7 +10,7 @@ from unicorn.arm_const import UC_ARM_REG_PC, UC_ARM_REG_PRIMASK
 from . import system
 from .bus import Bus
 from .core import CLOCK_HZ, Core, Reset, Stop
-from .dma import Dma, Dmamux
+from .dma import STREAM_IRQS, Dma, Dmamux
 from .serial import Spi, Usart
 
 # The embassy time driver runs on TIM12 (time-driver-any picks it on this chip).
@@ -53,6 +53,8 @@ class Machine:
         bus.clocks = {}
         self.rcc = bus.add(0x5802_4400, 0x400, system.Rcc(rsr))
         bus.rcc = self.rcc
+        self.rcc.on_ahb2enr = bus.sram_clocks_changed
+        bus.sram_clocks_changed()  # off after every reset
         self.pwr = bus.add(0x5802_4800, 0x400, system.Pwr())
         self.flash = bus.add(0x5200_2000, 0x1000, system.Flash())
         self.syscfg = bus.add(0x5800_0400, 0x400, system.Syscfg(), clock=(0xF4, 1, "SYSCFG"))
@@ -65,9 +67,9 @@ class Machine:
                                       clock=(0xE0, i, f"GPIO{port}"))
         self.iwdg = bus.add(0x5800_4800, 0x400, system.Iwdg(bus, self.dbgmcu, self.debugger))
         self.tim12 = bus.add(0x4000_1800, 0x400, system.Timer(
-            bus, nvic, TIM12_IRQ, self.rcc.apb1_timer_hz, bits=16), clock=(0xE8, 6, "TIM12"))
+            bus, nvic, TIM12_IRQ, self.rcc.apb1_timer_hz, bits=16, channels=2), clock=(0xE8, 6, "TIM12"))
         self.tim13 = bus.add(0x4000_1C00, 0x400, system.Timer(
-            bus, nvic, TIM13_IRQ, self.rcc.apb1_timer_hz, bits=16), clock=(0xE8, 7, "TIM13"))
+            bus, nvic, TIM13_IRQ, self.rcc.apb1_timer_hz, bits=16, channels=1), clock=(0xE8, 7, "TIM13"))
         self.dma = bus.add(0x4002_0000, 0x400, Dma(bus, nvic), clock=(0xD8, 0, "DMA1"))
         bus.add(0x4002_0800, 0x400, Dmamux(self.dma))
         slave = self.detector if self.detector else NoSlave()
@@ -77,6 +79,9 @@ class Machine:
             bus, nvic, self.dma, self.rcc, lambda b, t: self.uart.append((b, t))),
             clock=(0xE8, 18, "USART3"))
         self.gpio["D"].listeners.append(self._gpiod_changed)
+        bus.posted = {}
+        bus.irq_owner = {TIM12_IRQ: 0x4000_1800, TIM13_IRQ: 0x4000_1C00, 35: 0x4001_3000,
+                         39: 0x4000_4800, **{irq: 0x4002_0000 for irq in STREAM_IRQS}}
 
     def _gpiod_changed(self, pin, level):
         if pin == 14 and self.detector:
@@ -301,6 +306,10 @@ def _stats(self):
         "iwdg_frozen_in_debug": self.dbgmcu.iwdg1_frozen(),
         "resets": [{"cause": c, "ms": round(t * 1e3 / CLOCK_HZ, 3)} for c, t in self.resets],
         "exti_edges": self.exti.edges,
+        "spi_mode_faults": self.spi.mode_faults,
+        # Interrupts unpended while a write to their peripheral may still
+        # be in the write buffer (no read-back, no DSB): see bus.posted_write.
+        "unordered_unpends": len(self.bus.unordered_unpends),
         "sysclk_hz": self.rcc.sysclk_hz(),
         "fault": core.fault,
         "stack_bytes": self.stack[1] - self.stack[0] if self.stack else None,

@@ -5,8 +5,17 @@ SPI1: frames of DSIZE+1 bits take (DSIZE+1) SCK periods, SCK being the
 kernel clock (PLL1 Q through D2CCIP1R) divided by 2^(MBR+1). Full duplex
 shifts a frame when the TX FIFO holds one; receive-only (COMM = 10) shifts
 until TSIZE frames are in. A frame that finds the RX FIFO full is lost with
-OVR, unless MASRX is set, which suspends the clock (SUSP) until CSTART.
-The slave's answer comes from the detector model.
+OVR, unless MASRX is set, which suspends the clock (SUSP) until SUSPC or
+CSTART. The slave's answer comes from the detector model.
+
+Slave select (RM0433 §50.4, slave select management and error flags;
+SPI_CR1, SPI_CFG2): the internal SS input is SSI when SSM = 1, else the
+NSS pin (which a master with SSOE = 1 drives itself, so it never sees it
+active); it is active when its level equals SSIOP. A master whose SS input is active while SPE is
+set has a mode fault: MODF is set, SPE and MASTER are cleared (the SPI is
+now a disabled slave, so CSTART starts nothing), and SPE cannot be set
+again until MODF is cleared through IFCR.MODFC. A slave on this board
+never sees a clock (the detector is a slave too): it shifts nothing.
 
 USART3: a byte written to TDR (or by DMA while DMAT is set) moves to the
 shift register when it is free and leaves it ten bit times later (8N1 at
@@ -18,6 +27,14 @@ from .dma import REQ_SPI1_RX, REQ_SPI1_TX, REQ_USART3_TX
 
 SPI1_IRQ = 35
 USART3_IRQ = 39
+
+# SPI_CR1
+SPE, MASRX, CSTART, CSUSP, SSI = 1 << 0, 1 << 8, 1 << 9, 1 << 10, 1 << 12
+# SPI_CFG2
+MASTER, SSM, SSIOP, SSOE = 1 << 22, 1 << 26, 1 << 28, 1 << 29
+# SPI_SR, and SPI_IFCR at the same positions
+EOT, TXTF, OVR, MODF, SUSP = 1 << 3, 1 << 4, 1 << 6, 1 << 9, 1 << 11
+IFCR_MASK = 0xFF8  # EOTC .. SUSPC
 
 
 class Spi:
@@ -47,7 +64,11 @@ class Spi:
         self.gen = 0
         self.frames = 0
         self.overruns = 0
+        self.mode_faults = 0
         self.force_overrun = 0  # frames to lose with OVR (fault injection)
+        # Level of the NSS pin (PA4/PA15/PG10 in AF5) when SSM = 0; None:
+        # not wired on this board, and a run that needs it stops.
+        self.nss_pin = None
         dma.register(REQ_SPI1_RX, self.rx_request)
         dma.register(REQ_SPI1_TX, self.tx_request)
 
@@ -114,7 +135,7 @@ class Spi:
 
     # --- shifting
     def can_shift(self):
-        if not (self.active and self.cr1 & 1) or self.suspended:
+        if not (self.active and self.cr1 & SPE and self.cfg2 & MASTER) or self.suspended:
             return False
         if self.tsize() and self.done >= self.tsize():
             return False
@@ -204,24 +225,7 @@ class Spi:
 
     def write(self, off, size, value):
         if off == 0x00:
-            was_on = self.cr1 & 1
-            self.cr1 = value & ~(0x200 | 0x400)
-            if was_on and not value & 1:  # SPE cleared: FIFOs flushed
-                self.stop()
-                self.tx.clear()
-                self.rx.clear()
-                self.flags &= ~((1 << 11))
-                self.done = 0
-            if value & 1 and not was_on:
-                self.done = 0
-            if value & 0x400:  # CSUSP
-                self.stop()
-                self.flags |= 1 << 11
-            if value & 0x200 and value & 1:  # CSTART
-                if not self.cfg2 >> 22 & 1:
-                    raise Stop("SPI1 as a slave is not modelled")
-                self.active = True
-                self.suspended = False
+            self._write_cr1(value)
         elif off == 0x04:
             self.cr2 = value
         elif off == 0x08:
@@ -233,7 +237,10 @@ class Spi:
         elif off == 0x10:
             self.ier = value
         elif off == 0x18:
-            self.flags &= ~(value & 0xFF8)
+            self.flags &= ~(value & IFCR_MASK)
+            if value & SUSP and self.suspended and self.cr1 & SPE:
+                # A master suspended by MASRX resumes when SUSP is cleared.
+                self.suspended = False
         elif 0x20 <= off < 0x24:
             if len(self.tx) < self.fifo_frames():
                 self.tx.append(value)
@@ -244,6 +251,63 @@ class Spi:
         else:
             raise KeyError
         self.update()
+
+    def _write_cr1(self, value):
+        was_on = self.cr1 & SPE
+        cr1 = value & ~(CSTART | CSUSP)
+        if cr1 & SPE and not was_on and self.flags & MODF:
+            cr1 &= ~SPE  # RM0433: SPE cannot be set while MODF is set
+        self.cr1 = cr1
+        if was_on and not cr1 & SPE:
+            self._disabled()
+        if cr1 & SPE and not was_on:
+            self.done = 0
+        if self._mode_fault():
+            return
+        if value & CSUSP:
+            self.stop()
+            self.flags |= SUSP
+        if value & CSTART and self.cr1 & SPE and self.cfg2 & MASTER:
+            self.active = True
+            self.suspended = False
+
+    def _disabled(self):
+        """SPE cleared: the transfer ends and the FIFOs are flushed."""
+        self.stop()
+        self.tx.clear()
+        self.rx.clear()
+        self.flags &= ~SUSP
+        self.done = 0
+
+    def ss_active(self):
+        """Whether the internal slave-select input is at its active level."""
+        if self.cfg2 & SSM:
+            level = bool(self.cr1 & SSI)
+        elif self.cfg2 & MASTER and self.cfg2 & SSOE:
+            return False  # NSS is the master's output, not an input
+        elif self.nss_pin is None:
+            raise Stop("SPI1 with hardware slave select (SSM = 0, SSOE = 0): "
+                       "the NSS pin is not wired on this board")
+        else:
+            level = bool(self.nss_pin)
+        return level == bool(self.cfg2 & SSIOP)
+
+    def drive_nss(self, level):
+        """The NSS pin changes level (a multi-master bus)."""
+        self.nss_pin = level
+        if self._mode_fault():
+            self.update()
+
+    def _mode_fault(self):
+        """A master whose SS input is active while SPE is set: MODF."""
+        if not (self.cr1 & SPE and self.cfg2 & MASTER and self.ss_active()):
+            return False
+        self.flags |= MODF
+        self.mode_faults += 1
+        self.cr1 &= ~SPE
+        self.cfg2 &= ~MASTER
+        self._disabled()
+        return True
 
     def _config_write(self, name):
         if self.cr1 & 1:

@@ -18,6 +18,7 @@ class Registers:
     """A block of plain read/write registers at fixed offsets."""
 
     RESET = {}
+    READ_ONLY = frozenset()  # offsets whose writes the chip ignores
 
     def __init__(self):
         self.r = dict(self.RESET)
@@ -32,6 +33,8 @@ class Registers:
         word = off & ~3
         if word not in self.r:
             raise KeyError
+        if word in self.READ_ONLY:
+            return
         if size < 4:
             shift = 8 * (off & 3)
             mask = ((1 << (8 * size)) - 1) << shift
@@ -81,11 +84,13 @@ class Rcc(Registers):
         0xF0: 0, 0xF4: 0,  # enables
         0x130: POWER_ON_FLAGS,  # C1_RSR
     }
+    READ_ONLY = frozenset({0x08, 0x64})  # CRRCR, CIFR
 
     def __init__(self, rsr=POWER_ON_FLAGS):
         super().__init__()
         self.r[0xD0] = rsr
         self.r[0x130] = rsr
+        self.on_ahb2enr = None  # fn() when the SRAM1-3 clocks may change
 
     def written(self, word):
         r = self.r
@@ -105,6 +110,8 @@ class Rcc(Registers):
             r[0x74] = (r[0x74] & ~2) | ((r[0x74] & 1) << 1)
         elif word == 0x70:  # BDCR: LSERDY follows LSEON
             r[0x70] = (r[0x70] & ~2) | ((r[0x70] & 1) << 1)
+        elif word == 0xDC and self.on_ahb2enr is not None:
+            self.on_ahb2enr()
         elif word == 0xD0:
             if r[0xD0] & RSR_RMVF:
                 r[0xD0] = 0
@@ -211,6 +218,7 @@ class Pwr(Registers):
         0x18: 0x0000_4000,  # D3CR: VOS = scale 3
         0x20: 0, 0x24: 0, 0x28: 0,
     }
+    READ_ONLY = frozenset({0x04})  # CSR1
 
     def __init__(self):
         super().__init__()
@@ -232,6 +240,7 @@ class Flash(Registers):
 class Syscfg(Registers):
     RESET = {0x04: 0, 0x08: 0, 0x0C: 0, 0x10: 0, 0x14: 0,  # PMCR, EXTICR1-4
              0x20: 0, 0x24: 0, 0x28: 0, 0x2C: 0}  # CCCSR, CCVR, CCCR, PWRCR
+    READ_ONLY = frozenset({0x24})  # CCVR
 
     def written(self, word):
         if word == 0x20:  # the compensation cell is ready once enabled
@@ -245,6 +254,7 @@ class Syscfg(Registers):
 class Dbgmcu(Registers):
     RESET = {0x00: 0x2003_6450,  # IDC: revision V, device 0x450
              0x04: 0, 0x34: 0, 0x3C: 0, 0x4C: 0, 0x54: 0}
+    READ_ONLY = frozenset({0x00})  # IDC
 
     def iwdg1_frozen(self):
         return bool(self.r[0x54] >> 18 & 1)
@@ -426,7 +436,7 @@ class Timer:
     it: up-counting with prescaler, auto-reload, one-pulse mode (OPM), update
     and compare flags and interrupts."""
 
-    def __init__(self, bus, nvic, irq, clock_hz, bits=32):
+    def __init__(self, bus, nvic, irq, clock_hz, bits=32, channels=4):
         self.bus = bus
         self.nvic = nvic
         self.irq = irq
@@ -446,7 +456,19 @@ class Timer:
         self.cnt0 = 0
         self.t0 = 0
         self.gen = 0
-        self.other = {0x48: 0, 0x4C: 0, 0x50: 0, 0x60: 0, 0x68: 0}
+        # TIM13 (one channel) has no CR2 or SMCR, TIM12 (two) no CCMR2
+        # (RM0433's TIM12 and TIM13/TIM14 register maps); both have OR and TISEL.
+        self.channels = channels
+        self.other = {0x50: 0, 0x68: 0}
+
+    def _has(self, off):
+        if off in (0x04, 0x08):
+            return self.channels > 1
+        if off == 0x1C:
+            return self.channels > 2
+        if 0x34 <= off < 0x44:
+            return (off - 0x34) // 4 < self.channels
+        return True
 
     def tick_cycles(self):
         from .core import CLOCK_HZ
@@ -485,7 +507,7 @@ class Timer:
         if start + ticks > self.arr:
             self.sr |= 1  # UIF
             self.psc_active = self.psc
-        for ch in range(4):
+        for ch in range(self.channels):
             c = self.ccr[ch]
             # The compare fires when the counter passes from c-1 to c.
             dist = (c - start) % period
@@ -508,7 +530,7 @@ class Timer:
         dists = []
         if self.dier & 1:
             dists.append(period - cnt)
-        for ch in range(4):
+        for ch in range(self.channels):
             if self.dier >> (ch + 1) & 1:
                 d = (self.ccr[ch] - cnt) % period
                 dists.append(d if d else period)
@@ -527,6 +549,8 @@ class Timer:
         self.nvic.set_line(self.irq, bool(self.sr & self.dier & 0x1F))
 
     def read(self, off, size):
+        if not self._has(off):
+            raise KeyError
         self.advance()
         if off == 0x00:
             return self.cr1
@@ -555,6 +579,8 @@ class Timer:
         raise KeyError
 
     def write(self, off, size, value):
+        if not self._has(off):
+            raise KeyError
         self.rebase()
         if off == 0x00:
             self.cr1 = value & 0x3FF

@@ -235,10 +235,13 @@ class SpiTests(unittest.TestCase):
 
         spi = Spi(bus, core.nvic, dma, rcc, Slave())
         spi.write(0x08, 4, 15 | (2 << 28))          # DSIZE 16 bits, MBR / 8: 25 MHz
-        spi.write(0x0C, 4, (2 << 17) | (1 << 22))    # receive-only master
+        # Receive-only master, software slave select (SSM) held inactive
+        # (SSI = 1, SSIOP = 0: active low).
+        spi.write(0x0C, 4, (2 << 17) | (1 << 22) | (1 << 26))
         spi.write(0x04, 4, 20)                       # TSIZE
-        spi.write(0x00, 4, 1 | (masrx << 8))
-        spi.write(0x00, 4, 1 | (masrx << 8) | (1 << 9))
+        ssi = 1 << 12
+        spi.write(0x00, 4, ssi | 1 | (masrx << 8))
+        spi.write(0x00, 4, ssi | 1 | (masrx << 8) | (1 << 9))
         return bus, core, spi
 
     def test_frame_time_follows_sck(self):
