@@ -421,10 +421,13 @@ mod tests {
         assert!(run.settings.scores);
         assert_eq!(run.settings.max_defect_lines_per_row, 7);
         assert_eq!(run.config.full_scale, 4095);
+        // The configuration's warnings first (a normalised 2-cell axis under
+        // paper kernels tells its two cells apart by nothing), then the scan's.
         assert_eq!(
             run.warnings,
             vec![
-                "the scan has a single position: its gradient is zero (a neighbour outside the scan is the map itself)"
+                "maps that differ only along detector axis 1 (2 cells) score 0 under this configuration: that axis contributes nothing to the gradient",
+                "the scan has a single position: its gradient is zero (a neighbour outside the scan is the map itself)",
             ]
         );
     }

@@ -11,7 +11,7 @@ use cvm_core::protocol::{LineSink, Priority};
 use cvm_core::{Pipeline, Position, Scorer, Settings};
 use std::path::PathBuf;
 
-// Where tests and the listen decoder's own tests have long found them.
+// The tests, and listen's and eval's code, import these from here.
 pub use crate::fmt::fmt_num;
 pub use crate::options::OutputArgs;
 

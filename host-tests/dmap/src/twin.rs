@@ -3,11 +3,11 @@
 //! model wired to its pins) over a scan.
 //!
 //! * The scan is read as `dmap emulate` reads it, its settings resolved by
-//!   [`crate::settings::resolve`] (the same settings, errors and warnings as
-//!   `dmap stream`) and written as the emulated board's scan file
-//!   ([`crate::emulate::board_file`]); the H743 build configuration (`CVM_H743_SCAN`, read
-//!   by the firmware's `build.rs`) is derived from the header the emulated
-//!   board would get: geometry, columns, rows, kernels, weights,
+//!   [`crate::settings::resolve`] (the same settings, errors and warnings
+//!   as `dmap stream`) and written as the emulated board's scan file
+//!   ([`crate::emulate::board_file`]); the H743 build configuration
+//!   (`CVM_H743_SCAN`, read by the firmware's `build.rs`) is derived from
+//!   that file's header: geometry, columns, rows, kernels, weights,
 //!   normalisation, threshold, score lines and defect lines per row.
 //! * The ELF is built with `cargo build --release` into `target/twin` and
 //!   cached per configuration in `target/twin/elf/<hash>.elf`; a cached ELF
