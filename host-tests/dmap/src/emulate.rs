@@ -5,9 +5,9 @@
 //! The firmware's own diagnostics (counts, instructions per beam) go to
 //! stderr.
 
-use crate::npy::read_scan;
-use crate::options::ScoringArgs;
-use crate::stream::{OutputArgs, configure};
+use crate::npy::{Scan, read_scan};
+use crate::options::{OutputArgs, ScoringArgs};
+use crate::settings::{RunSettings, resolve};
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use cvm_fw_app::emufile::ScanHeader;
@@ -87,8 +87,20 @@ pub fn scan_file_and_warnings(args: &EmulateArgs) -> Result<(Vec<u8>, Vec<String
     let scan = read_scan(&args.scan)?;
     let (j1, j2) = (scan.geometry.j1(), scan.geometry.j2());
     // Same validation, settings and warnings as `dmap stream`.
-    let (_, settings, mut warnings) = configure(&args.scoring, &args.output, j1, j2, scan.cols)?;
-    warnings.extend(crate::score::flat_scan_warnings(scan.rows, scan.cols));
+    let run = resolve(
+        &args.scoring,
+        &args.output,
+        (j1, j2),
+        (scan.rows, scan.cols),
+    )?;
+    let file = board_file(&args.scan, &scan, &run)?;
+    Ok((file, run.warnings))
+}
+
+/// The emulated board's scan file of `scan` (read from `path`) under the
+/// settings `run`: its header carries the configuration and thresholds
+/// the firmware starts from, then the samples.
+pub fn board_file(path: &Path, scan: &Scan, run: &RunSettings) -> Result<Vec<u8>> {
     if scan.cols > MAX_COLS {
         bail!(
             "scan has {} columns; the emulated board holds at most {MAX_COLS}",
@@ -98,6 +110,7 @@ pub fn scan_file_and_warnings(args: &EmulateArgs) -> Result<(Vec<u8>, Vec<String
     if scan.rows == 0 || scan.rows > u32::MAX as usize {
         bail!("scan has {} rows", scan.rows);
     }
+    let settings = &run.settings;
     let version = settings.firmware_version.as_bytes();
     let mut v = [0u8; cvm_core::protocol::MAX_FW];
     if version.len() > v.len() {
@@ -105,11 +118,11 @@ pub fn scan_file_and_warnings(args: &EmulateArgs) -> Result<(Vec<u8>, Vec<String
     }
     v[..version.len()].copy_from_slice(version);
     let header = ScanHeader {
-        config: crate::stream::core_config(&args.scoring, &args.output, j1, j2)?,
+        config: run.config,
         cols: settings.cols,
         rows: scan.rows as u32,
-        threshold_units: args.output.threshold_units(&args.scoring)?,
-        power_threshold_units: args.output.power_threshold_units()?,
+        threshold_units: run.threshold_units,
+        power_threshold_units: run.power_threshold_units,
         scores: settings.scores,
         max_defect_lines_per_row: settings.max_defect_lines_per_row,
         version_len: version.len() as u8,
@@ -117,14 +130,14 @@ pub fn scan_file_and_warnings(args: &EmulateArgs) -> Result<(Vec<u8>, Vec<String
     };
     let data = scan
         .to_u16()
-        .with_context(|| format!("{}", args.scan.display()))?;
+        .with_context(|| format!("{}", path.display()))?;
     let mut out = Vec::with_capacity(cvm_fw_app::emufile::HEADER_LEN + 2 * data.len());
     out.extend_from_slice(&header.encode());
     // Native samples, as the H743's 16-bit SPI frames leave them in memory.
     for s in data {
         out.extend_from_slice(&s.to_le_bytes());
     }
-    Ok((out, warnings))
+    Ok(out)
 }
 
 /// A running QEMU and the directory of the scan file it reads. Dropping it

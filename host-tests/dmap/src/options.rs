@@ -1,9 +1,11 @@
-//! Scoring options shared by `score`, `stream` and `emulate`, and their
-//! translation into the fixed-point core's and the f64 reference's
-//! configurations, so that every command means the same thing by them.
+//! The command-line options that choose what a run scores and reports,
+//! shared by `score`, `calibrate`, `stream`, `emulate`, `twin` and `bench`.
+//! They are only what the user typed: [`crate::settings`] turns them (with
+//! a calibration file, if given) into the core's configuration and the
+//! pipeline's settings, and checks them there, once.
 
-use anyhow::{Result, bail};
 use clap::{Args, ValueEnum};
+use std::path::PathBuf;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum KernelArg {
@@ -48,93 +50,45 @@ impl Default for ScoringArgs {
     }
 }
 
-impl ScoringArgs {
-    fn check(&self, j1: usize, j2: usize) -> Result<()> {
-        if !(1..=16).contains(&j1) || !(1..=16).contains(&j2) {
-            bail!("detector geometry {j1}x{j2} is not supported (each axis must be 1..=16)");
-        }
-        match self.kernels {
-            KernelArg::Paper => {
-                if self.bmax == Some(0) {
-                    bail!("--bmax must be at least 1 for paper kernels");
-                }
-            }
-            KernelArg::Square => {
-                if self.weights == Some(WeightArg::Uniform) {
-                    bail!(
-                        "square kernels use unit weights (docs/method.md §3); drop --weights uniform"
-                    );
-                }
-                let limit = j1.max(j2) - 1;
-                if let Some(k) = self.bmax
-                    && k > limit
-                {
-                    bail!(
-                        "--bmax {k} is too large for square kernels on {j1}x{j2} maps (at most {limit})"
-                    );
-                }
-            }
-        }
-        Ok(())
-    }
+/// What the pipeline reports: shared by `stream`, `emulate` and `twin`.
+#[derive(Args, Clone, Debug, PartialEq)]
+pub struct OutputArgs {
+    /// Defect threshold on the gradient magnitude, in distance units (default 0.5 for
+    /// normalised maps; required with --raw, whose distances are in counts)
+    #[arg(long)]
+    pub threshold: Option<f64>,
+    /// Also emit every position's score (S lines)
+    #[arg(long)]
+    pub scores: bool,
+    /// Threshold of the power channel: the contrast |P+ - P-| / (P+ + P-) of the two
+    /// neighbours' powers (default 0.1; inf turns the channel off)
+    #[arg(long, value_name = "C")]
+    pub power_threshold: Option<f64>,
+    /// List up to this many defective positions per row as D lines, the strongest (the row
+    /// line has the full count; default 0: the object lines describe the defects)
+    #[arg(long, default_value_t = 0)]
+    pub max_defect_lines: u16,
+    /// Both channels' thresholds from a calibration file (`dmap calibrate`), the same
+    /// integers as the calibration's; refused unless these scoring options are the ones
+    /// it was made for
+    #[arg(long, value_name = "CAL.json", conflicts_with_all = ["threshold", "power_threshold"])]
+    pub calibration: Option<PathBuf>,
+    /// Full scale of the detector: a sample at or above it flags its map saturated
+    /// (header `fs`; 4095 for a 12-bit ADC)
+    #[arg(long, value_name = "N", default_value_t = u16::MAX,
+          value_parser = clap::value_parser!(u16).range(1..))]
+    pub full_scale: u16,
+}
 
-    /// The fixed-point core's configuration for `j1 x j2` maps.
-    pub fn core_config(&self, j1: usize, j2: usize) -> Result<cvm_core::Config> {
-        self.check(j1, j2)?;
-        let geometry = cvm_core::Geometry::new(j1 as u8, j2 as u8)
-            .map_err(|e| anyhow::anyhow!("geometry {j1}x{j2}: {e}"))?;
-        let kernels = match self.kernels {
-            KernelArg::Paper => cvm_core::Kernels::Paper {
-                bmax: self.bmax.unwrap_or(0).min(16) as u8,
-            },
-            KernelArg::Square => match self.bmax {
-                Some(k) => cvm_core::Kernels::Square { kmax: k as u8 },
-                None => cvm_core::Kernels::square_default(geometry),
-            },
-        };
-        let weights = match (self.kernels, self.weights) {
-            (KernelArg::Square, _) | (_, Some(WeightArg::Unit)) => cvm_core::Weights::Unit,
-            _ => cvm_core::Weights::Uniform,
-        };
-        Ok(cvm_core::Config {
-            geometry,
-            kernels,
-            weights,
-            normalise: !self.raw,
+impl Default for OutputArgs {
+    fn default() -> Self {
+        OutputArgs {
+            threshold: None,
+            power_threshold: None,
+            scores: false,
+            max_defect_lines: 0,
+            calibration: None,
             full_scale: u16::MAX,
-        })
-    }
-
-    /// The fixed-point scorer, with a readable error if the core refuses it.
-    pub fn scorer(&self, j1: usize, j2: usize) -> Result<cvm_core::Scorer> {
-        let cfg = self.core_config(j1, j2)?;
-        crate::fixed::scorer(&cfg)
-            .map_err(|e| anyhow::anyhow!("fixed-point scorer refused the configuration: {e}"))
-    }
-
-    /// Warnings for configurations under which part or all of the gradient
-    /// is zero whatever the scan (see [`crate::score::blind_axes`]).
-    pub fn warnings(&self, j1: usize, j2: usize) -> Result<Vec<String>> {
-        let e = cvm_reference::CvmEmbedding::new(&self.reference_config(j1, j2)?);
-        Ok(crate::score::blind_axes(j1, j2, |a, b| {
-            e.distance(&e.embed(a), &e.embed(b))
-        }))
-    }
-
-    /// The f64 reference configuration for `j1 x j2` maps.
-    pub fn reference_config(&self, j1: usize, j2: usize) -> Result<cvm_reference::CvmConfig> {
-        self.check(j1, j2)?;
-        let g = cvm_reference::Geometry::new(j1, j2)?;
-        let cfg = match self.kernels {
-            KernelArg::Paper => {
-                let w = match self.weights {
-                    Some(WeightArg::Unit) => cvm_reference::PaperWeights::Unit,
-                    _ => cvm_reference::PaperWeights::Uniform,
-                };
-                cvm_reference::CvmConfig::paper(g, w, self.bmax)?
-            }
-            KernelArg::Square => cvm_reference::CvmConfig::square(g, self.bmax)?,
-        };
-        Ok(cfg.with_normalise(!self.raw))
+        }
     }
 }

@@ -8,8 +8,8 @@ use anyhow::{Context, Result, bail};
 use clap::{ArgAction, Args};
 
 use crate::cli_values::{index, trimmed};
+use crate::fmt::fmt_num;
 use crate::font::{draw_text, text_height, text_width};
-use crate::stream::fmt_num;
 
 const NAN_RGB: [u8; 3] = [255, 0, 255];
 const INK: [u8; 3] = [0, 0, 0];

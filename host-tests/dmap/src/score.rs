@@ -4,6 +4,7 @@
 use crate::npy::{GradientWriter, ScanFile, band_rows};
 use crate::options::ScoringArgs;
 use crate::out::Target;
+use crate::settings::{blind_axes, flat_scan_warnings};
 use anyhow::{Result, bail};
 use clap::{Args, ValueEnum};
 use cvm_reference::{CvmEmbedding, Emd, Ground, MapDistance, MeanDir};
@@ -112,52 +113,6 @@ enum Method {
     Fixed(cvm_core::Scorer),
     Emd(Emd),
     MeanDir(MeanDir),
-}
-
-/// A scan of one position: the border rule makes its gradient zero.
-pub fn flat_scan_warnings(rows: usize, cols: usize) -> Vec<String> {
-    if rows == 1 && cols == 1 {
-        vec!["the scan has a single position: its gradient is zero (a neighbour outside the scan is the map itself)".into()]
-    } else {
-        Vec::new()
-    }
-}
-
-/// Detector axes along which the distance `d` cannot tell two maps apart:
-/// a unit spot moved from the first cell to the next (and to the last) of
-/// the axis scores 0. A 1x1 detector normalised tells nothing apart at all.
-pub fn blind_axes(j1: usize, j2: usize, d: impl Fn(&[f64], &[f64]) -> f64) -> Vec<String> {
-    let n = j1 * j2;
-    let spot = |k: usize| {
-        let mut m = vec![0.0; n];
-        m[k] = 1.0;
-        m
-    };
-    // Rounding noise of maps of unit mass, far below any real distance.
-    let zero = |x: f64| x.abs() <= 1e-12;
-    let mut blind = Vec::new();
-    let mut any_axis = false;
-    for (axis, len, step) in [(1, j1, j2), (2, j2, 1)] {
-        if len < 2 {
-            continue;
-        }
-        any_axis = true;
-        if zero(d(&spot(0), &spot(step))) && zero(d(&spot(0), &spot(step * (len - 1)))) {
-            blind.push(format!(
-                "maps that differ only along detector axis {axis} ({len} cells) score 0 under this configuration: that axis contributes nothing to the gradient"
-            ));
-        }
-    }
-    let mut dimmer = spot(0);
-    dimmer[0] = 0.5;
-    let intensity_blind = zero(d(&spot(0), &dimmer));
-    if intensity_blind && (!any_axis || blind.len() == usize::from(j1 >= 2) + usize::from(j2 >= 2))
-    {
-        return vec![format!(
-            "{j1}x{j2} maps: this configuration scores every pair of maps 0, so the whole gradient is zero"
-        )];
-    }
-    blind
 }
 
 /// One band-at-a-time way of scoring: per-map preparation of a row, and the

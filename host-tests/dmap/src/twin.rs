@@ -2,11 +2,12 @@
 //! model in `host-tests/twin` (an STM32H743 on Unicorn, with a detector
 //! model wired to its pins) over a scan.
 //!
-//! * The scan is read and validated by `dmap emulate`'s own code
-//!   ([`crate::emulate::scan_file_and_warnings`]: same settings, errors and warnings as
-//!   `dmap stream`), and the H743 build configuration (`CVM_H743_SCAN`, read
-//!   by the firmware's `build.rs`) is derived from the header the emulated
-//!   board would get: geometry, columns, rows, kernels, weights,
+//! * The scan is read as `dmap emulate` reads it, its settings resolved by
+//!   [`crate::settings::resolve`] (the same settings, errors and warnings
+//!   as `dmap stream`) and written as the emulated board's scan file
+//!   ([`crate::emulate::board_file`]); the H743 build configuration
+//!   (`CVM_H743_SCAN`, read by the firmware's `build.rs`) is derived from
+//!   that file's header: geometry, columns, rows, kernels, weights,
 //!   normalisation, threshold, score lines and defect lines per row.
 //! * The ELF is built with `cargo build --release` into `target/twin` and
 //!   cached per configuration in `target/twin/elf/<hash>.elf`; a cached ELF
@@ -22,9 +23,11 @@
 //!   pipe, a panic, SIGINT, SIGTERM or SIGHUP) it is killed and reaped
 //!   before its scan file is removed.
 
-use crate::emulate::{EmulateArgs, scan_file_and_warnings};
-use crate::options::ScoringArgs;
-use crate::stream::{OutputArgs, fmt_num};
+use crate::emulate::board_file;
+use crate::fmt::fmt_num;
+use crate::npy::read_scan;
+use crate::options::{OutputArgs, ScoringArgs};
+use crate::settings::resolve;
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use cvm_core::{Kernels, Weights};
@@ -507,13 +510,17 @@ pub fn run(args: &TwinArgs) -> Result<()> {
     }
     // The emulated board's scan file: the same reading, validation,
     // settings and warnings as `dmap emulate` and `dmap stream`.
-    let (emufile, warnings) = scan_file_and_warnings(&EmulateArgs {
-        scan: args.scan.clone(),
-        scoring: args.scoring.clone(),
-        output: args.output.clone(),
-        elf: None,
-        icount: false,
-    })?;
+    let scan = read_scan(&args.scan)?;
+    let (j1, j2) = (scan.geometry.j1(), scan.geometry.j2());
+    let run = resolve(
+        &args.scoring,
+        &args.output,
+        (j1, j2),
+        (scan.rows, scan.cols),
+    )?;
+    let emufile = board_file(&args.scan, &scan, &run)?;
+    drop(scan);
+    let warnings = run.warnings;
     let header = ScanHeader::parse(&emufile).map_err(|e| anyhow::anyhow!(e.message()))?;
     let beams = u64::from(header.rows) * u64::from(header.cols);
     for f in &args.faults {

@@ -1,0 +1,230 @@
+//! The calibration file `dmap calibrate` writes and `--calibration` reads:
+//! its identity and version, the scoring configuration it was made for,
+//! and each channel's threshold as the integer the firmware compares with.
+
+use std::path::Path;
+
+use anyhow::{Context, Result, anyhow, bail};
+use cvm_core::{Config, Kernels, Scorer, Weights, power};
+use serde_json::{Value, json};
+
+use crate::calibrate::rule::power_thr;
+use crate::fmt::fmt_num;
+
+/// Identifies a calibration file.
+pub const FORMAT: &str = "dmap-calibration";
+/// Version of the file layout; a reader refuses other versions. Version 2
+/// added the power channel (`channels.power`).
+pub const VERSION: u64 = 2;
+
+/// The scoring configuration as recorded in a calibration file.
+pub fn config_json(c: &Config) -> Result<Value> {
+    let (kernels, b) = match c.kernels {
+        Kernels::Paper { bmax } => ("paper", bmax),
+        Kernels::Square { kmax } => ("square", kmax),
+    };
+    let weights = match c.weights {
+        Weights::Uniform => "uniform",
+        Weights::Unit => "unit",
+        Weights::Separable { .. } => bail!("separable weights cannot be calibrated"),
+    };
+    Ok(json!({
+        "j1": c.geometry.j1,
+        "j2": c.geometry.j2,
+        "kernels": kernels,
+        "b": b,
+        "weights": weights,
+        "normalise": c.normalise,
+        "full_scale": c.full_scale,
+    }))
+}
+
+/// One line per field in which a recorded configuration differs from the
+/// run's.
+pub fn config_differences(recorded: &Value, run: &Value) -> Vec<String> {
+    let mut out = Vec::new();
+    if let (Some(a), Some(b)) = (recorded.as_object(), run.as_object()) {
+        for (key, want) in b {
+            let got = a.get(key).unwrap_or(&Value::Null);
+            if got != want {
+                out.push(format!("{key}: calibrated {got}, this run {want}"));
+            }
+        }
+        for key in a.keys().filter(|k| !b.contains_key(*k)) {
+            out.push(format!("{key}: not a configuration field"));
+        }
+    } else {
+        out.push("configuration is not a JSON object".into());
+    }
+    out
+}
+
+/// A calibration file, as read.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Calibration {
+    pub config: Value,
+    /// The CVM channel's threshold, in distance units and as the scorer's integer.
+    pub threshold: f64,
+    pub thr: u32,
+    pub q: i32,
+    /// The power channel's threshold, a contrast and its `Q15` integer
+    /// (at most [`power::POWER_MAX`], or [`power::POWER_OFF`]).
+    pub power_threshold: f64,
+    pub pthr: u32,
+}
+
+impl Calibration {
+    /// Reads and checks a calibration file's format.
+    pub fn load(path: &Path) -> Result<Self> {
+        let p = path.display();
+        let text = std::fs::read_to_string(path).with_context(|| format!("reading {p}"))?;
+        let v: Value =
+            serde_json::from_str(&text).with_context(|| format!("{p}: not a JSON calibration"))?;
+        if v["format"] != FORMAT {
+            bail!("{p}: not a calibration file (no \"format\": \"{FORMAT}\")");
+        }
+        if v["version"] == 1 {
+            bail!(
+                "{p}: calibration file version 1 has no power-channel threshold (made before the power channel): run dmap calibrate again"
+            );
+        }
+        if v["version"] != VERSION {
+            bail!(
+                "{p}: calibration file version {} (this dmap reads {VERSION})",
+                v["version"]
+            );
+        }
+        if v["config"]["scores"] == "precomputed" {
+            bail!(
+                "{p} was calibrated on precomputed scores (dmap calibrate --scores): it has no scoring configuration to check, so only dmap eval takes it"
+            );
+        }
+        let ch = &v["channels"]["cvm"];
+        let threshold = ch["threshold"]
+            .as_f64()
+            .filter(|t| t.is_finite() && *t >= 0.0)
+            .ok_or_else(|| anyhow!("{p}: channels.cvm.threshold missing or not a number >= 0"))?;
+        let thr = ch["thr"]
+            .as_u64()
+            .and_then(|t| u32::try_from(t).ok())
+            .ok_or_else(|| anyhow!("{p}: channels.cvm.thr missing or not a u32"))?;
+        let q = ch["q"]
+            .as_i64()
+            .and_then(|t| i32::try_from(t).ok())
+            .ok_or_else(|| anyhow!("{p}: channels.cvm.q missing or not an integer"))?;
+        if !v["config"].is_object() {
+            bail!("{p}: no scoring configuration recorded");
+        }
+        // The integer and its format are the calibration; the threshold in
+        // units is `thr * 2^-q` exactly (JSON's decimal, read back, may be
+        // an ulp away), and must agree with the recorded one.
+        if !(-64..=64).contains(&q) {
+            bail!("{p}: channels.cvm.q {q} is not a score format");
+        }
+        let exact = f64::from(thr) * 2f64.powi(-q);
+        if (exact - threshold).abs() > 1e-12 * exact.max(f64::MIN_POSITIVE) {
+            bail!(
+                "{p}: threshold {} is not the integer {thr} in Q({q}) ({})",
+                fmt_num(threshold),
+                fmt_num(exact)
+            );
+        }
+        let threshold = exact;
+        let pch = &v["channels"]["power"];
+        let power_threshold = pch["threshold"]
+            .as_f64()
+            .filter(|t| t.is_finite() && *t >= 0.0)
+            .ok_or_else(|| anyhow!("{p}: channels.power.threshold missing or not a number >= 0"))?;
+        let pthr = pch["thr"]
+            .as_u64()
+            .and_then(|t| u32::try_from(t).ok())
+            .filter(|&t| power_thr(t) == t)
+            .ok_or_else(|| {
+                anyhow!(
+                    "{p}: channels.power.thr missing or not a power threshold (0..={} or {} for off)",
+                    power::POWER_MAX,
+                    power::POWER_OFF
+                )
+            })?;
+        if pch["q"] != power::POWER_FRAC {
+            bail!(
+                "{p}: channels.power.q must be {} (Q15 contrasts)",
+                power::POWER_FRAC
+            );
+        }
+        let pexact = power::to_units(pthr);
+        if (pexact - power_threshold).abs() > 1e-12 * pexact.max(f64::MIN_POSITIVE) {
+            bail!(
+                "{p}: power threshold {} is not the integer {pthr} in Q15 ({})",
+                fmt_num(power_threshold),
+                fmt_num(pexact)
+            );
+        }
+        debug_assert_eq!(power::threshold_from_units(pexact), pthr);
+        Ok(Calibration {
+            config: v["config"].clone(),
+            threshold,
+            thr,
+            q,
+            power_threshold: pexact,
+            pthr,
+        })
+    }
+
+    /// The threshold in distance units for a run with core configuration
+    /// `config` and its scorer; refuses any other configuration than the
+    /// one calibrated, and a threshold that would not be `thr` exactly.
+    pub fn threshold_for(&self, path: &Path, config: &Config, scorer: &Scorer) -> Result<f64> {
+        let diff = config_differences(&self.config, &config_json(config)?);
+        if !diff.is_empty() {
+            bail!(
+                "{} was calibrated for another scoring configuration ({}); calibrate again with these options",
+                path.display(),
+                diff.join("; ")
+            );
+        }
+        if scorer.score_frac_bits() != self.q
+            || scorer.threshold_from_units(self.threshold) != self.thr
+        {
+            bail!(
+                "{}: threshold {} is not the integer {} in this scorer's Q({}) format",
+                path.display(),
+                fmt_num(self.threshold),
+                self.thr,
+                scorer.score_frac_bits()
+            );
+        }
+        Ok(self.threshold)
+    }
+}
+
+/// The threshold `dmap eval --calibration` applies: the CVM channel of a
+/// calibration made on scans, or that of one made on precomputed scores.
+pub fn eval_threshold(path: &Path) -> Result<f64> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let v: Value = serde_json::from_str(&text)
+        .with_context(|| format!("{}: not a JSON calibration", path.display()))?;
+    if v["format"] == FORMAT && v["config"]["scores"] == "precomputed" {
+        return v["channels"]["scores"]["threshold"]
+            .as_f64()
+            .ok_or_else(|| anyhow!("{}: channels.scores.threshold missing", path.display()));
+    }
+    Ok(Calibration::load(path)?.threshold)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn differences_name_the_fields() {
+        let a = json!({"j1": 9, "j2": 9, "normalise": true});
+        let b = json!({"j1": 9, "j2": 9, "normalise": false});
+        assert_eq!(
+            config_differences(&a, &b),
+            vec!["normalise: calibrated true, this run false".to_string()]
+        );
+        assert!(config_differences(&a, &a).is_empty());
+    }
+}
