@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use crate::objects::components;
-use crate::stream::fmt_num;
+use crate::fmt::fmt_num;
 use anyhow::{Result, bail};
 use clap::Args;
 use std::fmt::Write;

@@ -12,7 +12,6 @@ use cvm_core::{Pipeline, Position, Scorer, Settings};
 use std::path::PathBuf;
 
 // The tests, and listen's and eval's code, import these from here.
-pub use crate::fmt::fmt_num;
 pub use crate::options::OutputArgs;
 
 #[derive(Args, Clone, Debug)]

@@ -2,7 +2,7 @@
 
 use super::decoder::Decoder;
 use super::scan::{ObjectSize, ScanResult, channel_names, mm, q8, strength_ratio};
-use crate::stream::fmt_num;
+use crate::fmt::fmt_num;
 use cvm_core::objects::Object;
 use cvm_core::protocol::{self, EndInfo};
 
