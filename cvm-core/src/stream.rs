@@ -72,8 +72,8 @@ impl PositionScore {
 /// with data fires) gives `u32::MAX`: a defect's strength is at least
 /// `2^16` whatever the threshold.
 pub fn strength(s: u32, thr: u32) -> u32 {
-    let v = ((s as u64) << 16).checked_div(thr as u64).unwrap_or(u64::MAX);
-    v.min(u32::MAX as u64) as u32
+    let q = (u64::from(s) << 16).checked_div(u64::from(thr));
+    q.map_or(u32::MAX, |v| v.min(u32::MAX as u64) as u32)
 }
 
 /// Decisions for one finished row.
