@@ -4,21 +4,16 @@
 //! the host pipeline. (Before, positions of magnitude 0 were reported with
 //! strength 0, and `dmap listen` rejected the firmware's own lines.)
 
+mod common;
+
+use common::{ok, tmp_in};
 use cvm_reference::Geometry;
 use dmap::listen::Decoder;
 use dmap::npy::write_scan_u16;
-use std::process::Command;
 
 fn dmap(args: &[&str]) -> Vec<u8> {
-    let out = Command::new(env!("CARGO_BIN_EXE_dmap"))
-        .args(args)
-        .output()
-        .expect("running dmap");
-    assert!(
-        out.status.success(),
-        "dmap {args:?} failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out = common::dmap(args);
+    ok(&out);
     out.stdout
 }
 
@@ -47,9 +42,7 @@ fn field(line: &str, i: usize) -> u64 {
 
 #[test]
 fn threshold_zero_defects_have_full_strength_and_decode_cleanly() {
-    let dir = std::env::temp_dir().join(format!("dmap-thr0-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let scan = dir.join("flat.npy");
+    let scan = tmp_in("thr0", "flat.npy");
     let (rows, cols) = (5, 7);
     write_flat_scan(&scan, rows, cols);
     let scan = scan.to_str().unwrap();
@@ -92,5 +85,5 @@ fn threshold_zero_defects_have_full_strength_and_decode_cleanly() {
             String::from_utf8_lossy(&target)
         );
     }
-    let _ = std::fs::remove_dir_all(&dir);
+    let _ = std::fs::remove_file(scan);
 }
