@@ -78,7 +78,7 @@ def check(path):
     expect("line encoder's tables in DTCM, loaded from flash",
            None not in (lo, hi, load) and lo < hi and inside(lo, hi, DTCM) and inside(load, load + hi - lo, FLASH),
            f"{lo:#x}..{hi:#x} from {load:#x}" if None not in (lo, hi, load) else "symbols missing")
-    for part in ("8protocol5CRC16", "8protocol3B64"):
+    for part in ("8protocol5frame5CRC16", "8protocol5score3B64"):
         try:
             n, a, z = obj(part)
             expect(f"{part} in .dtcm_rodata", lo is not None and lo <= a and a + z <= hi, f"at {a:#x}")
