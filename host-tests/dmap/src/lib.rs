@@ -18,3 +18,4 @@ pub mod score;
 pub mod simulate;
 pub mod stream;
 pub mod twin;
+pub mod twin_requests;
