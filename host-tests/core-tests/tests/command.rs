@@ -296,6 +296,20 @@ fn every_refusal_of_a_request() {
 }
 
 #[test]
+fn protocol_document_example() {
+    assert_eq!(
+        parse_request(b"C,1,set,thr=4194304*EE0C\n", &CAP),
+        Ok((1, Request::Set(Key::Threshold, 4194304)))
+    );
+    let reply = Reply::Value {
+        key: Key::Threshold,
+        value: 4194304,
+        source: Source::Changed,
+    };
+    assert_eq!(reply_line(Some(1), &reply), b"A,1,ok,thr=4194304:c*23E1\n");
+}
+
+#[test]
 fn keys_read_and_write_the_settings_value() {
     let mut s = Settings {
         cols: 300,
@@ -369,7 +383,8 @@ fn the_longest_status_fits_a_line() {
         verdict: Verdict::NoScan,
     };
     let line = reply_line(Some(u32::MAX), &Reply::Status(s));
-    assert!(line.len() <= MAX_LINE, "{} bytes", line.len());
+    let star = line.iter().rposition(|&c| c == b'*').unwrap();
+    assert!(star <= 250, "{star} bytes before the `*`");
     let mut want = s;
     want.firmware = &"0123456789abcdefghijklmnopqrstuvwxyz"[..MAX_FW];
     assert_eq!(

@@ -26,10 +26,9 @@ What silicon does and the model follows:
   and reading that word is a double ECC error (SR2.DBECCERR and a bus
   error). The model records such words and stops the run when one is read.
 
-The model's operation times are its own (PROGRAM_US, ERASE_US), much
-shorter for an erase than silicon's (the datasheet gives sector erase
-times of the order of a second), so that runs stay short; a test that
-depends on the time passes its own.
+The model's operation times are its own (PROGRAM_US, ERASE_US), an
+erase far shorter than the datasheet's sector erase time, so that runs
+stay short; nothing about the board's timing may rest on them.
 
 Power cuts: `Bank2.cut_at = N` ends the run at the N-th flash operation
 (erase or flash-word program, counted from 1 across resets) with
