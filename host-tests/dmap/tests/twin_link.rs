@@ -90,7 +90,10 @@ fn requests_and_flash_leave_todays_firmware_unchanged() {
     text.push_str(damaged);
     std::fs::write(&req, text).unwrap();
     let sent = first.len() + 8;
-    assert!(sent * 4340 < 40 * 80_000, "all bytes arrive within the scan");
+    assert!(
+        sent * 4340 < 40 * 80_000,
+        "all bytes arrive within the scan"
+    );
 
     let flash = dir.path().join("bank2.bin");
     let req = req.to_str().unwrap();
