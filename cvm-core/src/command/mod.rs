@@ -31,13 +31,4 @@ pub use refusal::Refusal;
 pub use reply::{Calibration, Reply, encode_reply, parse_reply};
 pub use request::{Request, encode_request, parse_request};
 pub use status::{LastScan, Status, Store, Verdict};
-
-/// Version of the command channel, carried in the `status` reply (`pv=`):
-/// the result protocol's next version, the first with commands.
-pub const VERSION: u32 = 5;
-/// Type letter of a request line.
-pub const REQUEST: u8 = b'C';
-/// Type letter of a reply line.
-pub const REPLY: u8 = b'A';
-/// Most scans one `calibrate` may take.
-pub const MAX_CALIBRATION_SCANS: u16 = 100;
+pub use wire::{MAX_CALIBRATION_SCANS, REPLY, REQUEST, VERSION};

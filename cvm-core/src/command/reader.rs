@@ -1,8 +1,8 @@
 //! Cutting received bytes into request lines in a fixed buffer, with the
 //! receiver's errors attached to the line they damaged.
 
-use super::MAX_LINE;
 use super::refusal::Refusal;
+use crate::protocol::MAX_LINE;
 
 /// An error the serial receiver reported while a line was arriving.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -2,11 +2,10 @@
 //! `A,<id>,err,<reason>[,<min>,<max>]*XXXX\n`, the id `-` when the
 //! request's own could not be trusted.
 
-use super::REPLY;
 use super::key::Key;
 use super::refusal::Refusal;
 use super::status::Status;
-use super::wire::{FrameError, checked_body, kv, parse_u32, split_once, value_source};
+use super::wire::{FrameError, REPLY, checked_body, kv, parse_u32, split_once, value_source};
 use crate::protocol::{LineBuf, LineSink, ParseError, Priority};
 use crate::settings::Source;
 

@@ -2,9 +2,10 @@
 
 use super::key::{Capacity, Key};
 use super::refusal::Refusal;
-use super::wire::{FrameError, checked_body, parse_u32, split_once};
-use super::{MAX_CALIBRATION_SCANS, MAX_LINE, REQUEST};
-use crate::protocol::{LineBuf, LineSink, Priority};
+use super::wire::{
+    FrameError, MAX_CALIBRATION_SCANS, REQUEST, checked_body, parse_u32, split_once,
+};
+use crate::protocol::{LineBuf, LineSink, MAX_LINE, Priority};
 
 /// A request, decoded.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -3,9 +3,8 @@
 //!
 //! `A,<id>,ok,status,pv=5,fw=..,j=15x15,cap=<cols>x<rows>,store=..,cols=<v>:<s>,rows=..,thr=..,pthr=..,scores=..,dcap=..,rst=..,boots=..,last=<scans>/<defects>/<objects>/<verdict>`
 
-use super::VERSION;
 use super::key::Key;
-use super::wire::{kv, parse_u32, split_once, value_source};
+use super::wire::{VERSION, kv, parse_u32, split_once, value_source};
 use crate::protocol::{LineBuf, MAX_FW, ParseError};
 use crate::settings::{ResetCause, Source};
 

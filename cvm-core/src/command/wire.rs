@@ -3,6 +3,16 @@
 
 use crate::protocol::crc16;
 
+/// Version of the command channel, carried in the `status` reply (`pv=`):
+/// the result protocol's next version, the first with commands.
+pub const VERSION: u32 = 5;
+/// Type letter of a request line.
+pub const REQUEST: u8 = b'C';
+/// Type letter of a reply line.
+pub const REPLY: u8 = b'A';
+/// Most scans one `calibrate` may take.
+pub const MAX_CALIBRATION_SCANS: u16 = 100;
+
 /// Why a received line's frame is not accepted.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(super) enum FrameError {
