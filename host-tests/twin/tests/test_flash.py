@@ -6,9 +6,12 @@ import os
 import tempfile
 import unittest
 
+from unicorn.arm_const import UC_ARM_REG_R0
+
 from h743twin import flash
 from h743twin.core import Stop
 from h743twin.flash import BANK2_BASE, Bank2, Bank2Window, FlashInterface, PowerCut
+import test_memory_dma
 from test_model import run_until, world
 
 KEYR2, CR2, SR2, CCR2 = 0x104, 0x10C, 0x110, 0x114
@@ -19,6 +22,36 @@ EOPIE = 1 << 16
 PROGRAM = round(flash.PROGRAM_US * 400)   # cycles at 400 MHz
 ERASE = round(flash.ERASE_US * 400)
 SECTOR = 128 << 10
+
+
+class CpuThroughTheBus(unittest.TestCase):
+    """The core's loads and stores at 0x0810_0000 reach the flash model."""
+
+    def machine(self):
+        bus, core, _ = test_memory_dma.machine(BANK2_BASE)
+        bank = Bank2()
+        bank.data[0:4] = bytes.fromhex("efbeadde")
+        f = FlashInterface(bus, core.nvic, bank)
+        bus.add(0x5200_2000, 0x1000, f)
+        bus.add(BANK2_BASE, flash.BANK2_SIZE, Bank2Window(f))
+        return core, f, bank
+
+    def test_a_load_reads_the_cells_and_a_store_without_pg_is_refused(self):
+        # The program: r0 = [0x0810_0000]; [0x0810_0004] = r0; `b .`
+        core, f, bank = self.machine()
+        core.run_until(2_000)
+        self.assertEqual(core.uc.reg_read(UC_ARM_REG_R0), 0xDEAD_BEEF)
+        self.assertEqual(f.read(SR2, 4), PGSERR, "a store with PG = 0")
+        self.assertEqual(bank.data[4:8], b"\xff" * 4)
+
+    def test_a_store_with_pg_fills_the_write_buffer(self):
+        core, f, bank = self.machine()
+        f.write(KEYR2, 4, 0x4567_0123)
+        f.write(KEYR2, 4, 0xCDEF_89AB)
+        f.write(CR2, 4, PG)
+        core.run_until(2_000)
+        self.assertEqual(f.read(SR2, 4), WBNE)
+        self.assertEqual(f.buf_word, 0)
 
 
 class Flash(unittest.TestCase):
