@@ -4,6 +4,7 @@
 /// Version of the scoring code, carried in every header line (`fw=`).
 pub const VERSION: &str = env!("CARGO_PKG_VERSION");
 
+pub mod command;
 pub mod config;
 pub mod flags;
 pub mod objects;

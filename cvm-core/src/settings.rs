@@ -78,3 +78,36 @@ pub struct Settings {
     /// Starts since power-on, this one included (`boots`; 1 on the host).
     pub boots: u32,
 }
+
+/// Where a runtime setting's value came from, as the command channel's
+/// `status`, `get` and `set` replies report it (docs/protocol.md, "Command
+/// channel").
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Source {
+    /// The value compiled into the firmware (`d`).
+    Default,
+    /// The value of the settings record read from flash at start-up (`f`).
+    Flash,
+    /// Changed through the command channel since start-up and not saved (`c`).
+    Changed,
+}
+
+impl Source {
+    /// Every source, in the order of the protocol document.
+    pub const ALL: [Source; 3] = [Source::Default, Source::Flash, Source::Changed];
+
+    /// The letter a reply carries after the value.
+    pub const fn as_char(self) -> u8 {
+        match self {
+            Source::Default => b'd',
+            Source::Flash => b'f',
+            Source::Changed => b'c',
+        }
+    }
+
+    /// The source whose letter is `c`.
+    pub fn from_char(c: u8) -> Option<Self> {
+        Source::ALL.into_iter().find(|s| s.as_char() == c)
+    }
+}

@@ -98,6 +98,8 @@ pub struct TwinArgs {
     /// A debugger is attached (the DBGMCU freeze bits apply while the core is halted)
     #[arg(long)]
     pub debugger: bool,
+    #[command(flatten)]
+    pub link: crate::twin_requests::TwinRequestArgs,
 }
 
 /// The repository root (this crate lives in host-tests/dmap).
@@ -455,6 +457,7 @@ pub fn run_model(
     if args.debugger {
         cmd.arg("--debugger");
     }
+    args.link.apply(&mut cmd);
     let (model, mut stdout, stderr) = Supervised::spawn(&mut cmd, dir)?;
     let errors = pass_stderr(stderr);
     let mut buf = [0u8; 8192];
@@ -526,6 +529,7 @@ pub fn run(args: &TwinArgs) -> Result<()> {
     for f in &args.faults {
         check_fault(f, beams)?;
     }
+    args.link.check(beams)?;
     let config = h743_config(&header)?;
     let file = twin_file(&header, &emufile)?;
     drop(emufile);

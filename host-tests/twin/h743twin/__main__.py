@@ -8,6 +8,8 @@ import json
 import sys
 
 from .core import Stop
+from .flash import Bank2, PowerCut
+from .usart_rx import parse_requests
 from .detector import Detector, Scan, parse_fault
 from .machine import Machine, cycles_of_ms
 
@@ -27,14 +29,23 @@ def main(argv=None):
     ap.add_argument("--max-instructions", type=int, help="stop after this many instructions")
     ap.add_argument("--profile", action="store_true",
                     help="instructions per function from the first beam on (in the JSON)")
+    ap.add_argument("--requests", help="what the host sends on USART3 and at which beams (usart_rx.py)")
+    ap.add_argument("--flash", help="bank 2's contents: loaded if the file exists, saved at the end")
+    ap.add_argument("--power-cut", type=int, metavar="N", help="cut power at the N-th flash operation")
     args = ap.parse_args(argv)
 
     try:
         faults = [parse_fault(f) for f in args.fault]
-    except ValueError as e:
+        requests = parse_requests(args.requests) if args.requests else []
+        bank2 = Bank2.load(args.flash) if args.flash else Bank2()
+    except (ValueError, Stop) as e:
         print(f"h743twin: {e}", file=sys.stderr)
         return 2
-    m = Machine(args.elf, debugger=args.debugger)
+    if requests and not args.scan:
+        print("h743twin: --requests needs --scan (requests start at beams)", file=sys.stderr)
+        return 2
+    bank2.cut_at = args.power_cut
+    m = Machine(args.elf, debugger=args.debugger, bank2=bank2)
     status = "time"
     error = None
     try:
@@ -42,6 +53,10 @@ def main(argv=None):
             scan = Scan.read_raw(args.scan)
             det = Detector(m, scan, args.beam_us, args.start_ms, faults)
             m.attach(det)
+            for beam, data, errors in requests:
+                if beam >= len(det.times):
+                    raise Stop(f"request at beam {beam}: the scan has {len(det.times)} beams")
+                m.bus.at(det.times[beam], lambda d=data, e=errors: m.usart.rx.send(d, e), owner="host")
             if args.profile:
                 # Boot first, then count: the profile is of the beams.
                 m.run(max(det.times[0] - 1000, 0) if det.times else 0)
@@ -57,12 +72,19 @@ def main(argv=None):
             status = m.run(end, done, args.max_instructions)
         else:
             status = m.run(cycles_of_ms(args.run_ms or 100.0), None, args.max_instructions)
+    except PowerCut as e:
+        status = "power cut"
+        stats_note = str(e)
     except Stop as e:
         error = str(e)
+    if args.flash:
+        m.bank2.save(args.flash)
     sys.stdout.buffer.write(bytes(b for b, _ in m.uart))
     sys.stdout.flush()
     stats = m.stats()
     stats["status"] = "error" if error else status
+    if status == "power cut":
+        stats["power_cut"] = stats_note
     if error:
         stats["error"] = error
     print(json.dumps(stats), file=sys.stderr)

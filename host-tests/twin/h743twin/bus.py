@@ -16,6 +16,7 @@ from unicorn import UC_HOOK_MEM_PROT, UC_MEM_FETCH_PROT, UC_MEM_WRITE_PROT, UC_P
 from unicorn.arm_const import UC_ARM_REG_PC
 
 from .core import Reset, Stop
+from .flash import BANK2_BASE, BANK2_SIZE
 
 MEMORIES = (
     ("ITCM", 0x0000_0000, 64 << 10),
@@ -80,8 +81,14 @@ class Bus:
     def attach(self, core):
         self.core = core
         uc = core.uc
-        for _, base, size in MEMORIES:
-            uc.mem_map(base, size)
+        for name, base, size in MEMORIES:
+            if name == "FLASH":
+                # Bank 2 goes through the flash interface's model
+                # (flash.py): its writes program, its reads check ECC.
+                uc.mem_map(base, size - BANK2_SIZE)
+                uc.mmio_map(BANK2_BASE, BANK2_SIZE, self._read, BANK2_BASE, self._write, BANK2_BASE)
+            else:
+                uc.mem_map(base, size)
         uc.mmio_map(PERIPH_BASE, PERIPH_SIZE, self._read, PERIPH_BASE,
                     self._write, PERIPH_BASE)
         uc.mmio_map(PPB_BASE, PPB_SIZE, self._read, PPB_BASE, self._write, PPB_BASE)

@@ -11,6 +11,7 @@ from . import system
 from .bus import Bus
 from .core import CLOCK_HZ, Core, Reset, Stop
 from .dma import STREAM_IRQS, Dma, Dmamux
+from .flash import BANK2_BASE, BANK2_SIZE, FLASH_IRQ, Bank2, Bank2Window, FlashInterface
 from .serial import Spi, Usart
 
 # The embassy time driver runs on TIM12 (time-driver-any picks it on this chip).
@@ -24,8 +25,9 @@ WEDGE_ADDR = 0x0000_0000  # ITCM: unused by the firmware
 
 
 class Machine:
-    def __init__(self, elf_path, debugger=False):
+    def __init__(self, elf_path, debugger=False, bank2=None):
         self.debugger = debugger
+        self.bank2 = bank2
         self.bus = Bus()
         self.core = Core(self.bus)
         self.elf_path = elf_path
@@ -56,7 +58,10 @@ class Machine:
         self.rcc.on_ahb2enr = bus.sram_clocks_changed
         bus.sram_clocks_changed()  # off after every reset
         self.pwr = bus.add(0x5802_4800, 0x400, system.Pwr())
-        self.flash = bus.add(0x5200_2000, 0x1000, system.Flash())
+        if getattr(self, "bank2", None) is None:
+            self.bank2 = Bank2()  # kept across resets: see flash.py
+        self.flash = bus.add(0x5200_2000, 0x1000, FlashInterface(bus, nvic, self.bank2))
+        bus.add(BANK2_BASE, BANK2_SIZE, Bank2Window(self.flash))
         self.syscfg = bus.add(0x5800_0400, 0x400, system.Syscfg(), clock=(0xF4, 1, "SYSCFG"))
         self.exti = bus.add(0x5800_0000, 0x400, system.Exti(nvic))
         self.dbgmcu = bus.add(0x5C00_1000, 0x400, system.Dbgmcu())
@@ -81,7 +86,7 @@ class Machine:
         self.gpio["D"].listeners.append(self._gpiod_changed)
         bus.posted = {}
         bus.irq_owner = {TIM12_IRQ: 0x4000_1800, TIM13_IRQ: 0x4000_1C00, 35: 0x4001_3000,
-                         39: 0x4000_4800, **{irq: 0x4002_0000 for irq in STREAM_IRQS}}
+                         39: 0x4000_4800, FLASH_IRQ: 0x5200_2000, **{irq: 0x4002_0000 for irq in STREAM_IRQS}}
 
     def _gpiod_changed(self, pin, level):
         if pin == 14 and self.detector:
@@ -307,6 +312,11 @@ def _stats(self):
         "resets": [{"cause": c, "ms": round(t * 1e3 / CLOCK_HZ, 3)} for c, t in self.resets],
         "exti_edges": self.exti.edges,
         "spi_mode_faults": self.spi.mode_faults,
+        "uart_rx_bytes": self.usart.rx.received,
+        "uart_rx_overruns": self.usart.rx.overruns,
+        "uart_rx_lost_while_off": self.usart.rx.lost_off,
+        "flash_operations": self.bank2.ops,
+        "flash_double_programs": self.bank2.double_programs,
         # Interrupts unpended while a write to their peripheral may still
         # be in the write buffer (no read-back, no DSB): see bus.posted_write.
         "unordered_unpends": len(self.bus.unordered_unpends),

@@ -1,5 +1,5 @@
 """SPI1 (RM0433 §50, the H7 SPI with FIFOs, TSIZE and CSTART) as a master,
-and USART3 (RM0433 §48) as a transmitter.
+and USART3 (RM0433 §48) as a transmitter; its receiver is in usart_rx.py.
 
 SPI1: frames of DSIZE+1 bits take (DSIZE+1) SCK periods, SCK being the
 kernel clock (PLL1 Q through D2CCIP1R) divided by 2^(MBR+1). Full duplex
@@ -24,6 +24,7 @@ the kernel clock divided by BRR); every byte is captured with its time.
 
 from .core import CLOCK_HZ, Stop
 from .dma import REQ_SPI1_RX, REQ_SPI1_TX, REQ_USART3_TX
+from .usart_rx import REQ_USART3_RX, Receiver
 
 SPI1_IRQ = 35
 USART3_IRQ = 39
@@ -329,6 +330,7 @@ class Usart:
         self.busy_until = 0  # fault injection: the line is held until then
         self.bytes = 0
         dma.register(REQ_USART3_TX, self.tx_request)
+        self.rx = Receiver(self)  # usart_rx.py
 
     def enabled(self):
         return self.r[0] & 1 and self.r[0] >> 3 & 1
@@ -352,7 +354,7 @@ class Usart:
         if self.tc:
             v |= 1 << 6
         v |= (1 << 21) | (1 << 22) if self.enabled() else 0  # TEACK, REACK
-        return v
+        return v | self.rx.isr()
 
     def byte_cycles(self):
         brr = self.r[0x0C]
@@ -389,14 +391,17 @@ class Usart:
 
     def update(self):
         cr1 = self.r[0]
-        irq = (cr1 >> 7 & 1 and self.txe()) or (cr1 >> 6 & 1 and self.tc)
+        irq = (cr1 >> 7 & 1 and self.txe()) or (cr1 >> 6 & 1 and self.tc) or self.rx.irq()
         self.nvic.set_line(USART3_IRQ, bool(irq))
         self.dma.poll(REQ_USART3_TX)
+        self.dma.poll(REQ_USART3_RX)
 
     def read(self, off, size):
         if off == 0x1C:
             return self.isr()
-        if off in (0x18, 0x20, 0x24, 0x28):
+        if off == 0x24:
+            return self.rx.rdr()
+        if off in (0x18, 0x20, 0x28):
             return 0
         if off in self.r:
             return self.r[off]
@@ -412,8 +417,10 @@ class Usart:
         elif off == 0x20:  # ICR
             if value >> 6 & 1:
                 self.tc = False
+            self.rx.clear(value)
         elif off == 0x18:
-            pass  # RQR
+            if value >> 3 & 1:  # RQR.RXFRQ
+                self.rx.flush()
         elif off in self.r:
             self.r[off] = value
             self.start_shift()

@@ -233,10 +233,6 @@ class Pwr(Registers):
         self.settle()
 
 
-class Flash(Registers):
-    RESET = {0x00: 0x0000_0037}  # ACR: 7 wait states, WRHIGHFREQ 3
-
-
 class Syscfg(Registers):
     RESET = {0x04: 0, 0x08: 0, 0x0C: 0, 0x10: 0, 0x14: 0,  # PMCR, EXTICR1-4
              0x20: 0, 0x24: 0, 0x28: 0, 0x2C: 0}  # CCCSR, CCVR, CCCR, PWRCR

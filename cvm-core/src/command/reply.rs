@@ -1,0 +1,193 @@
+//! Reply lines, board to host: `A,<id>,ok,...*XXXX\n` or
+//! `A,<id>,err,<reason>[,<min>,<max>]*XXXX\n`, the id `-` when the
+//! request's own could not be trusted.
+
+use super::key::Key;
+use super::refusal::Refusal;
+use super::status::Status;
+use super::wire::{FrameError, REPLY, checked_body, kv, parse_u32, split_once, value_source};
+use crate::protocol::{LineBuf, LineSink, ParseError, Priority};
+use crate::settings::Source;
+
+/// What a finished calibration found: both thresholds and the statistics
+/// behind them, in the units of the header's `thr` (magnitudes) and
+/// `pthr` (power magnitudes).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Calibration {
+    /// Scans it took.
+    pub scans: u16,
+    /// Positions with data it took them from.
+    pub positions: u32,
+    pub threshold: u32,
+    pub power_threshold: u32,
+    /// Median and median absolute deviation of the magnitudes.
+    pub median: u32,
+    pub mad: u32,
+    /// Median and median absolute deviation of the power magnitudes.
+    pub power_median: u32,
+    pub power_mad: u32,
+}
+
+/// A reply, decoded.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Reply<'s> {
+    /// `ok,status,...` (see [`Status`]).
+    Status(Status<'s>),
+    /// `ok,<key>=<value>:<source>`: the answer to `get`, and to `set`
+    /// (the value now in effect for the next scan).
+    Value {
+        key: Key,
+        value: u32,
+        source: Source,
+    },
+    /// `ok,calibrate,<n>`: the next n scans calibrate.
+    Calibrating(u16),
+    /// `ok,calibrated,scans=..,positions=..,thr=..,pthr=..,med=..,mad=..,pmed=..,pmad=..`,
+    /// once the last of them has ended; carries the `calibrate` request's id.
+    Calibrated(Calibration),
+    /// `ok,save`: written to flash.
+    Saved,
+    /// `ok,defaults`: the compiled values are in effect from the next scan.
+    Defaults,
+    /// `ok,reset`: the board restarts after this line.
+    Resetting,
+    /// `err,<reason>`: nothing changed.
+    Refused(Refusal),
+}
+
+/// Writes the reply line; `id` is the request's, or `None` when it could
+/// not be trusted (written `-`).
+pub fn encode_reply(id: Option<u32>, r: &Reply, sink: &mut impl LineSink) {
+    let mut l = LineBuf::new(REPLY);
+    l.byte(b',');
+    match id {
+        Some(id) => l.u64(id as u64),
+        None => l.byte(b'-'),
+    }
+    l.field(if matches!(r, Reply::Refused(_)) {
+        b"err"
+    } else {
+        b"ok"
+    });
+    match *r {
+        Reply::Status(ref s) => {
+            l.field(b"status");
+            s.encode(&mut l);
+        }
+        Reply::Value { key, value, source } => {
+            l.kv_u64(key.name().as_bytes(), value as u64);
+            l.byte(b':');
+            l.byte(source.as_char());
+        }
+        Reply::Calibrating(n) => {
+            l.field(b"calibrate");
+            l.byte(b',');
+            l.u64(n as u64);
+        }
+        Reply::Calibrated(c) => {
+            l.field(b"calibrated");
+            l.kv_u64(b"scans", c.scans as u64);
+            l.kv_u64(b"positions", c.positions as u64);
+            l.kv_u64(b"thr", c.threshold as u64);
+            l.kv_u64(b"pthr", c.power_threshold as u64);
+            l.kv_u64(b"med", c.median as u64);
+            l.kv_u64(b"mad", c.mad as u64);
+            l.kv_u64(b"pmed", c.power_median as u64);
+            l.kv_u64(b"pmad", c.power_mad as u64);
+        }
+        Reply::Saved => l.field(b"save"),
+        Reply::Defaults => l.field(b"defaults"),
+        Reply::Resetting => l.field(b"reset"),
+        Reply::Refused(why) => {
+            l.field(why.word().as_bytes());
+            if let Refusal::OutOfRange { min, max } = why {
+                l.byte(b',');
+                l.u64(min as u64);
+                l.byte(b',');
+                l.u64(max as u64);
+            }
+        }
+    }
+    sink.line(l.finish(), Priority::Keep);
+}
+
+/// Decodes a reply line: the id it echoes (`None` for `-`) and the reply.
+pub fn parse_reply(line: &[u8]) -> Result<(Option<u32>, Reply<'_>), ParseError> {
+    let body = checked_body(line).map_err(|e| match e {
+        FrameError::NoChecksum => ParseError::NoChecksum,
+        FrameError::Checksum => ParseError::Checksum,
+    })?;
+    let mut f = body.split(|&b| b == b',');
+    if f.next() != Some(&[REPLY][..]) {
+        return Err(ParseError::Type);
+    }
+    let id = match f.next() {
+        Some(b"-") => None,
+        Some(s) => Some(parse_u32(s).ok_or(ParseError::Format)?),
+        None => return Err(ParseError::Format),
+    };
+    let reply = match f.next() {
+        Some(b"ok") => parse_ok(&mut f)?,
+        Some(b"err") => Reply::Refused(parse_refusal(&mut f)?),
+        _ => return Err(ParseError::Format),
+    };
+    if f.next().is_some() {
+        return Err(ParseError::Format);
+    }
+    if id.is_none() && !matches!(reply, Reply::Refused(_)) {
+        return Err(ParseError::Format);
+    }
+    Ok((id, reply))
+}
+
+fn parse_ok<'s, I: Iterator<Item = &'s [u8]>>(f: &mut I) -> Result<Reply<'s>, ParseError> {
+    let what = f.next().ok_or(ParseError::Format)?;
+    Ok(match what {
+        b"status" => return Status::parse(f).map(Reply::Status),
+        b"save" => Reply::Saved,
+        b"defaults" => Reply::Defaults,
+        b"reset" => Reply::Resetting,
+        b"calibrate" => {
+            let n = f.next().and_then(parse_u32).ok_or(ParseError::Format)?;
+            Reply::Calibrating(u16::try_from(n).map_err(|_| ParseError::Format)?)
+        }
+        b"calibrated" => {
+            let mut field = |key: &str| {
+                f.next()
+                    .and_then(|x| kv(x, key.as_bytes()))
+                    .and_then(parse_u32)
+                    .ok_or(ParseError::Format)
+            };
+            let scans = u16::try_from(field("scans")?).map_err(|_| ParseError::Format)?;
+            Reply::Calibrated(Calibration {
+                scans,
+                positions: field("positions")?,
+                threshold: field("thr")?,
+                power_threshold: field("pthr")?,
+                median: field("med")?,
+                mad: field("mad")?,
+                power_median: field("pmed")?,
+                power_mad: field("pmad")?,
+            })
+        }
+        kv_field => {
+            let (name, rest) = split_once(kv_field, b'=').ok_or(ParseError::Format)?;
+            let key = Key::from_name(name).ok_or(ParseError::Format)?;
+            let (value, source) = value_source(rest).ok_or(ParseError::Format)?;
+            Reply::Value { key, value, source }
+        }
+    })
+}
+
+fn parse_refusal<'s, I: Iterator<Item = &'s [u8]>>(f: &mut I) -> Result<Refusal, ParseError> {
+    let word = f.next().ok_or(ParseError::Format)?;
+    if word == b"range" {
+        let min = f.next().and_then(parse_u32).ok_or(ParseError::Format)?;
+        let max = f.next().and_then(parse_u32).ok_or(ParseError::Format)?;
+        return Ok(Refusal::OutOfRange { min, max });
+    }
+    Refusal::SIMPLE
+        .into_iter()
+        .find(|r| r.word().as_bytes() == word)
+        .ok_or(ParseError::Format)
+}

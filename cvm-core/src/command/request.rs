@@ -1,0 +1,128 @@
+//! Request lines, host to board: `C,<id>,<command>[,<argument>]*XXXX\n`.
+
+use super::key::{Capacity, Key};
+use super::refusal::Refusal;
+use super::wire::{
+    FrameError, MAX_CALIBRATION_SCANS, REQUEST, checked_body, parse_u32, split_once,
+};
+use crate::protocol::{LineBuf, LineSink, MAX_LINE, Priority};
+
+/// A request, decoded.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Request {
+    /// `status`
+    Status,
+    /// `get,<key>`
+    Get(Key),
+    /// `set,<key>=<value>`, the value checked against the key's range.
+    Set(Key, u32),
+    /// `calibrate,<n>`: the next n scans are of defect-free reference parts.
+    Calibrate(u16),
+    /// `save`: the settings in effect go to flash.
+    Save,
+    /// `defaults`: back to the compiled values (not saved).
+    Defaults,
+    /// `reset`: the board restarts once the reply is out.
+    Reset,
+}
+
+/// Writes the request line with this id.
+pub fn encode_request(id: u32, r: &Request, sink: &mut impl LineSink) {
+    let mut l = LineBuf::new(REQUEST);
+    l.byte(b',');
+    l.u64(id as u64);
+    match *r {
+        Request::Status => l.field(b"status"),
+        Request::Get(k) => {
+            l.field(b"get");
+            l.field(k.name().as_bytes());
+        }
+        Request::Set(k, v) => {
+            l.field(b"set");
+            l.kv_u64(k.name().as_bytes(), v as u64);
+        }
+        Request::Calibrate(n) => {
+            l.field(b"calibrate");
+            l.byte(b',');
+            l.u64(n as u64);
+        }
+        Request::Save => l.field(b"save"),
+        Request::Defaults => l.field(b"defaults"),
+        Request::Reset => l.field(b"reset"),
+    }
+    sink.line(l.finish(), Priority::Keep);
+}
+
+/// A refused request: the id to echo (`None` when the line's id cannot
+/// be trusted: a bad checksum, or no readable id) and the reason.
+pub type Refused = (Option<u32>, Refusal);
+
+/// Decodes a received request line (its `\n` or `\r\n` optional), checks
+/// every value against `cap`, and returns its id and request, or what to
+/// refuse it with.
+pub fn parse_request(line: &[u8], cap: &Capacity) -> Result<(u32, Request), Refused> {
+    let without_nl = line.strip_suffix(b"\n").unwrap_or(line);
+    if without_nl.len() >= MAX_LINE {
+        return Err((None, Refusal::TooLong));
+    }
+    let body = match checked_body(line) {
+        Ok(b) => b,
+        Err(FrameError::Checksum) => return Err((None, Refusal::Checksum)),
+        Err(FrameError::NoChecksum) => return Err((None, Refusal::Malformed)),
+    };
+    let mut f = body.split(|&b| b == b',');
+    if f.next() != Some(&[REQUEST][..]) {
+        return Err((None, Refusal::Malformed));
+    }
+    let id = f
+        .next()
+        .and_then(parse_u32)
+        .ok_or((None, Refusal::Malformed))?;
+    let refuse = |r| (Some(id), r);
+    let command = f.next().ok_or(refuse(Refusal::Malformed))?;
+    let arg = f.next();
+    if f.next().is_some() {
+        return Err(refuse(Refusal::Malformed));
+    }
+    let bare = |r: Request| match arg {
+        None => Ok((id, r)),
+        Some(_) => Err(refuse(Refusal::Malformed)),
+    };
+    match command {
+        b"status" => bare(Request::Status),
+        b"save" => bare(Request::Save),
+        b"defaults" => bare(Request::Defaults),
+        b"reset" => bare(Request::Reset),
+        b"get" => {
+            let name = arg.ok_or(refuse(Refusal::Malformed))?;
+            let key = Key::from_name(name).ok_or(refuse(Refusal::UnknownKey))?;
+            Ok((id, Request::Get(key)))
+        }
+        b"set" => {
+            let (name, value) = arg
+                .and_then(|a| split_once(a, b'='))
+                .ok_or(refuse(Refusal::Malformed))?;
+            let key = Key::from_name(name).ok_or(refuse(Refusal::UnknownKey))?;
+            let v = key.parse_value(value, cap).map_err(refuse)?;
+            Ok((id, Request::Set(key, v)))
+        }
+        b"calibrate" => {
+            let n = arg.ok_or(refuse(Refusal::Malformed))?;
+            if n.is_empty() || !n.iter().all(u8::is_ascii_digit) {
+                return Err(refuse(Refusal::WrongType));
+            }
+            let range = Refusal::OutOfRange {
+                min: 1,
+                max: MAX_CALIBRATION_SCANS as u32,
+            };
+            match parse_u32(n).and_then(|n| u16::try_from(n).ok()) {
+                Some(n) if (1..=MAX_CALIBRATION_SCANS).contains(&n) => {
+                    Ok((id, Request::Calibrate(n)))
+                }
+                _ => Err(refuse(range)),
+            }
+        }
+        _ => Err(refuse(Refusal::UnknownCommand)),
+    }
+}

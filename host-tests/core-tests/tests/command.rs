@@ -1,0 +1,642 @@
+//! The command channel's codec (cvm_core::command, docs/protocol.md
+//! "Command channel"): hand-written lines checked byte for byte (their CRC
+//! from a bit-by-bit CRC-16 written here, not the crate's table), round
+//! trips of every request and reply, every refusal, the line length bound,
+//! the line reader, and arbitrary bytes.
+
+use cvm_core::Settings;
+use cvm_core::command::{
+    Calibration, Capacity, Event, Key, LastScan, LineReader, LinkError, MAX_CALIBRATION_SCANS,
+    MAX_LINE, Refusal, Reply, Request, Source, Status, Store, Verdict, encode_reply,
+    encode_request, parse_reply, parse_request,
+};
+use cvm_core::protocol::{LineSink, MAX_FW, ParseError, Priority, ResetCause};
+use proptest::prelude::*;
+
+#[derive(Default)]
+struct Lines(Vec<(Vec<u8>, Priority)>);
+impl LineSink for Lines {
+    fn line(&mut self, line: &[u8], p: Priority) {
+        self.0.push((line.to_vec(), p));
+    }
+}
+
+/// CRC-16/CCITT-FALSE bit by bit (polynomial 0x1021, initial 0xFFFF).
+fn crc_bitwise(data: &[u8]) -> u16 {
+    let mut crc: u16 = 0xFFFF;
+    for &b in data {
+        crc ^= (b as u16) << 8;
+        for _ in 0..8 {
+            crc = if crc & 0x8000 != 0 {
+                (crc << 1) ^ 0x1021
+            } else {
+                crc << 1
+            };
+        }
+    }
+    crc
+}
+
+/// `body*XXXX\n`, framed independently of the crate.
+fn framed(body: &str) -> Vec<u8> {
+    format!("{body}*{:04X}\n", crc_bitwise(body.as_bytes())).into_bytes()
+}
+
+const CAP: Capacity = Capacity {
+    max_cols: 300,
+    max_rows: 1000,
+    max_dcap: 16,
+};
+
+fn request_line(id: u32, r: &Request) -> Vec<u8> {
+    let mut s = Lines::default();
+    encode_request(id, r, &mut s);
+    assert_eq!(s.0.len(), 1);
+    assert_eq!(s.0[0].1, Priority::Keep);
+    s.0.remove(0).0
+}
+
+fn reply_line(id: Option<u32>, r: &Reply) -> Vec<u8> {
+    let mut s = Lines::default();
+    encode_reply(id, r, &mut s);
+    assert_eq!(s.0.len(), 1);
+    assert_eq!(s.0[0].1, Priority::Keep);
+    s.0.remove(0).0
+}
+
+#[test]
+fn crc_reference_is_the_catalogued_one() {
+    assert_eq!(crc_bitwise(b"123456789"), 0x29B1);
+    assert_eq!(cvm_core::protocol::crc16(b"123456789"), 0x29B1);
+}
+
+#[test]
+fn requests_are_written_as_specified() {
+    let cases: [(u32, Request, &str); 9] = [
+        (1, Request::Status, "C,1,status"),
+        (42, Request::Get(Key::Threshold), "C,42,get,thr"),
+        (7, Request::Get(Key::Rows), "C,7,get,rows"),
+        (
+            4294967295,
+            Request::Set(Key::PowerThreshold, 3277),
+            "C,4294967295,set,pthr=3277",
+        ),
+        (0, Request::Set(Key::Scores, 1), "C,0,set,scores=1"),
+        (9, Request::Calibrate(5), "C,9,calibrate,5"),
+        (10, Request::Save, "C,10,save"),
+        (11, Request::Defaults, "C,11,defaults"),
+        (12, Request::Reset, "C,12,reset"),
+    ];
+    for (id, r, body) in cases {
+        let line = request_line(id, &r);
+        assert_eq!(line, framed(body), "{body}");
+        assert_eq!(parse_request(&line, &CAP), Ok((id, r)), "{body}");
+    }
+}
+
+fn status_example() -> Status<'static> {
+    Status {
+        firmware: "0.1.0",
+        j1: 15,
+        j2: 15,
+        max_cols: 300,
+        max_rows: 1000,
+        store: Store::Loaded,
+        values: [
+            (300, Source::Default),
+            (300, Source::Flash),
+            (4194304, Source::Changed),
+            (3277, Source::Default),
+            (0, Source::Default),
+            (0, Source::Flash),
+        ],
+        reset_cause: ResetCause::PowerOn,
+        boots: 3,
+        last: LastScan {
+            scans: 2,
+            defects: 14,
+            objects: 1,
+            verdict: Verdict::Fail,
+        },
+    }
+}
+
+#[test]
+fn replies_are_written_as_specified() {
+    let cal = Calibration {
+        scans: 5,
+        positions: 1500,
+        threshold: 838861,
+        power_threshold: 3277,
+        median: 1000,
+        mad: 120,
+        power_median: 500,
+        power_mad: 60,
+    };
+    let cases: Vec<(Option<u32>, Reply, &str)> = vec![
+        (
+            Some(1),
+            Reply::Status(status_example()),
+            "A,1,ok,status,pv=5,fw=0.1.0,j=15x15,cap=300x1000,store=ok,cols=300:d,rows=300:f,\
+             thr=4194304:c,pthr=3277:d,scores=0:d,dcap=0:f,rst=por,boots=3,last=2/14/1/fail",
+        ),
+        (
+            Some(42),
+            Reply::Value {
+                key: Key::Threshold,
+                value: 4194304,
+                source: Source::Flash,
+            },
+            "A,42,ok,thr=4194304:f",
+        ),
+        (Some(9), Reply::Calibrating(5), "A,9,ok,calibrate,5"),
+        (
+            Some(9),
+            Reply::Calibrated(cal),
+            "A,9,ok,calibrated,scans=5,positions=1500,thr=838861,pthr=3277,med=1000,mad=120,pmed=500,pmad=60",
+        ),
+        (Some(10), Reply::Saved, "A,10,ok,save"),
+        (Some(11), Reply::Defaults, "A,11,ok,defaults"),
+        (Some(12), Reply::Resetting, "A,12,ok,reset"),
+        (
+            Some(3),
+            Reply::Refused(Refusal::OutOfRange { min: 1, max: 300 }),
+            "A,3,err,range,1,300",
+        ),
+        (None, Reply::Refused(Refusal::Checksum), "A,-,err,checksum"),
+        (
+            Some(5),
+            Reply::Refused(Refusal::UnknownKey),
+            "A,5,err,unknown-key",
+        ),
+    ];
+    for (id, r, body) in cases {
+        let line = reply_line(id, &r);
+        assert_eq!(
+            String::from_utf8_lossy(&line),
+            String::from_utf8_lossy(&framed(body))
+        );
+        assert_eq!(parse_reply(&line), Ok((id, r)), "{body}");
+    }
+}
+
+#[test]
+fn every_refusal_has_its_word_and_round_trips() {
+    let words = [
+        "checksum",
+        "malformed",
+        "too-long",
+        "unknown-command",
+        "unknown-key",
+        "type",
+        "busy",
+        "overrun",
+        "framing",
+        "noise",
+        "storage",
+    ];
+    for (r, w) in Refusal::SIMPLE.into_iter().zip(words) {
+        let line = reply_line(Some(77), &Reply::Refused(r));
+        assert_eq!(line, framed(&format!("A,77,err,{w}")));
+        assert_eq!(parse_reply(&line), Ok((Some(77), Reply::Refused(r))));
+        assert!(!r.to_string().is_empty());
+    }
+}
+
+/// The refusal each request line gets, with the id it echoes.
+#[test]
+fn every_refusal_of_a_request() {
+    let range = |min, max| Refusal::OutOfRange { min, max };
+    let cases: Vec<(&str, Option<u32>, Refusal)> = vec![
+        ("C,5,launch", Some(5), Refusal::UnknownCommand),
+        ("C,5,STATUS", Some(5), Refusal::UnknownCommand),
+        ("C,5,get,speed", Some(5), Refusal::UnknownKey),
+        ("C,5,set,speed=3", Some(5), Refusal::UnknownKey),
+        ("C,5,set,thr=abc", Some(5), Refusal::WrongType),
+        ("C,5,set,thr=-1", Some(5), Refusal::WrongType),
+        ("C,5,set,thr=", Some(5), Refusal::WrongType),
+        ("C,5,set,thr=0.5", Some(5), Refusal::WrongType),
+        ("C,5,set,scores=2", Some(5), Refusal::WrongType),
+        ("C,5,set,scores=01", Some(5), Refusal::WrongType),
+        ("C,5,set,scores=yes", Some(5), Refusal::WrongType),
+        ("C,5,calibrate,five", Some(5), Refusal::WrongType),
+        ("C,5,set,cols=0", Some(5), range(1, 300)),
+        ("C,5,set,cols=301", Some(5), range(1, 300)),
+        ("C,5,set,rows=1001", Some(5), range(1, 1000)),
+        ("C,5,set,dcap=17", Some(5), range(0, 16)),
+        ("C,5,set,thr=4294967296", Some(5), range(0, u32::MAX)),
+        ("C,5,set,pthr=99999999999", Some(5), range(0, u32::MAX)),
+        ("C,5,calibrate,0", Some(5), range(1, 100)),
+        ("C,5,calibrate,101", Some(5), range(1, 100)),
+        ("C,5,calibrate,70000", Some(5), range(1, 100)),
+        ("C,5", Some(5), Refusal::Malformed),
+        ("C,5,status,now", Some(5), Refusal::Malformed),
+        ("C,5,save,1", Some(5), Refusal::Malformed),
+        ("C,5,get", Some(5), Refusal::Malformed),
+        ("C,5,get,thr,pthr", Some(5), Refusal::Malformed),
+        ("C,5,set,thr", Some(5), Refusal::Malformed),
+        ("C,5,calibrate", Some(5), Refusal::Malformed),
+        ("C,x,status", None, Refusal::Malformed),
+        ("C,-1,status", None, Refusal::Malformed),
+        ("C,4294967296,status", None, Refusal::Malformed),
+        ("C,,status", None, Refusal::Malformed),
+        ("A,5,status", None, Refusal::Malformed),
+        ("H,v=4", None, Refusal::Malformed),
+        ("", None, Refusal::Malformed),
+    ];
+    for (body, id, why) in cases {
+        let line = framed(body);
+        assert_eq!(parse_request(&line, &CAP), Err((id, why)), "{body}");
+    }
+    // Framing failures, where the id cannot be trusted.
+    let good = framed("C,5,status");
+    let mut flipped = good.clone();
+    flipped[2] = b'6';
+    assert_eq!(
+        parse_request(&flipped, &CAP),
+        Err((None, Refusal::Checksum))
+    );
+    let lower = String::from_utf8(good.clone()).unwrap().to_lowercase();
+    let lower = lower.replace("c,5", "C,5");
+    if lower.as_bytes() != good.as_slice() {
+        assert_eq!(
+            parse_request(lower.as_bytes(), &CAP),
+            Err((None, Refusal::Malformed)),
+            "lower-case hex"
+        );
+    }
+    assert_eq!(
+        parse_request(b"C,5,status\n", &CAP),
+        Err((None, Refusal::Malformed))
+    );
+    assert_eq!(
+        parse_request(&good[..good.len() - 3], &CAP),
+        Err((None, Refusal::Malformed)),
+        "truncated trailer"
+    );
+    // The longest accepted line has 255 bytes before its `\n`.
+    let pad = |n: usize| {
+        let base = "C,5,get,";
+        let key = "x".repeat(n - base.len() - 5);
+        framed(&format!("{base}{key}"))
+    };
+    assert_eq!(pad(255).len(), 256);
+    assert_eq!(
+        parse_request(&pad(255), &CAP),
+        Err((Some(5), Refusal::UnknownKey))
+    );
+    assert_eq!(
+        parse_request(&pad(256), &CAP),
+        Err((None, Refusal::TooLong))
+    );
+    // `\r\n` is accepted like `\n`.
+    let mut crlf = good[..good.len() - 1].to_vec();
+    crlf.extend_from_slice(b"\r\n");
+    assert_eq!(parse_request(&crlf, &CAP), Ok((5, Request::Status)));
+}
+
+#[test]
+fn protocol_document_example() {
+    assert_eq!(
+        parse_request(b"C,1,set,thr=4194304*EE0C\n", &CAP),
+        Ok((1, Request::Set(Key::Threshold, 4194304)))
+    );
+    let reply = Reply::Value {
+        key: Key::Threshold,
+        value: 4194304,
+        source: Source::Changed,
+    };
+    assert_eq!(reply_line(Some(1), &reply), b"A,1,ok,thr=4194304:c*23E1\n");
+}
+
+#[test]
+fn keys_read_and_write_the_settings_value() {
+    let mut s = Settings {
+        cols: 300,
+        threshold: 4194304,
+        power_threshold: 3277,
+        scores: false,
+        max_defect_lines_per_row: 0,
+        firmware_version: "t",
+        reset_cause: ResetCause::PowerOn,
+        boots: 1,
+    };
+    assert_eq!(Key::Threshold.get(&s), Some(4194304));
+    assert_eq!(Key::Rows.get(&s), None);
+    assert!(Key::Threshold.set(&mut s, 7));
+    assert!(Key::PowerThreshold.set(&mut s, 8));
+    assert!(Key::Scores.set(&mut s, 1));
+    assert!(Key::DefectCap.set(&mut s, 16));
+    assert!(Key::Cols.set(&mut s, 9));
+    assert!(!Key::Rows.set(&mut s, 9));
+    assert!(!Key::Scores.set(&mut s, 2));
+    assert!(!Key::DefectCap.set(&mut s, 70000));
+    assert!(!Key::Cols.set(&mut s, 0));
+    assert_eq!(
+        (
+            s.threshold,
+            s.power_threshold,
+            s.scores,
+            s.max_defect_lines_per_row,
+            s.cols
+        ),
+        (7, 8, true, 16, 9)
+    );
+    let names: Vec<_> = Key::ALL.iter().map(|k| k.name()).collect();
+    assert_eq!(names, ["cols", "rows", "thr", "pthr", "scores", "dcap"]);
+    for k in Key::ALL {
+        assert_eq!(Key::from_name(k.name().as_bytes()), Some(k));
+    }
+    for src in Source::ALL {
+        assert_eq!(Source::from_char(src.as_char()), Some(src));
+    }
+    assert_eq!(
+        Source::ALL.map(|s| s.as_char()),
+        [b'd', b'f', b'c'],
+        "the letters of the protocol document"
+    );
+}
+
+#[test]
+fn the_longest_status_fits_a_line() {
+    let mut s = status_example();
+    s.firmware = "0123456789abcdefghijklmnopqrstuvwxyz";
+    s.j1 = 15;
+    s.j2 = 15;
+    s.max_cols = u16::MAX;
+    s.max_rows = u16::MAX;
+    s.store = Store::Unreadable;
+    s.values = [
+        (65535, Source::Changed),
+        (65535, Source::Changed),
+        (u32::MAX, Source::Changed),
+        (u32::MAX, Source::Changed),
+        (1, Source::Changed),
+        (65535, Source::Changed),
+    ];
+    s.reset_cause = ResetCause::Other;
+    s.boots = u32::MAX;
+    s.last = LastScan {
+        scans: u32::MAX,
+        defects: u32::MAX,
+        objects: u32::MAX,
+        verdict: Verdict::NoScan,
+    };
+    let line = reply_line(Some(u32::MAX), &Reply::Status(s));
+    let star = line.iter().rposition(|&c| c == b'*').unwrap();
+    assert!(star <= 250, "{star} bytes before the `*`");
+    let mut want = s;
+    want.firmware = &"0123456789abcdefghijklmnopqrstuvwxyz"[..MAX_FW];
+    assert_eq!(
+        parse_reply(&line),
+        Ok((Some(u32::MAX), Reply::Status(want)))
+    );
+    // Calibrated, the next longest.
+    let c = Calibration {
+        scans: MAX_CALIBRATION_SCANS,
+        positions: u32::MAX,
+        threshold: u32::MAX,
+        power_threshold: u32::MAX,
+        median: u32::MAX,
+        mad: u32::MAX,
+        power_median: u32::MAX,
+        power_mad: u32::MAX,
+    };
+    assert!(reply_line(Some(u32::MAX), &Reply::Calibrated(c)).len() <= MAX_LINE);
+}
+
+#[test]
+fn firmware_characters_that_would_break_the_line_are_replaced() {
+    let mut s = status_example();
+    s.firmware = "a,b*c d";
+    let line = reply_line(Some(1), &Reply::Status(s));
+    let Ok((_, Reply::Status(got))) = parse_reply(&line) else {
+        panic!("{}", String::from_utf8_lossy(&line))
+    };
+    assert_eq!(got.firmware, "a?b?c?d");
+}
+
+#[test]
+fn reply_parser_refuses_what_is_no_reply() {
+    let cases: [(&str, ParseError); 9] = [
+        ("C,1,status", ParseError::Type),
+        ("A,1,maybe", ParseError::Format),
+        ("A,-,ok,save", ParseError::Format),
+        ("A,1,err,sorry", ParseError::Format),
+        ("A,1,err,range,1", ParseError::Format),
+        ("A,1,ok,thr=5", ParseError::Format),
+        ("A,1,ok,thr=5:x", ParseError::Format),
+        ("A,1,ok,save,extra", ParseError::Format),
+        ("A,1,ok,status,pv=4", ParseError::Format),
+    ];
+    for (body, e) in cases {
+        assert_eq!(parse_reply(&framed(body)), Err(e), "{body}");
+    }
+    let mut bad = framed("A,1,ok,save");
+    bad[4] = b'k';
+    assert_eq!(parse_reply(&bad), Err(ParseError::Checksum));
+    assert_eq!(parse_reply(b"A,1,ok,save\n"), Err(ParseError::NoChecksum));
+}
+
+#[test]
+fn line_reader_cuts_lines_and_keeps_errors_with_their_line() {
+    let mut r = LineReader::new();
+    let mut events = Vec::new();
+    let feed = |r: &mut LineReader, bytes: &[u8], events: &mut Vec<String>| {
+        for &b in bytes {
+            if let Some(e) = r.push(b) {
+                events.push(match e {
+                    Event::Line(l) => format!("line {}", String::from_utf8_lossy(l)),
+                    Event::TooLong => "too long".into(),
+                    Event::Damaged(k) => format!("damaged {k:?}"),
+                });
+            }
+        }
+    };
+    feed(&mut r, b"C,1\n\n\nC,2\r\n", &mut events);
+    feed(&mut r, b"C,3", &mut events);
+    r.error(LinkError::Framing);
+    r.error(LinkError::Overrun);
+    feed(&mut r, b",x\n", &mut events);
+    feed(&mut r, &[b'y'; 255], &mut events);
+    feed(&mut r, b"\n", &mut events);
+    feed(&mut r, &[b'z'; 256], &mut events);
+    feed(&mut r, b"\nC,4\n", &mut events);
+    r.error(LinkError::Noise);
+    feed(&mut r, b"\n", &mut events);
+    assert_eq!(
+        events,
+        [
+            "line C,1".to_string(),
+            "line C,2\r".into(),
+            "damaged Framing".into(),
+            format!("line {}", "y".repeat(255)),
+            "too long".into(),
+            "line C,4".into(),
+            "damaged Noise".into(),
+        ]
+    );
+    assert_eq!(LinkError::Overrun.refusal(), Refusal::Overrun);
+    assert_eq!(LinkError::Framing.refusal(), Refusal::Framing);
+    assert_eq!(LinkError::Noise.refusal(), Refusal::Noise);
+}
+
+fn key() -> impl Strategy<Value = Key> {
+    prop::sample::select(Key::ALL.to_vec())
+}
+
+fn valid_request() -> impl Strategy<Value = Request> {
+    prop_oneof![
+        Just(Request::Status),
+        key().prop_map(Request::Get),
+        (key(), any::<u32>()).prop_map(|(k, v)| {
+            let (lo, hi) = k.range(&CAP);
+            Request::Set(
+                k,
+                lo + (v % (hi - lo).saturating_add(1).max(1)).min(hi - lo),
+            )
+        }),
+        (1..=MAX_CALIBRATION_SCANS).prop_map(Request::Calibrate),
+        Just(Request::Save),
+        Just(Request::Defaults),
+        Just(Request::Reset),
+    ]
+}
+
+fn source() -> impl Strategy<Value = Source> {
+    prop::sample::select(Source::ALL.to_vec())
+}
+
+fn refusal() -> impl Strategy<Value = Refusal> {
+    prop_oneof![
+        prop::sample::select(Refusal::SIMPLE.to_vec()),
+        (any::<u32>(), any::<u32>()).prop_map(|(min, max)| Refusal::OutOfRange { min, max }),
+    ]
+}
+
+fn status(fw: &str) -> impl Strategy<Value = Status<'_>> {
+    (
+        (1u8..=15, 1u8..=15, any::<u16>(), any::<u16>()),
+        prop::sample::select(Store::ALL.to_vec()),
+        prop::array::uniform6((any::<u32>(), source())).prop_map(|mut v| {
+            // Each value within its key's range on the largest capacity
+            // (16 bits for cols, rows and dcap), as a board reports them.
+            let widest = Capacity {
+                max_cols: u16::MAX,
+                max_rows: u16::MAX,
+                max_dcap: u16::MAX,
+            };
+            for (slot, k) in v.iter_mut().zip(Key::ALL) {
+                let (lo, hi) = k.range(&widest);
+                slot.0 = lo + slot.0 % (hi - lo).saturating_add(1).max(1);
+                if hi == u32::MAX {
+                    slot.0 = slot.0.max(lo);
+                }
+            }
+            v
+        }),
+        (prop::sample::select(ResetCause::ALL.to_vec()), any::<u32>()),
+        (any::<u32>(), any::<u32>(), any::<u32>()),
+        prop::sample::select(Verdict::ALL.to_vec()),
+    )
+        .prop_map(
+            move |((j1, j2, max_cols, max_rows), store, values, (rst, boots), (a, b, c), v)| {
+                Status {
+                    firmware: fw,
+                    j1,
+                    j2,
+                    max_cols,
+                    max_rows,
+                    store,
+                    values,
+                    reset_cause: rst,
+                    boots,
+                    last: LastScan {
+                        scans: a,
+                        defects: b,
+                        objects: c,
+                        verdict: v,
+                    },
+                }
+            },
+        )
+}
+
+proptest! {
+    #[test]
+    fn every_request_round_trips(id in any::<u32>(), r in valid_request()) {
+        let line = request_line(id, &r);
+        prop_assert!(line.len() <= MAX_LINE);
+        prop_assert_eq!(parse_request(&line, &CAP), Ok((id, r)));
+    }
+
+    #[test]
+    fn any_changed_byte_of_a_request_is_refused(
+        id in any::<u32>(), r in valid_request(), at in any::<prop::sample::Index>(), to in any::<u8>()
+    ) {
+        let mut line = request_line(id, &r);
+        let i = at.index(line.len() - 1); // not the `\n`
+        prop_assume!(line[i] != to && to != b'\n');
+        line[i] = to;
+        prop_assert!(parse_request(&line, &CAP).is_err());
+    }
+
+    #[test]
+    fn every_reply_round_trips(
+        id in any::<u32>(),
+        key in key(), value in any::<u32>(), src in source(),
+        n in 1..=MAX_CALIBRATION_SCANS,
+        cal in prop::array::uniform7(any::<u32>()),
+        why in refusal(),
+        st in status("0.1.0-rc.1+g3af9"),
+    ) {
+        let c = Calibration {
+            scans: n, positions: cal[0], threshold: cal[1], power_threshold: cal[2],
+            median: cal[3], mad: cal[4], power_median: cal[5], power_mad: cal[6],
+        };
+        let replies = [
+            Reply::Status(st),
+            Reply::Value { key, value, source: src },
+            Reply::Calibrating(n),
+            Reply::Calibrated(c),
+            Reply::Saved,
+            Reply::Defaults,
+            Reply::Resetting,
+            Reply::Refused(why),
+        ];
+        for r in replies {
+            let line = reply_line(Some(id), &r);
+            prop_assert!(line.len() <= MAX_LINE);
+            prop_assert_eq!(parse_reply(&line), Ok((Some(id), r)));
+        }
+        let line = reply_line(None, &Reply::Refused(why));
+        prop_assert_eq!(parse_reply(&line), Ok((None, Reply::Refused(why))));
+    }
+
+    #[test]
+    fn arbitrary_bytes_never_panic(bytes in prop::collection::vec(any::<u8>(), 0..600)) {
+        let _ = parse_request(&bytes, &CAP);
+        let _ = parse_reply(&bytes);
+        let mut r = LineReader::new();
+        for &b in &bytes {
+            if let Some(Event::Line(l)) = r.push(b) {
+                prop_assert!(l.len() < MAX_LINE && !l.is_empty());
+                let _ = parse_request(l, &CAP);
+            }
+        }
+    }
+
+    #[test]
+    fn framed_garbage_never_panics(body in "C,[0-9]{0,11}(,[a-z=0-9:x/.-]{0,14}){0,4}") {
+        let line = framed(&body);
+        match parse_request(&line, &CAP) {
+            Ok((id, r)) => prop_assert_eq!(parse_request(&request_line(id, &r), &CAP), Ok((id, r))),
+            Err((Some(id), _)) => {
+                let field = body.split(',').nth(1).unwrap_or("");
+                prop_assert_eq!(field.parse::<u64>().ok(), Some(id as u64));
+            }
+            Err((None, _)) => {}
+        }
+        let _ = parse_reply(&framed(&body.replacen('C', "A", 1)));
+    }
+}
