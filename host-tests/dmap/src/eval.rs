@@ -3,8 +3,8 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::objects::components;
 use crate::fmt::fmt_num;
+use crate::objects::components;
 use anyhow::{Result, bail};
 use clap::Args;
 use std::fmt::Write;

@@ -67,7 +67,10 @@ fn threshold_zero_defects_have_full_strength_and_decode_cleanly() {
             .iter()
             .filter(|l| field(l, if channel[0] == "--threshold" { 3 } else { 4 }) == 0)
             .count();
-        assert!(zero_mag > 0, "the flat scan must have magnitude-0 positions");
+        assert!(
+            zero_mag > 0,
+            "the flat scan must have magnitude-0 positions"
+        );
         for l in &d_lines {
             assert_eq!(field(l, 5), u32::MAX as u64, "{channel:?}: {l}");
         }
