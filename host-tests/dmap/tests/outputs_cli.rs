@@ -6,8 +6,6 @@
 use std::os::unix::fs::FileTypeExt;
 use std::path::{Path, PathBuf};
 
-use dmap::npy;
-
 mod common;
 use common::{dmap, ok, s};
 
@@ -15,29 +13,8 @@ fn tmp(name: &str) -> PathBuf {
     common::tmp_in("outputs", name)
 }
 
-/// A small defect-free reference: a spot drifting across a 5x5 detector
-/// with pseudo-random noise (a 64-bit LCG).
 fn reference(path: &Path, seed: u64) {
-    let (rows, cols, j) = (6, 7, 5);
-    let mut x = seed.wrapping_mul(6364136223846793005).wrapping_add(1);
-    let mut data = Vec::new();
-    for r in 0..rows {
-        for c in 0..cols {
-            let (cy, cx) = (1.0 + r as f64 * 0.3, 1.0 + c as f64 * 0.3);
-            for a in 0..j {
-                for b in 0..j {
-                    x = x
-                        .wrapping_mul(6364136223846793005)
-                        .wrapping_add(1442695040888963407);
-                    let noise = (x >> 54) as f64;
-                    let d2 = (a as f64 - cy).powi(2) + (b as f64 - cx).powi(2);
-                    data.push((3000.0 * (-d2).exp() + noise / 16.0).round() as u16);
-                }
-            }
-        }
-    }
-    let g = cvm_reference::Geometry::new(j, j).unwrap();
-    npy::write_scan_u16(path, rows, cols, g, &data).unwrap();
+    common::spot_scan(path, 6, 7, 5, seed);
 }
 
 fn references() -> (PathBuf, PathBuf) {
