@@ -77,10 +77,10 @@ pub fn check_fault(spec: &str, rows: u64, cols: u64) -> Result<f64> {
                 );
             }
         }
-        ("sync-miss", _) if beam % cols != 0 => bail!(
+        ("sync-miss", _) if !beam.is_multiple_of(cols) => bail!(
             "--fault {spec:?}: beam {beam} is not a row start (rows start at multiples of {cols})"
         ),
-        ("sync-glitch", _) if beam % cols == 0 => bail!(
+        ("sync-glitch", _) if beam.is_multiple_of(cols) => bail!(
             "--fault {spec:?}: beam {beam} is a row start; a glitch is an extra LINE_SYNC mid-row"
         ),
         _ => {}
