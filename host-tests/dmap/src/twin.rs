@@ -12,7 +12,10 @@
 //! * The ELF is built with `cargo build --release` into `target/twin` and
 //!   cached per configuration in `target/twin/elf/<hash>.elf`; a cached ELF
 //!   is reused while it is newer than every firmware source. `--elf` skips
-//!   the build (the ELF must have been built for the scan's configuration).
+//!   the build; the ELF's `.cvm_config` section (written by build.rs) must
+//!   then agree with the run's configuration field by field
+//!   ([`crate::twin_checks::check_built_for`]), and a damaged ELF is refused
+//!   before the model starts ([`crate::elf::read`]).
 //! * The model (`python3 -m h743twin`) reads the scan in its own format,
 //!   written to a temporary file; its standard output (the bytes the
 //!   firmware sent on USART3) is copied to standard output, and its
@@ -21,7 +24,10 @@
 //!   model makes `dmap` fail with one line after that JSON.
 //! * The model never outlives `dmap`: on every way out (an error, a closed
 //!   pipe, a panic, SIGINT, SIGTERM or SIGHUP) it is killed and reaped
-//!   before its scan file is removed.
+//!   before its scan file is removed; on SIGKILL, which `dmap` cannot
+//!   catch, the kernel kills it ([`crate::child::dies_with_parent`]).
+//! * A run whose end line never came (the firmware wedged, or the settle
+//!   time ran out) fails, after the model's counters.
 
 use crate::emulate::board_file;
 use crate::fmt::fmt_num;
