@@ -161,6 +161,16 @@ fn h743_scan(spec: &str, calibration: Option<&std::path::Path>) -> Result<String
     if pthr.is_nan() || pthr < 0.0 {
         return Err(format!("pthr={pthr}: must be >= 0 (inf: off)"));
     }
+    // What the ELF was built for, in a section that is not loaded (no
+    // flash): `dmap twin --elf` reads it and refuses a run it does not fit.
+    let section_b = match (kernels.as_str(), b) {
+        ("paper", b) => b.unwrap_or(0),
+        (_, Some(k)) => k,
+        (_, None) => j1.max(j2) - 1,
+    };
+    let built_for = format!(
+        "j1={j1} j2={j2} cols={cols} rows={rows} kernels={kernels} b={section_b} weights={weights} normalise={normalise} threshold={threshold:?} pthr={pthr:?} scores={scores} max_defect_lines={max_defect_lines} fs={full_scale}"
+    );
     let kernels = match (kernels.as_str(), b) {
         ("paper", b) => format!("Kernels::Paper {{ bmax: {} }}", b.unwrap_or(0)),
         (_, Some(k)) => format!("Kernels::Square {{ kmax: {k} }}"),
@@ -193,6 +203,10 @@ fn h743_scan(spec: &str, calibration: Option<&std::path::Path>) -> Result<String
     let _ = writeln!(
         s,
         "pub const FIRMWARE_VERSION_OVERRIDE: Option<&str> = {fw:?};"
+    );
+    let _ = writeln!(
+        s,
+        r##"core::arch::global_asm!(r#".pushsection .cvm_config,"",%progbits"#, r#".ascii "{built_for}""#, ".popsection");"##
     );
     Ok(s)
 }

@@ -224,6 +224,7 @@ pub fn run_qemu(
     if icount {
         cmd.args(["-icount", "shift=0"]);
     }
+    crate::child::dies_with_parent(&mut cmd);
     let shared: Shared = Arc::new(Mutex::new(None));
     let signals = watch_signals(shared.clone())?;
     let result = (|| {
@@ -274,9 +275,8 @@ pub fn run(args: &EmulateArgs) -> Result<()> {
         Some(p) => p.clone(),
         None => build_elf()?,
     };
-    if !elf.is_file() {
-        bail!("firmware ELF {} not found", elf.display());
-    }
+    // QEMU given a damaged ELF dumps its registers, or waits forever.
+    crate::elf::read(&elf)?;
     let dir = tempfile::Builder::new()
         .prefix("dmap-emulate-")
         .tempdir()

@@ -3,7 +3,9 @@
 
 pub mod bench;
 pub mod calibrate;
+pub mod child;
 pub mod cli_values;
+pub mod elf;
 pub mod emulate;
 pub mod eval;
 pub mod fixed;
@@ -20,4 +22,5 @@ pub mod settings;
 pub mod simulate;
 pub mod stream;
 pub mod twin;
+pub mod twin_checks;
 pub mod twin_requests;

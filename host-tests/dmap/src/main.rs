@@ -59,7 +59,8 @@ fn main() {
                 .lines()
                 .take_while(|l| !l.starts_with("Usage:"))
                 .map(|l| l.trim().trim_start_matches("error: "))
-                .filter(|l| !l.is_empty())
+                // clap's own hint, which the one below replaces.
+                .filter(|l| !l.is_empty() && !l.starts_with("For more information"))
                 .collect();
             let _ = writeln!(
                 std::io::stderr(),

@@ -6,10 +6,16 @@
 //!   exits quietly with status 141 (128 + SIGPIPE, what a shell reports for
 //!   a tool killed by the signal). Any other failure (a full disk) is a
 //!   one-line error.
-//! * Files: written to a temporary file beside the final name, then renamed
-//!   over it, so an interrupted run leaves the previous file whole; an output
-//!   that names one of the command's inputs (the same file, whatever the
-//!   path) is refused before anything is written.
+//! * Files: a regular file (or a name not yet taken) is written to a
+//!   temporary file beside it, then renamed over it, so an interrupted run
+//!   leaves the previous file whole. A symbolic link is followed: the file
+//!   it points to is the one replaced, the link stays. Anything else (a
+//!   device such as `/dev/null`, a FIFO, a shell's `>(...)`) is opened and
+//!   written in place, never replaced; a directory or socket is refused.
+//!   An output that names one of the command's inputs (the same file,
+//!   whatever the path) is refused before anything is written; the check
+//!   looks at the files' identities without opening them, so a FIFO does
+//!   not block it.
 
 use anyhow::{Result, anyhow, bail};
 use std::io::{BufWriter, Write};
@@ -85,16 +91,20 @@ impl Target {
 /// Whether `output` is the file `input` (the same device and inode, so
 /// whatever the paths); an `input` of `-` is standard input.
 pub fn input_is_output(input: &Path, output: &Path) -> bool {
+    let Some(out) = identity(output) else {
+        return false;
+    };
     if input.as_os_str() == "-" {
-        return match (
-            same_file::Handle::stdin(),
-            same_file::Handle::from_path(output),
-        ) {
-            (Ok(a), Ok(b)) => a == b,
-            _ => false,
-        };
+        return same_file::Handle::stdin().is_ok_and(|h| (h.dev(), h.ino()) == out);
     }
-    same_file::is_same_file(input, output).unwrap_or(false)
+    identity(input) == Some(out)
+}
+
+/// The device and inode of the file `path` names (through symbolic
+/// links), from its metadata: opening a FIFO to compare it would block.
+fn identity(path: &Path) -> Option<(u64, u64)> {
+    use std::os::unix::fs::MetadataExt;
+    std::fs::metadata(path).ok().map(|m| (m.dev(), m.ino()))
 }
 
 /// Refuses an output file that is one of `inputs` (the same file, even
@@ -115,7 +125,7 @@ pub fn refuse_inputs(output: &Path, inputs: &[&Path]) -> Result<()> {
 /// Whether two output paths name the same file, existing or not: the same
 /// existing file, or the same name in the same directory.
 pub fn same_destination(a: &Path, b: &Path) -> bool {
-    if same_file::is_same_file(a, b).unwrap_or(false) {
+    if identity(a).is_some_and(|i| identity(b) == Some(i)) {
         return true;
     }
     let dir = |p: &Path| {
@@ -128,11 +138,73 @@ pub fn same_destination(a: &Path, b: &Path) -> bool {
     a.file_name() == b.file_name() && a.file_name().is_some() && dir(a) == dir(b)
 }
 
-/// Writes a file through `write`: into a temporary file in the same
-/// directory, renamed over `path` once complete. On any error the
-/// temporary file is removed and `path` is left as it was.
+/// Writes a file through `write`. A regular file or a new name: into a
+/// temporary file in the same directory, renamed over the file once
+/// complete (through a symbolic link, over the file it points to); on any
+/// error the temporary file is removed and the file is left as it was.
+/// A device or FIFO: written in place, as a shell's `>` would.
 pub fn write_file(path: &Path, write: impl FnOnce(&mut dyn Write) -> Result<()>) -> Result<()> {
     let p = path.display();
+    if let Ok(meta) = std::fs::metadata(path) {
+        use std::os::unix::fs::FileTypeExt;
+        let t = meta.file_type();
+        if t.is_dir() {
+            bail!("{p}: is a directory");
+        }
+        if t.is_socket() {
+            bail!("{p}: is a socket, not a file dmap can write");
+        }
+        if !t.is_file() {
+            return write_in_place(path, write);
+        }
+    }
+    let target = resolve_links(path)?;
+    replace_file(&target, &p.to_string(), write)
+}
+
+/// A device or FIFO, opened for writing only (a FIFO waits for its
+/// reader) and written through; nothing is created or renamed.
+fn write_in_place(path: &Path, write: impl FnOnce(&mut dyn Write) -> Result<()>) -> Result<()> {
+    let p = path.display();
+    let file = std::fs::OpenOptions::new()
+        .write(true)
+        .open(path)
+        .map_err(|e| anyhow!("{p}: cannot open for writing: {e}"))?;
+    let mut out = BufWriter::new(file);
+    write(&mut out)?;
+    out.flush().map_err(|e| anyhow!("{p}: cannot write: {e}"))?;
+    Ok(())
+}
+
+/// The path a chain of symbolic links ends at (which may not exist yet:
+/// a dangling link names the file to create); the path itself if it is
+/// not a link.
+fn resolve_links(path: &Path) -> Result<PathBuf> {
+    let mut at = path.to_path_buf();
+    // The kernel's own limit on links followed in one lookup.
+    for _ in 0..40 {
+        match std::fs::symlink_metadata(&at) {
+            Ok(m) if m.file_type().is_symlink() => {
+                let to = std::fs::read_link(&at)
+                    .map_err(|e| anyhow!("{}: cannot read the link: {e}", path.display()))?;
+                at = match at.parent() {
+                    Some(dir) if to.is_relative() => dir.join(to),
+                    _ => to,
+                };
+            }
+            _ => return Ok(at),
+        }
+    }
+    bail!("{}: too many levels of symbolic links", path.display())
+}
+
+/// [`write_file`] of a regular file or a new name (`p`: the name the user
+/// gave, for messages).
+fn replace_file(
+    path: &Path,
+    p: &str,
+    write: impl FnOnce(&mut dyn Write) -> Result<()>,
+) -> Result<()> {
     let dir = match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d,
         _ => Path::new("."),

@@ -189,7 +189,7 @@ fn threshold_warnings(scorer: &Scorer, units: f64) -> Vec<String> {
     let q = scorer.score_frac_bits();
     if thr == u32::MAX && units > effective {
         vec![format!(
-            "--threshold {} is above the largest score the scorer reports ({} in its Q({q}) format): no position can be a defect",
+            "--threshold {} is above the largest score the scorer reports ({} in its Q({q}) format): no position can be a defect on the CVM channel (the power channel, --power-threshold, still counts in the end line's defects)",
             fmt_num(units),
             fmt_num(effective)
         )]

@@ -12,7 +12,10 @@
 //! * The ELF is built with `cargo build --release` into `target/twin` and
 //!   cached per configuration in `target/twin/elf/<hash>.elf`; a cached ELF
 //!   is reused while it is newer than every firmware source. `--elf` skips
-//!   the build (the ELF must have been built for the scan's configuration).
+//!   the build; the ELF's `.cvm_config` section (written by build.rs) must
+//!   then agree with the run's configuration field by field
+//!   ([`crate::twin_checks::check_built_for`]), and a damaged ELF is refused
+//!   before the model starts ([`crate::elf::read`]).
 //! * The model (`python3 -m h743twin`) reads the scan in its own format,
 //!   written to a temporary file; its standard output (the bytes the
 //!   firmware sent on USART3) is copied to standard output, and its
@@ -21,13 +24,17 @@
 //!   model makes `dmap` fail with one line after that JSON.
 //! * The model never outlives `dmap`: on every way out (an error, a closed
 //!   pipe, a panic, SIGINT, SIGTERM or SIGHUP) it is killed and reaped
-//!   before its scan file is removed.
+//!   before its scan file is removed; on SIGKILL, which `dmap` cannot
+//!   catch, the kernel kills it ([`crate::child::dies_with_parent`]).
+//! * A run whose end line never came (the firmware wedged, or the settle
+//!   time ran out) fails, after the model's counters.
 
 use crate::emulate::board_file;
 use crate::fmt::fmt_num;
 use crate::npy::read_scan;
 use crate::options::{OutputArgs, ScoringArgs};
 use crate::settings::resolve;
+use crate::twin_checks::{check_built_for, check_fault, check_model_time};
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use cvm_core::{Kernels, Weights};
@@ -37,21 +44,6 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, ChildStderr, ChildStdout, Command, ExitStatus, Stdio};
 use std::sync::{Arc, Mutex};
 use std::time::SystemTime;
-
-/// The fault kinds of the detector model and how many numbers follow the
-/// beam in each (`host-tests/twin/h743twin/detector.py`).
-pub const FAULT_KINDS: [(&str, usize); 10] = [
-    ("gap", 1),
-    ("burst", 2),
-    ("sync-glitch", 0),
-    ("sync-miss", 0),
-    ("overrun", 0),
-    ("dma-error", 0),
-    ("dma-stall", 0),
-    ("uart-busy", 1),
-    ("halt", 1),
-    ("wedge", 0),
-];
 
 const FAULTS_HELP: &str = "\
 Faults (--fault KIND@BEAM[:ARG...], repeatable; beams count from 0 in raster order):
@@ -66,7 +58,11 @@ Faults (--fault KIND@BEAM[:ARG...], repeatable; beams count from 0 in raster ord
   halt@B:MS        a debugger halts the core for MS milliseconds at beam B
   wedge@B          the firmware wedges at beam B (interrupts off; the watchdog must reset it)
 
-Standard output: the bytes the firmware sent on its UART. Standard error: the model's
+A burst must end by the scan's last beam, a sync-miss falls on a row start, a
+sync-glitch mid-row. A run's model time (--start-ms, the beams at --beam-us, the
+faults' pauses, --settle-ms) is at most 600 s.
+
+Standard output: the bytes the firmware sent on its UART, as they come. Standard error: the model's
 counters as one JSON object (last line; `resets` lists watchdog resets). Needs python3
 with unicorn 2.1.4 and pyelftools 0.33 (scripts/setup.sh installs them).";
 
@@ -170,43 +166,6 @@ pub fn twin_file(h: &ScanHeader, emufile: &[u8]) -> Result<Vec<u8>> {
     }
     out.extend_from_slice(samples);
     Ok(out)
-}
-
-/// Checks a `--fault` against the model's kinds and a scan of `beams`
-/// beams (the model would refuse it only after the build).
-pub fn check_fault(spec: &str, beams: u64) -> Result<()> {
-    let (kind, rest) = spec
-        .split_once('@')
-        .with_context(|| format!("--fault {spec:?}: expected KIND@BEAM[:ARG...]"))?;
-    let Some(&(_, nargs)) = FAULT_KINDS.iter().find(|(k, _)| *k == kind) else {
-        let kinds: Vec<&str> = FAULT_KINDS.iter().map(|(k, _)| *k).collect();
-        bail!(
-            "--fault {spec:?}: unknown kind {kind:?} (one of {})",
-            kinds.join(", ")
-        );
-    };
-    let mut parts = rest.split(':');
-    let beam: u64 = parts
-        .next()
-        .and_then(|b| b.parse().ok())
-        .with_context(|| format!("--fault {spec:?}: the beam must be a number from 0"))?;
-    if beam >= beams {
-        bail!(
-            "--fault {spec:?}: beam {beam} is past the scan's last beam ({})",
-            beams - 1
-        );
-    }
-    let args: Vec<&str> = parts.collect();
-    if args.len() != nargs {
-        bail!("--fault {spec:?}: {kind} takes {nargs} number(s) after the beam");
-    }
-    for a in args {
-        match a.parse::<f64>() {
-            Ok(v) if v.is_finite() && v >= 0.0 => {}
-            _ => bail!("--fault {spec:?}: {a:?} is not a non-negative number"),
-        }
-    }
-    Ok(())
 }
 
 /// A stable 64-bit hash (FNV-1a) of a configuration, naming its cached ELF.
@@ -359,7 +318,7 @@ impl Supervised {
         // Held from before the spawn until the child is in it, so that a
         // signal in between finds the child to end.
         let mut slot = lock(&me.shared);
-        let child = cmd
+        let child = crate::child::dies_with_parent(cmd)
             .stdin(Stdio::null())
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
@@ -481,6 +440,11 @@ pub fn run_model(
     {
         return Ok((j.clone(), last));
     }
+    // The model could not load the ELF or the scan: its one line is the
+    // error.
+    if status.code() == Some(4) && json.is_none() {
+        bail!("{}", last.trim_start_matches("h743twin: "));
+    }
     if !last.is_empty() {
         let _ = writeln!(std::io::stderr(), "{last}");
     }
@@ -526,10 +490,15 @@ pub fn run(args: &TwinArgs) -> Result<()> {
     let warnings = run.warnings;
     let header = ScanHeader::parse(&emufile).map_err(|e| anyhow::anyhow!(e.message()))?;
     let beams = u64::from(header.rows) * u64::from(header.cols);
+    let mut faults_ms = 0.0;
     for f in &args.faults {
-        check_fault(f, beams)?;
+        faults_ms += check_fault(f, u64::from(header.rows), u64::from(header.cols))?;
     }
     args.link.check(beams)?;
+    check_model_time(
+        beams,
+        [args.start_ms, args.beam_us, faults_ms, args.settle_ms],
+    )?;
     let config = h743_config(&header)?;
     let file = twin_file(&header, &emufile)?;
     drop(emufile);
@@ -540,9 +509,9 @@ pub fn run(args: &TwinArgs) -> Result<()> {
         Some(p) => p.clone(),
         None => build_elf(&config)?,
     };
-    if !elf.is_file() {
-        bail!("firmware ELF {} not found", elf.display());
-    }
+    let image = crate::elf::read(&elf)?;
+    check_built_for(&elf, &image, &config)?;
+    drop(image);
     let dir = tempfile::Builder::new()
         .prefix("dmap-twin-")
         .tempdir()
@@ -553,34 +522,21 @@ pub fn run(args: &TwinArgs) -> Result<()> {
     let (stats, line) = run_model(&elf, &scan_path, dir, args, &mut |bytes| {
         crate::out::stdout(bytes)
     })?;
-    if stats["status"] == "time" {
-        crate::out::warn(&format!(
-            "the firmware sent no complete end line within --settle-ms {} after the last beam",
-            fmt_num(args.settle_ms)
-        ));
-    }
-    // The counters stay the last line, as the model prints them.
+    // The counters stay the last line the model prints, before dmap's
+    // own verdict.
     let _ = writeln!(std::io::stderr(), "{line}");
+    if stats["status"] == "time" {
+        bail!(
+            "the firmware sent no complete end line within --settle-ms {} after the last beam: the scan did not finish",
+            fmt_num(args.settle_ms)
+        );
+    }
     Ok(())
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn faults_are_checked_before_the_build() {
-        assert!(check_fault("gap@3:5", 10).is_ok());
-        assert!(check_fault("burst@0:4:20.5", 10).is_ok());
-        assert!(check_fault("wedge@9", 10).is_ok());
-        assert!(check_fault("wedge@10", 10).is_err());
-        assert!(check_fault("gap@3", 10).is_err());
-        assert!(check_fault("wedge@3:1", 10).is_err());
-        assert!(check_fault("jam@3", 10).is_err());
-        assert!(check_fault("gap", 10).is_err());
-        assert!(check_fault("gap@-1:5", 10).is_err());
-        assert!(check_fault("gap@1:x", 10).is_err());
-    }
 
     #[test]
     fn config_hash_is_stable() {

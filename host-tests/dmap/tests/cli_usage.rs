@@ -35,6 +35,12 @@ fn usage_errors_are_one_line() {
         assert_eq!(err.lines().count(), 1, "{args:?}: {err}");
         assert!(err.starts_with("dmap: error: "), "{args:?}: {err}");
         assert!(!err.contains("panicked"));
+        // One pointer to the help, not clap's and dmap's both.
+        assert_eq!(err.matches("help").count(), 1, "{args:?}: {err}");
+        assert!(
+            err.trim_end().ends_with("(see dmap --help)"),
+            "{args:?}: {err}"
+        );
     }
 }
 

@@ -698,6 +698,9 @@ fn raw_needs_a_threshold_and_odd_thresholds_are_explained() {
         err.contains("--threshold 1e300 is above the largest score"),
         "{err}"
     );
+    // The end line may still count power-channel defects: the warning
+    // says which channel it is about.
+    assert!(err.contains("defect on the CVM channel"), "{err}");
     assert!(!err.contains("0000000000"), "{err}");
     for t in ["inf", "NaN", "-1"] {
         let out = dmap(&["stream", s(&scan), &format!("--threshold={t}")]);

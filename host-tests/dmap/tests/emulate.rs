@@ -270,3 +270,75 @@ fn emulate_terminated_by_a_signal_leaves_no_qemu() {
     assert_nothing_left(&tmp);
     drop(stdout);
 }
+
+/// Killed by SIGINT or SIGKILL while QEMU runs: QEMU goes with dmap. On
+/// SIGKILL dmap cannot act; the kernel's parent-death signal ends QEMU
+/// (its scan file, which dmap would have removed, stays behind).
+#[test]
+fn emulate_killed_by_any_signal_leaves_no_qemu() {
+    use std::os::unix::process::ExitStatusExt;
+    for (sig, name) in [(libc::SIGINT, "sigint"), (libc::SIGKILL, "sigkill")] {
+        let (tmp, mut cmd) = emulate_in(name, 200);
+        let mut child = cmd.stdout(Stdio::piped()).spawn().unwrap();
+        let mut stdout = child.stdout.take().unwrap();
+        let mut first = [0u8; 100];
+        stdout.read_exact(&mut first).unwrap();
+        let qemu = qemu_processes(tmp.to_str().unwrap());
+        assert_eq!(qemu.len(), 1, "{name}: one QEMU while the run goes on");
+        // SAFETY: kill(2) on the pid of our own child.
+        assert_eq!(unsafe { libc::kill(child.id() as i32, sig) }, 0);
+        let status = child.wait().unwrap();
+        assert_eq!(status.signal(), Some(sig), "{name}: {status}");
+        // The parent-death signal is delivered as the parent exits: allow
+        // the kernel a moment to reap.
+        let gone = (0..200).any(|_| {
+            std::thread::sleep(std::time::Duration::from_millis(10));
+            qemu_processes(tmp.to_str().unwrap()).is_empty()
+        });
+        assert!(gone, "{name}: QEMU (pid {}) outlived dmap", qemu[0]);
+        if sig != libc::SIGKILL {
+            assert_nothing_left(&tmp);
+        }
+        drop(stdout);
+    }
+}
+
+/// A damaged or foreign ELF is one error line before QEMU starts (QEMU
+/// itself dumps its registers, or waits forever on a truncated one).
+#[test]
+fn emulate_refuses_a_damaged_elf_in_one_line() {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("emulate-bad-elf");
+    std::fs::create_dir_all(&dir).unwrap();
+    let scan = dir.join("scan.npy");
+    write_scan(&scan, 9, 9, 300, 2, 5);
+    let elf = dmap::emulate::build_elf().unwrap();
+    let whole = std::fs::read(&elf).unwrap();
+    let cases: [(&str, Vec<u8>, &str); 4] = [
+        ("empty", Vec::new(), "not an ELF file"),
+        (
+            "garbage",
+            b"garbage, not a firmware".to_vec(),
+            "not an ELF file",
+        ),
+        ("truncated", whole[..whole.len() / 3].to_vec(), "truncated"),
+        (
+            "host",
+            std::fs::read("/proc/self/exe").unwrap()[..4096].to_vec(),
+            "not a 32-bit",
+        ),
+    ];
+    for (name, bytes, what) in cases {
+        let bad = dir.join(format!("{name}.elf"));
+        std::fs::write(&bad, bytes).unwrap();
+        let out = Command::new(env!("CARGO_BIN_EXE_dmap"))
+            .args(["emulate", "--elf"])
+            .arg(&bad)
+            .arg(&scan)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{name}: {err}");
+        assert_eq!(err.lines().count(), 1, "{name}: {err}");
+        assert!(err.contains(what), "{name}: {err}");
+    }
+}

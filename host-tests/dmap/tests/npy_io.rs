@@ -296,3 +296,28 @@ fn scan_truncated_while_open_is_an_error_naming_the_lost_positions() {
         .to_string();
     assert!(err.contains("outside the scan's 12 positions"), "{err}");
 }
+
+/// Bytes after the data are named as such, not as a cut file (and a cut
+/// file still as cut).
+#[test]
+fn trailing_bytes_are_not_called_truncated() {
+    let g = Geometry::new(2, 2).unwrap();
+    let whole = path("trailing_whole.npy");
+    write_scan_u16(&whole, 2, 2, g, &[7; 16]).unwrap();
+    let bytes = std::fs::read(&whole).unwrap();
+    let long = path("trailing_long.npy");
+    std::fs::write(&long, [&bytes[..], b"xx"].concat()).unwrap();
+    let e = format!("{:#}", read_scan(&long).unwrap_err());
+    assert!(
+        e.contains("holds 34 data bytes") && e.contains("extra bytes after the data"),
+        "{e}"
+    );
+    assert!(!e.contains("truncated"), "{e}");
+    let short = path("trailing_short.npy");
+    std::fs::write(&short, &bytes[..bytes.len() - 2]).unwrap();
+    let e = format!("{:#}", read_scan(&short).unwrap_err());
+    assert!(
+        e.contains("holds 30 data bytes") && e.contains("truncated"),
+        "{e}"
+    );
+}

@@ -414,7 +414,19 @@ fn twin_fault_dma_stall() {
 
 #[test]
 fn twin_wedged_firmware_is_reset_by_the_watchdog() {
-    let (_, c) = twin_with(&["wedge@30"], &[]);
+    let dir = tempfile::tempdir().unwrap();
+    let scan = dir.path().join("scan.npy");
+    write_scan(&scan, 9, 9, 909);
+    let mut args = vec!["twin", scan.to_str().unwrap()];
+    args.extend_from_slice(&FAULT_OPTS);
+    args.extend_from_slice(&["--fault", "wedge@30"]);
+    let out = dmap(&args);
+    // The scan restarted after the reset never ends: a failed run.
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.trim_end().ends_with("the scan did not finish"), "{err}");
+    let c: serde_json::Value =
+        serde_json::from_str(err.trim_end().lines().rev().nth(1).unwrap()).unwrap();
     assert_eq!(c["faults_injected"]["wedge"], 1, "{c}");
     let resets = c["resets"].as_array().expect("resets list");
     assert!(

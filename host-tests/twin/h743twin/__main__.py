@@ -1,7 +1,8 @@
 """Command line of the chip model: `python3 -m h743twin ELF [options]`.
 
-Prints the bytes the firmware sends on USART3 to stdout and the model's
-counters as one JSON object on stderr (last line)."""
+Prints the bytes the firmware sends on USART3 to stdout as they come and the
+model's counters as one JSON object on stderr (last line). An ELF or scan it
+cannot load is one line on stderr and exit status 4."""
 
 import argparse
 import json
@@ -45,12 +46,38 @@ def main(argv=None):
         print("h743twin: --requests needs --scan (requests start at beams)", file=sys.stderr)
         return 2
     bank2.cut_at = args.power_cut
-    m = Machine(args.elf, debugger=args.debugger, bank2=bank2)
+    # Whatever a damaged file makes the loaders raise is one line, not a
+    # traceback.
+    try:
+        m = Machine(args.elf, debugger=args.debugger, bank2=bank2)
+    except Exception as e:  # noqa: BLE001
+        print(f"h743twin: cannot load the ELF {args.elf}: {type(e).__name__}: {e}", file=sys.stderr)
+        return 4
+    try:
+        scan = Scan.read_raw(args.scan) if args.scan else None
+    except Exception as e:  # noqa: BLE001
+        print(f"h743twin: cannot load the scan {args.scan}: {type(e).__name__}: {e}", file=sys.stderr)
+        return 4
     status = "time"
     error = None
+    sent = 0
+
+    def pump(final=False):
+        # The UART bytes so far, out at each line's end (or every 4 KiB):
+        # whoever reads sees lines as the firmware sends them, and an
+        # interrupted run has shown what it got to.
+        nonlocal sent
+        n = len(m.uart)
+        if n > sent and (final or n - sent >= 4096 or m.uart[n - 1][0] == 0x0A):
+            sys.stdout.buffer.write(bytes(b for b, _ in m.uart[sent:n]))
+            sys.stdout.flush()
+            sent = n
+
+    def pumping():
+        pump()
+        return False
     try:
-        if args.scan:
-            scan = Scan.read_raw(args.scan)
+        if scan is not None:
             det = Detector(m, scan, args.beam_us, args.start_ms, faults)
             m.attach(det)
             for beam, data, errors in requests:
@@ -59,11 +86,12 @@ def main(argv=None):
                 m.bus.at(det.times[beam], lambda d=data, e=errors: m.usart.rx.send(d, e), owner="host")
             if args.profile:
                 # Boot first, then count: the profile is of the beams.
-                m.run(max(det.times[0] - 1000, 0) if det.times else 0)
+                m.run(max(det.times[0] - 1000, 0) if det.times else 0, pumping)
                 m.start_profile()
             end = det.done_at + cycles_of_ms(args.settle_ms)
 
             def done():
+                pump()
                 if m.core.cycles <= det.done_at:
                     return False
                 out = bytes(b for b, _ in m.uart)
@@ -71,7 +99,7 @@ def main(argv=None):
                 return ends >= args.scans and out.endswith(b"\n") and not m.usart.shifting
             status = m.run(end, done, args.max_instructions)
         else:
-            status = m.run(cycles_of_ms(args.run_ms or 100.0), None, args.max_instructions)
+            status = m.run(cycles_of_ms(args.run_ms or 100.0), pumping, args.max_instructions)
     except PowerCut as e:
         status = "power cut"
         stats_note = str(e)
@@ -79,8 +107,7 @@ def main(argv=None):
         error = str(e)
     if args.flash:
         m.bank2.save(args.flash)
-    sys.stdout.buffer.write(bytes(b for b, _ in m.uart))
-    sys.stdout.flush()
+    pump(final=True)
     stats = m.stats()
     stats["status"] = "error" if error else status
     if status == "power cut":

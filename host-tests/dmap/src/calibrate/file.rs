@@ -2,6 +2,7 @@
 //! its identity and version, the scoring configuration it was made for,
 //! and each channel's threshold as the integer the firmware compares with.
 
+use std::io::Read;
 use std::path::Path;
 
 use anyhow::{Context, Result, anyhow, bail};
@@ -73,13 +74,42 @@ pub struct Calibration {
     pub pthr: u32,
 }
 
+/// The most a calibration file is read of: one is about 2 KB, and a
+/// device or a runaway pipe named by mistake must not fill the memory.
+pub const MAX_FILE_BYTES: u64 = 1 << 20;
+
+/// A calibration file's JSON, read once (a pipe or `/dev/stdin` cannot be
+/// read twice), at most [`MAX_FILE_BYTES`], a leading UTF-8 byte order
+/// mark (some editors write one) skipped.
+fn read_json(path: &Path) -> Result<Value> {
+    let p = path.display();
+    let file = std::fs::File::open(path).with_context(|| format!("reading {p}"))?;
+    if file.metadata().is_ok_and(|m| m.is_dir()) {
+        bail!("{p}: is a directory, not a calibration file");
+    }
+    let mut bytes = Vec::new();
+    file.take(MAX_FILE_BYTES + 1)
+        .read_to_end(&mut bytes)
+        .with_context(|| format!("reading {p}"))?;
+    if bytes.len() as u64 > MAX_FILE_BYTES {
+        bail!(
+            "{p}: larger than {} KiB, not a calibration file (dmap calibrate writes about 2 KB)",
+            MAX_FILE_BYTES >> 10
+        );
+    }
+    let body = bytes.strip_prefix(b"\xef\xbb\xbf").unwrap_or(&bytes);
+    serde_json::from_slice(body).with_context(|| format!("{p}: not a JSON calibration"))
+}
+
 impl Calibration {
     /// Reads and checks a calibration file's format.
     pub fn load(path: &Path) -> Result<Self> {
+        Self::from_json(path, read_json(path)?)
+    }
+
+    /// Checks the calibration `v` read from `path` (named in messages).
+    fn from_json(path: &Path, v: Value) -> Result<Self> {
         let p = path.display();
-        let text = std::fs::read_to_string(path).with_context(|| format!("reading {p}"))?;
-        let v: Value =
-            serde_json::from_str(&text).with_context(|| format!("{p}: not a JSON calibration"))?;
         if v["format"] != FORMAT {
             bail!("{p}: not a calibration file (no \"format\": \"{FORMAT}\")");
         }
@@ -201,16 +231,13 @@ impl Calibration {
 /// The threshold `dmap eval --calibration` applies: the CVM channel of a
 /// calibration made on scans, or that of one made on precomputed scores.
 pub fn eval_threshold(path: &Path) -> Result<f64> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    let v: Value = serde_json::from_str(&text)
-        .with_context(|| format!("{}: not a JSON calibration", path.display()))?;
+    let v = read_json(path)?;
     if v["format"] == FORMAT && v["config"]["scores"] == "precomputed" {
         return v["channels"]["scores"]["threshold"]
             .as_f64()
             .ok_or_else(|| anyhow!("{}: channels.scores.threshold missing", path.display()));
     }
-    Ok(Calibration::load(path)?.threshold)
+    Ok(Calibration::from_json(path, v)?.threshold)
 }
 
 #[cfg(test)]

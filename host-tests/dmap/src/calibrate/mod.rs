@@ -33,6 +33,7 @@
 //! calibrate again: applying only half a calibration would leave the power
 //! channel at a default the references never checked.
 
+pub mod checks;
 pub mod file;
 pub mod rule;
 
@@ -87,6 +88,8 @@ pub struct Magnitudes {
     pub cvm: Vec<u32>,
     /// Power magnitudes, `Q15`.
     pub power: Vec<u32>,
+    /// The lowest and highest sample of the scan.
+    pub samples: Option<checks::SampleRange>,
 }
 
 /// Both channels' magnitudes of every position of a scan with data, in the
@@ -99,7 +102,14 @@ pub fn magnitudes(scorer: &Scorer, scan: &ScanFile) -> Result<Magnitudes> {
     for (row, out) in data.chunks_mut(scan.cols * n).enumerate() {
         scan.maps_u16(row * scan.cols, out, &mut scratch)?;
     }
-    let mut m = Magnitudes::default();
+    let mut m = Magnitudes {
+        samples: data
+            .iter()
+            .min()
+            .zip(data.iter().max())
+            .map(|(&lowest, &highest)| checks::SampleRange { lowest, highest }),
+        ..Magnitudes::default()
+    };
     for s in crate::fixed::score_scan(scorer, scan.rows, scan.cols, &data) {
         if s.flags & flags::NO_DATA == 0 {
             m.cvm.push(s.mag);
@@ -179,7 +189,9 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
     let mut all = Vec::new();
     let mut per_ref = Vec::new();
     let mut setup: Option<(Config, Scorer, (usize, usize))> = None;
-    for path in &a.refs {
+    for (i, path) in a.refs.iter().enumerate() {
+        let earlier: Vec<&Path> = a.refs[..i].iter().map(PathBuf::as_path).collect();
+        checks::refuse_duplicate(path, &earlier)?;
         let scan = ScanFile::open(path)?;
         scan.validate(true)
             .with_context(|| format!("{}", path.display()))?;
@@ -206,6 +218,9 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
         if m.cvm.is_empty() {
             bail!("{} has no position with data", path.display());
         }
+        if let Some(range) = m.samples {
+            checks::refuse_unfit(path, (scan.rows, scan.cols), range, a.full_scale, &m.cvm)?;
+        }
         per_ref.push((
             path.clone(),
             scan.rows,
@@ -222,6 +237,28 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
         all.into_iter().map(|m| (m.cvm, m.power)).unzip();
     let (st, thr, loo) = channel(&cvm_all, &rule, |t| t);
     let (pst, pthr, ploo) = channel(&pow_all, &rule, power_thr);
+    let mut warnings = Vec::new();
+    for (i, (path, ..)) in per_ref.iter().enumerate() {
+        if let Some(&(t, n)) = loo.get(i) {
+            let others = fmt_num(scorer.score_to_units(t));
+            warnings.extend(checks::outlier_warning(path, "CVM", n, &others));
+        }
+        if let Some(&(t, n)) = ploo.get(i) {
+            let others = fmt_num(power::to_units(t));
+            warnings.extend(checks::outlier_warning(path, "power", n, &others));
+        }
+    }
+    if thr == u32::MAX {
+        warnings.push(format!(
+            "the CVM channel is off: its threshold is past the largest score (--k {} is too large)",
+            fmt_num(a.k)
+        ));
+    }
+    if pthr == power::POWER_OFF {
+        warnings.push(
+            "the power channel is off: its threshold is above every power magnitude (a reference with a dark neighbour, or --k too large)".into(),
+        );
+    }
     let units = scorer.score_to_units(thr);
     debug_assert_eq!(scorer.threshold_from_units(units), thr);
     let punits = power::to_units(pthr);
@@ -317,5 +354,8 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
             format!("{} (integer {pthr} in Q15)", fmt_num(punits))
         }
     );
+    for w in &warnings {
+        crate::out::warn(w);
+    }
     Ok(())
 }

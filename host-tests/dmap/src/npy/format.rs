@@ -70,8 +70,14 @@ pub(super) fn open_npy<'a>(path: &Path, bytes: &'a [u8]) -> Result<NpyFile<&'a [
     // NpyFile has consumed the header from the slice; what remains is data.
     let data = npy.into_inner();
     if data.len() as u64 != want {
+        // Too few bytes is a cut file; too many, something appended.
+        let what = if (data.len() as u64) < want {
+            "truncated or corrupt file"
+        } else {
+            "extra bytes after the data: a corrupt or appended-to file"
+        };
         bail!(
-            "{p}: holds {} data bytes but shape {:?} of {} needs {want} (truncated or corrupt file)",
+            "{p}: holds {} data bytes but shape {:?} of {} needs {want} ({what})",
             data.len(),
             header.shape(),
             header.dtype().descr()

@@ -57,3 +57,31 @@ pub fn ok(out: &Output) {
         String::from_utf8_lossy(&out.stderr)
     );
 }
+
+/// A defect-free scan of `rows x cols` positions: a spot drifting across a
+/// `j x j` detector
+/// with pseudo-random noise (a 64-bit LCG).
+pub fn spot_scan(path: &Path, rows: usize, cols: usize, j: usize, seed: u64) {
+    let mut x = seed.wrapping_mul(6364136223846793005).wrapping_add(1);
+    let mut data = Vec::new();
+    for r in 0..rows {
+        for c in 0..cols {
+            let (cy, cx) = (
+                1.0 + r as f64 * (j as f64 - 3.0) / rows as f64,
+                1.0 + c as f64 * (j as f64 - 3.0) / cols as f64,
+            );
+            for a in 0..j {
+                for b in 0..j {
+                    x = x
+                        .wrapping_mul(6364136223846793005)
+                        .wrapping_add(1442695040888963407);
+                    let noise = (x >> 54) as f64;
+                    let d2 = (a as f64 - cy).powi(2) + (b as f64 - cx).powi(2);
+                    data.push((3000.0 * (-d2).exp() + noise / 16.0).round() as u16);
+                }
+            }
+        }
+    }
+    let g = cvm_reference::Geometry::new(j, j).unwrap();
+    dmap::npy::write_scan_u16(path, rows, cols, g, &data).unwrap();
+}
