@@ -8,7 +8,7 @@
 //! configuration from the scan file's header instead (see
 //! `cvm_fw_app::emufile`) and only uses the board-independent part here.
 
-use cvm_core::protocol::{MAX_LINE, SCORES_PER_LINE};
+use cvm_core::protocol::{MAX_LINE, MAX_ROW_LINE, SCORES_PER_LINE};
 use cvm_fw_app::queue::LineQueue;
 
 /// Announced in the header line (printable ASCII without `,` or `*`).
@@ -34,7 +34,9 @@ pub const fn keep_reserve(max_cols: usize) -> usize {
     let score_lines = max_cols.div_ceil(SCORES_PER_LINE);
     // Each object closes once: at most every open one in such a burst.
     let objects = cvm_core::objects::MAX_OBJECTS;
-    (4 * row + 2 * score_lines + 2 + objects) * LineQueue::<1>::cost(MAX_LINE)
+    // The header and the end line are the only lines longer than a row's.
+    (4 * row + 2 * score_lines + objects) * LineQueue::<1>::cost(MAX_ROW_LINE)
+        + 2 * LineQueue::<1>::cost(MAX_LINE)
 }
 
 /// A queue must leave room for score lines besides the keep reserve.
