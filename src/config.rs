@@ -61,7 +61,14 @@ pub mod emulated {
 
 #[cfg(feature = "h743")]
 pub mod h743 {
-    use cvm_core::{Config, Geometry, Kernels, Weights};
+    use cvm_core::{Config, Geometry, Kernels, Outputs, Weights};
+
+    /// The part verdict's rules and the READY and REJECT outputs
+    /// (docs/firmware.md, "READY and REJECT outputs"): `dmap stream`'s and
+    /// the emulated board's verdict uses the same defaults, so the three
+    /// end lines agree. A command channel will set the same value at run
+    /// time.
+    pub const OUTPUTS: Outputs = Outputs::DEFAULT;
 
     // The scan configuration: J1, J2 (detector geometry), COLS (beams per
     // row), ROWS (rows per scan: after this many the end line goes out),

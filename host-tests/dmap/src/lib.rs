@@ -20,3 +20,4 @@ pub mod settings;
 pub mod simulate;
 pub mod stream;
 pub mod twin;
+pub mod twin_pins;

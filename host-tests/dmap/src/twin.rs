@@ -40,7 +40,7 @@ use std::time::SystemTime;
 
 /// The fault kinds of the detector model and how many numbers follow the
 /// beam in each (`host-tests/twin/h743twin/detector.py`).
-pub const FAULT_KINDS: [(&str, usize); 10] = [
+pub const FAULT_KINDS: [(&str, usize); 11] = [
     ("gap", 1),
     ("burst", 2),
     ("sync-glitch", 0),
@@ -51,6 +51,7 @@ pub const FAULT_KINDS: [(&str, usize); 10] = [
     ("uart-busy", 1),
     ("halt", 1),
     ("wedge", 0),
+    ("drdy-miss", 0),
 ];
 
 const FAULTS_HELP: &str = "\
@@ -65,6 +66,7 @@ Faults (--fault KIND@BEAM[:ARG...], repeatable; beams count from 0 in raster ord
   uart-busy@B:MS   the UART line is held busy for MS milliseconds from beam B
   halt@B:MS        a debugger halts the core for MS milliseconds at beam B
   wedge@B          the firmware wedges at beam B (interrupts off; the watchdog must reset it)
+  drdy-miss@B      beam B raises no DRDY
 
 Standard output: the bytes the firmware sent on its UART. Standard error: the model's
 counters as one JSON object (last line; `resets` lists watchdog resets). Needs python3
@@ -98,6 +100,8 @@ pub struct TwinArgs {
     /// A debugger is attached (the DBGMCU freeze bits apply while the core is halted)
     #[arg(long)]
     pub debugger: bool,
+    #[command(flatten)]
+    pub pins: crate::twin_pins::PinArgs,
 }
 
 /// The repository root (this crate lives in host-tests/dmap).
@@ -546,9 +550,12 @@ pub fn run(args: &TwinArgs) -> Result<()> {
     let scan_path = dir.path().join("scan.twin");
     std::fs::write(&scan_path, &file)
         .with_context(|| format!("writing {}", scan_path.display()))?;
+    let mut uart = Vec::new();
     let (stats, line) = run_model(&elf, &scan_path, dir, args, &mut |bytes| {
+        uart.extend_from_slice(bytes);
         crate::out::stdout(bytes)
     })?;
+    crate::twin_pins::report(&args.pins, &stats, &uart)?;
     if stats["status"] == "time" {
         crate::out::warn(&format!(
             "the firmware sent no complete end line within --settle-ms {} after the last beam",
