@@ -61,14 +61,24 @@ pub mod emulated {
 
 #[cfg(feature = "h743")]
 pub mod h743 {
-    use cvm_core::{Config, Geometry, Kernels, Outputs, Weights};
+    use cvm_core::{Config, Geometry, Kernels, Outputs, RejectMode, Weights};
 
     /// The part verdict's rules and the READY and REJECT outputs
-    /// (docs/firmware.md, "READY and REJECT outputs"): `dmap stream`'s and
-    /// the emulated board's verdict uses the same defaults, so the three
-    /// end lines agree. A command channel will set the same value at run
-    /// time.
-    pub const OUTPUTS: Outputs = Outputs::DEFAULT;
+    /// (docs/firmware.md, "READY and REJECT outputs"): the verdict's
+    /// rules are `dmap stream`'s and the emulated board's defaults, so the
+    /// three end lines agree; REJECT's mode, pulse width and row delay
+    /// come from `CVM_H743_SCAN` (`reject`, `pulse_us`, `row_delay`). A
+    /// command channel will set the same value at run time.
+    pub const OUTPUTS: Outputs = Outputs {
+        reject_mode: if REJECT_ROW {
+            RejectMode::Row
+        } else {
+            RejectMode::Part
+        },
+        pulse_us: PULSE_US,
+        row_delay: ROW_DELAY,
+        ..Outputs::DEFAULT
+    };
 
     // The scan configuration: J1, J2 (detector geometry), COLS (beams per
     // row), ROWS (rows per scan: after this many the end line goes out),

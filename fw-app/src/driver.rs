@@ -71,6 +71,7 @@ impl<'a, const MAX_COLS: usize> ScanDriver<'a, MAX_COLS> {
             finished,
             verdict: self.pipeline.verdict(),
             faulty,
+            rows: self.pipeline.totals().rows,
         }
     }
 

@@ -22,6 +22,8 @@ pub struct Progress {
     /// The scan in progress is already faulty (its end line will say
     /// `fault-...`): READY need not wait for its end to drop.
     pub faulty: bool,
+    /// Rows of the current (or last) scan whose lines have gone out.
+    pub rows: u32,
 }
 
 /// The outputs' asserted states (not their pin levels: see [`level`]).
@@ -41,12 +43,20 @@ pub struct Change {
     pub pulses: u32,
 }
 
+/// Row mode: closures waiting for their delay, at most this many rows
+/// with closures at once; more are merged into the last (their pulses
+/// come with its, a few rows early, never lost).
+pub const DELAYED_ROWS: usize = 8;
+
 /// The outputs' state across scans.
 #[derive(Clone, Copy, Debug)]
 pub struct OutputLogic {
     settings: Outputs,
     now: Asserted,
     seen: Progress,
+    /// Row mode: (rows out when due, pulses), oldest first.
+    delayed: [(u32, u32); DELAYED_ROWS],
+    n_delayed: usize,
 }
 
 impl OutputLogic {
@@ -64,7 +74,38 @@ impl OutputLogic {
                 reject: !clean && part,
             },
             seen: Progress::default(),
+            delayed: [(0, 0); DELAYED_ROWS],
+            n_delayed: 0,
         }
+    }
+
+    /// Row mode: queues `closed` pulses for `row_delay` rows after the
+    /// rows out now, and returns the pulses now due (all of them when the
+    /// scan has ended: no more rows will come to count the delay).
+    fn row_pulses(&mut self, p: Progress, closed: u32) -> u32 {
+        if closed > 0 {
+            let due = p.rows.saturating_add(self.settings.row_delay);
+            if self.n_delayed < DELAYED_ROWS {
+                self.delayed[self.n_delayed] = (due, closed);
+                self.n_delayed += 1;
+            } else if let Some(last) = self.delayed.last_mut() {
+                last.1 = last.1.saturating_add(closed);
+            }
+        }
+        let ended = p.finished != self.seen.finished;
+        let mut pulses = 0u32;
+        let mut kept = 0;
+        for k in 0..self.n_delayed {
+            let (due, n) = self.delayed[k];
+            if ended || due <= p.rows {
+                pulses = pulses.saturating_add(n);
+            } else {
+                self.delayed[kept] = (due, n);
+                kept += 1;
+            }
+        }
+        self.n_delayed = kept;
+        pulses
     }
 
     pub fn asserted(&self) -> Asserted {
@@ -95,7 +136,7 @@ impl OutputLogic {
                     }
                 }
             }
-            RejectMode::Row => pulses = closed,
+            RejectMode::Row => pulses = self.row_pulses(p, closed),
         }
         if p.faulty {
             self.now.ready = false;

@@ -530,7 +530,7 @@ pub fn run(args: &TwinArgs) -> Result<()> {
     for f in &args.faults {
         check_fault(f, beams)?;
     }
-    let config = h743_config(&header)?;
+    let config = h743_config(&header)? + &args.pins.build_keys()?;
     let file = twin_file(&header, &emufile)?;
     drop(emufile);
     for w in &warnings {

@@ -7,13 +7,43 @@ use clap::Args;
 use std::io::Write;
 use std::path::PathBuf;
 
-#[derive(Args, Clone, Debug, Default)]
+#[derive(Args, Clone, Debug)]
 pub struct PinArgs {
     /// Write the output pins' timeline to FILE (CSV: us,pin,level,beam,row;
     /// each edge with its model time in µs and the last beam whose DRDY
     /// came before it, -1 before the first)
     #[arg(long = "pins", value_name = "FILE")]
     pub pins: Option<PathBuf>,
+    /// REJECT's mode in the firmware built: part (at the scan's end) or
+    /// row (a pulse per object, after the row that closes it)
+    #[arg(long, value_name = "MODE", default_value = "part", value_parser = ["part", "row"])]
+    pub reject: String,
+    /// REJECT's pulse width in µs (0: held until the next scan; row mode needs one)
+    #[arg(long, value_name = "US", default_value_t = 0)]
+    pub pulse_us: u32,
+    /// Row mode: rows between the row that closes an object and its pulse
+    #[arg(long, value_name = "ROWS", default_value_t = 0)]
+    pub row_delay: u32,
+}
+
+impl PinArgs {
+    /// The `CVM_H743_SCAN` keys of the outputs (none for the defaults, so
+    /// that the default build stays the one cached).
+    pub fn build_keys(&self) -> anyhow::Result<String> {
+        if self.reject == "row" && self.pulse_us == 0 {
+            anyhow::bail!("--reject row needs --pulse-us");
+        }
+        if self.pulse_us > 65_536 {
+            anyhow::bail!("--pulse-us: at most 65536 (TIM14 counts 16 bits of µs)");
+        }
+        if self.reject == "part" && self.pulse_us == 0 && self.row_delay == 0 {
+            return Ok(String::new());
+        }
+        Ok(format!(
+            " reject={} pulse_us={} row_delay={}",
+            self.reject, self.pulse_us, self.row_delay
+        ))
+    }
 }
 
 /// One recorded change of an output pin.

@@ -251,15 +251,14 @@ fn reset_mid_scan_rejects_the_part_and_ready_waits_for_a_clean_scan() {
     assert!(ready[2].0 > reject[0].0, "{ready:?}");
 }
 
-/// The demo (dmap simulate's prototype lens, two defects) at the 9x9
-/// SPI-limit beam rate: `dmap twin --pins` writes the timeline; REJECT goes
-/// up once, after the scan's last beam, as the end line says `obj`; READY
-/// stays up. The output is `dmap stream`'s byte for byte.
-#[test]
-fn demo_part_is_rejected_at_the_scans_end() {
-    let dir = tempfile::tempdir().unwrap();
-    let scan = dir.path().join("demo.npy");
-    let s = |p: &Path| p.to_str().unwrap().to_string();
+fn s(p: &Path) -> String {
+    p.to_str().unwrap().to_string()
+}
+
+/// The demo scan: dmap simulate's prototype lens (39 x 39 beams of 9x9
+/// maps, two defects), as `scripts/demo.sh` makes it.
+fn demo(dir: &Path) -> std::path::PathBuf {
+    let scan = dir.join("demo.npy");
     dmap(&[
         "simulate",
         "--preset",
@@ -269,8 +268,19 @@ fn demo_part_is_rejected_at_the_scans_end() {
         "-o",
         &s(&scan),
         "--truth",
-        &s(&dir.path().join("truth.npy")),
+        &s(&dir.join("truth.npy")),
     ]);
+    scan
+}
+
+/// The demo at the 9x9 SPI-limit beam rate: `dmap twin --pins` writes the
+/// timeline; REJECT goes up once, after the scan's last beam, as the end
+/// line says `obj`; READY stays up. The output is `dmap stream`'s byte for
+/// byte, and the QEMU board's end line carries the same verdict.
+#[test]
+fn demo_part_is_rejected_at_the_scans_end() {
+    let dir = tempfile::tempdir().unwrap();
+    let scan = demo(dir.path());
     let host = dmap(&["stream", &s(&scan), "--scores", "--threshold", "0.5"]);
     let pins = dir.path().join("pins.csv");
     let twin = dmap(&[
@@ -318,4 +328,80 @@ fn demo_part_is_rejected_at_the_scans_end() {
     let latency = us - (20_000.0 + 1520.0 * 53.0);
     println!("demo: REJECT {latency:.1} us after the last beam's DRDY");
     assert!(latency > 0.0 && latency < 1_000.0, "{latency}");
+    let qemu = dmap(&["emulate", &s(&scan), "--scores", "--threshold", "0.5"]);
+    assert_eq!(verdicts(&qemu.stdout), ["obj"]);
+}
+
+/// The demo in row mode (500 µs pulses, 2 rows' delay): one pulse per
+/// object, each 500 µs wide (±1 µs, one TIM14 tick), starting after the
+/// beam that puts out the row `row_delay` rows after the one closing the
+/// object (a row goes out when the next one is complete), or at the scan's
+/// end when the delay runs past it.
+#[test]
+fn demo_in_row_mode_pulses_once_per_object() {
+    let dir = tempfile::tempdir().unwrap();
+    let scan = demo(dir.path());
+    let pins = dir.path().join("pins.csv");
+    let (period, delay, cols, rows) = (53.0, 2, 39, 39);
+    let twin = dmap(&[
+        "twin",
+        &s(&scan),
+        "--scores",
+        "--threshold",
+        "0.5",
+        "--beam-us",
+        "53",
+        "--reject",
+        "row",
+        "--pulse-us",
+        "500",
+        "--row-delay",
+        "2",
+        "--pins",
+        &s(&pins),
+    ]);
+    let text = String::from_utf8_lossy(&twin.stdout);
+    assert_eq!(verdicts(&twin.stdout), ["obj"]);
+    let last_rows: Vec<i64> = text
+        .lines()
+        .filter(|l| l.starts_with("O,"))
+        .map(|l| l.split(',').nth(3).unwrap().parse().unwrap())
+        .collect();
+    assert_eq!(last_rows.len(), 2, "{text}");
+    let csv = std::fs::read_to_string(&pins).unwrap();
+    let reject: Vec<(f64, u8, i64)> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').collect::<Vec<_>>())
+        .filter(|f| f[1] == "REJECT")
+        .map(|f| {
+            (
+                f[0].parse().unwrap(),
+                f[2].parse().unwrap(),
+                f[3].parse().unwrap(),
+            )
+        })
+        .collect();
+    assert_eq!(reject.len(), 4, "{csv}");
+    for (k, row1) in last_rows.iter().enumerate() {
+        let (up, down) = (reject[2 * k], reject[2 * k + 1]);
+        assert_eq!((up.1, down.1), (1, 0), "{csv}");
+        let width = down.0 - up.0;
+        assert!((width - 500.0).abs() <= 1.0, "pulse {k}: {width} us");
+        // Closed by row row1 + 1, which goes out with the last beam of the
+        // row after it; due `delay` rows later.
+        let due_rows = row1 + 2 + delay;
+        let due_beam = if due_rows < rows {
+            (due_rows + 1) * cols - 1
+        } else {
+            rows * cols - 1
+        };
+        assert!(
+            (due_beam..=due_beam + 3).contains(&up.2),
+            "pulse {k} after beam {}, due after beam {due_beam}",
+            up.2
+        );
+        let latency = up.0 - (20_000.0 + due_beam as f64 * period);
+        println!("demo, row mode: pulse {k} {latency:.1} us after beam {due_beam}'s DRDY");
+    }
 }

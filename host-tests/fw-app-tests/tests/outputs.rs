@@ -13,6 +13,7 @@ fn progress(begun: u32, finished: u32, verdict: Option<Verdict>, faulty: bool) -
         finished,
         verdict,
         faulty,
+        rows: 0,
     }
 }
 
@@ -182,4 +183,40 @@ fn pin_levels_follow_the_polarity() {
     // The default READY is active high: an unpowered board or a broken
     // wire (the PLC input's pull-down: low) reads "not ready".
     assert!(Outputs::DEFAULT.ready_high);
+}
+
+#[test]
+fn row_mode_delays_each_rows_pulses_by_the_set_rows() {
+    let s = Outputs {
+        reject_mode: RejectMode::Row,
+        pulse_us: 500,
+        row_delay: 2,
+        ..Outputs::DEFAULT
+    };
+    let mut o = OutputLogic::start(s, ResetCause::PowerOn);
+    let at = |rows: u32, finished: u32| Progress {
+        begun: 1,
+        finished,
+        verdict: None,
+        faulty: false,
+        rows,
+    };
+    o.step(at(0, 0), 0);
+    let pulse = |n| {
+        Some(Change {
+            now: asserted(true, false),
+            pulses: n,
+        })
+    };
+    // Row 4 goes out (5 rows out) and closes one object: due when 7
+    // rows are out.
+    assert_eq!(o.step(at(5, 0), 1), None);
+    // Row 5 closes two more: due at 8.
+    assert_eq!(o.step(at(6, 0), 2), None);
+    assert_eq!(o.step(at(7, 0), 0), pulse(1));
+    assert_eq!(o.step(at(8, 0), 0), pulse(2));
+    // A closure near the end of the scan: its pulse comes with the end,
+    // when no row is left to count the delay.
+    assert_eq!(o.step(at(9, 0), 1), None);
+    assert_eq!(o.step(at(10, 1), 0), pulse(1));
 }
