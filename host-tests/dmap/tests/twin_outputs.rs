@@ -123,10 +123,7 @@ fn parts_on_the_twin(parts: usize, faults: &[&str], beam_us: &str) -> (Vec<u8>, 
 
 /// The last level of `e` at or before beam `beam` (`start` before any edge).
 fn level_after(e: &[(f64, u64, i64)], beam: i64, start: u64) -> u64 {
-    e.iter()
-        .filter(|x| x.2 <= beam)
-        .last()
-        .map_or(start, |x| x.1)
+    e.iter().rfind(|x| x.2 <= beam).map_or(start, |x| x.1)
 }
 
 #[test]
