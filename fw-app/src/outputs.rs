@@ -85,22 +85,29 @@ impl OutputLogic {
     fn row_pulses(&mut self, p: Progress, closed: u32) -> u32 {
         if closed > 0 {
             let due = p.rows.saturating_add(self.settings.row_delay);
-            if self.n_delayed < DELAYED_ROWS {
-                self.delayed[self.n_delayed] = (due, closed);
-                self.n_delayed += 1;
-            } else if let Some(last) = self.delayed.last_mut() {
-                last.1 = last.1.saturating_add(closed);
+            match self.delayed.get_mut(self.n_delayed) {
+                Some(slot) => {
+                    *slot = (due, closed);
+                    self.n_delayed += 1;
+                }
+                None => {
+                    if let Some(last) = self.delayed.last_mut() {
+                        last.1 = last.1.saturating_add(closed);
+                    }
+                }
             }
         }
         let ended = p.finished != self.seen.finished;
         let mut pulses = 0u32;
         let mut kept = 0;
-        for k in 0..self.n_delayed {
-            let (due, n) = self.delayed[k];
+        for k in 0..self.n_delayed.min(DELAYED_ROWS) {
+            let Some(&(due, n)) = self.delayed.get(k) else {
+                break;
+            };
             if ended || due <= p.rows {
                 pulses = pulses.saturating_add(n);
-            } else {
-                self.delayed[kept] = (due, n);
+            } else if let Some(slot) = self.delayed.get_mut(kept) {
+                *slot = (due, n);
                 kept += 1;
             }
         }
