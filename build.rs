@@ -62,7 +62,9 @@ fn main() {
 /// Keys: j1, j2, cols, rows, kernels (paper|square), b, weights
 /// (uniform|unit), normalise, threshold, pthr (the power channel's
 /// threshold, a contrast; `inf` turns it off), scores, max_defect_lines,
-/// fs (full scale), fw (the version in the header).
+/// fs (full scale), fw (the version in the header), reject (part|row:
+/// REJECT's mode), pulse_us (its pulse width; 0 in part mode: held),
+/// row_delay (row mode: rows between the closing row and the pulse).
 ///
 /// `CVM_H743_CALIBRATION` names a calibration file (`dmap calibrate`): its
 /// two thresholds are compiled in, after checking that it was made for
@@ -83,6 +85,9 @@ fn h743_scan(spec: &str, calibration: Option<&std::path::Path>) -> Result<String
     let mut max_defect_lines = 0u16;
     let mut full_scale = u16::MAX;
     let mut fw = None::<String>;
+    let mut reject_row = false;
+    let mut pulse_us = 0u32;
+    let mut row_delay = 0u32;
     fn num<T: std::str::FromStr>(k: &str, v: &str) -> Result<T, String> {
         v.parse()
             .map_err(|_| format!("{k}={v}: not a valid number"))
@@ -112,6 +117,9 @@ fn h743_scan(spec: &str, calibration: Option<&std::path::Path>) -> Result<String
             "scores" => scores = flag(k, v)?,
             "max_defect_lines" => max_defect_lines = num(k, v)?,
             "fs" => full_scale = num(k, v)?,
+            "reject" if v == "part" || v == "row" => reject_row = v == "row",
+            "pulse_us" => pulse_us = num(k, v)?,
+            "row_delay" => row_delay = num(k, v)?,
             // The version the header announces (`dmap twin` passes the
             // host's, so that its output compares byte for byte).
             "fw" if !v.is_empty()
@@ -200,6 +208,9 @@ fn h743_scan(spec: &str, calibration: Option<&std::path::Path>) -> Result<String
         "pub const MAX_DEFECT_LINES_PER_ROW: u16 = {max_defect_lines};"
     );
     let _ = writeln!(s, "pub const FULL_SCALE: u16 = {full_scale};");
+    let _ = writeln!(s, "pub const REJECT_ROW: bool = {reject_row};");
+    let _ = writeln!(s, "pub const PULSE_US: u32 = {pulse_us};");
+    let _ = writeln!(s, "pub const ROW_DELAY: u32 = {row_delay};");
     let _ = writeln!(
         s,
         "pub const FIRMWARE_VERSION_OVERRIDE: Option<&str> = {fw:?};"

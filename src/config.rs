@@ -8,7 +8,7 @@
 //! configuration from the scan file's header instead (see
 //! `cvm_fw_app::emufile`) and only uses the board-independent part here.
 
-use cvm_core::protocol::{MAX_LINE, SCORES_PER_LINE};
+use cvm_core::protocol::{MAX_LINE, MAX_ROW_LINE, SCORES_PER_LINE};
 use cvm_fw_app::queue::LineQueue;
 
 /// Announced in the header line (printable ASCII without `,` or `*`).
@@ -34,7 +34,9 @@ pub const fn keep_reserve(max_cols: usize) -> usize {
     let score_lines = max_cols.div_ceil(SCORES_PER_LINE);
     // Each object closes once: at most every open one in such a burst.
     let objects = cvm_core::objects::MAX_OBJECTS;
-    (4 * row + 2 * score_lines + 2 + objects) * LineQueue::<1>::cost(MAX_LINE)
+    // The header and the end line are the only lines longer than a row's.
+    (4 * row + 2 * score_lines + objects) * LineQueue::<1>::cost(MAX_ROW_LINE)
+        + 2 * LineQueue::<1>::cost(MAX_LINE)
 }
 
 /// A queue must leave room for score lines besides the keep reserve.
@@ -59,7 +61,24 @@ pub mod emulated {
 
 #[cfg(feature = "h743")]
 pub mod h743 {
-    use cvm_core::{Config, Geometry, Kernels, Weights};
+    use cvm_core::{Config, Geometry, Kernels, Outputs, RejectMode, Weights};
+
+    /// The part verdict's rules and the READY and REJECT outputs
+    /// (docs/firmware.md, "READY and REJECT outputs"): the verdict's
+    /// rules are `dmap stream`'s and the emulated board's defaults, so the
+    /// three end lines agree; REJECT's mode, pulse width and row delay
+    /// come from `CVM_H743_SCAN` (`reject`, `pulse_us`, `row_delay`). A
+    /// command channel will set the same value at run time.
+    pub const OUTPUTS: Outputs = Outputs {
+        reject_mode: if REJECT_ROW {
+            RejectMode::Row
+        } else {
+            RejectMode::Part
+        },
+        pulse_us: PULSE_US,
+        row_delay: ROW_DELAY,
+        ..Outputs::DEFAULT
+    };
 
     // The scan configuration: J1, J2 (detector geometry), COLS (beams per
     // row), ROWS (rows per scan: after this many the end line goes out),

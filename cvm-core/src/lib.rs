@@ -15,10 +15,12 @@ pub mod scorer;
 pub mod settings;
 pub mod stream;
 pub mod tables;
+pub mod verdict;
 
 pub use config::{Config, ConfigError, Geometry, Kernels, MAX_CELLS, MAX_J, Weights};
 pub use objects::{Object, Objects};
 pub use pipeline::Pipeline;
 pub use scorer::{Bounds, Formats, FrameError, Scorer, magnitude};
-pub use settings::Settings;
+pub use settings::{Outputs, RejectMode, Settings};
 pub use stream::{Engine, Position, PositionScore, RowSummary, RowView, Totals};
+pub use verdict::{Fault, Verdict};

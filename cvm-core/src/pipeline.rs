@@ -3,16 +3,38 @@
 //! `dmap stream` and both firmware boards drive exactly this type, which is
 //! what makes their output byte-identical.
 
-use crate::objects::Objects;
+use crate::objects::{Object, Objects};
 use crate::protocol::{HeaderInfo, LineSink, encode_end, encode_header, encode_object, encode_row};
 use crate::scorer::Scorer;
-pub use crate::settings::Settings;
+pub use crate::settings::{Outputs, Settings};
 use crate::stream::{Engine, EngineError, Position, PushOutcome, RowView, Totals};
+use crate::verdict::{self, Verdict};
+
+/// What the objects' closures decide so far in a scan: the objects that
+/// count towards the verdict, and those that rows closed since a board
+/// last took them (row-mode REJECT pulses).
+#[derive(Clone, Copy, Debug, Default)]
+struct Closures {
+    counted: u32,
+    untaken: u32,
+}
+
+impl Closures {
+    fn close(&mut self, o: &Object, outputs: &Outputs) {
+        if verdict::counts(o, outputs) {
+            self.counted = self.counted.saturating_add(1);
+            self.untaken = self.untaken.saturating_add(1);
+        }
+    }
+}
 
 pub struct Pipeline<'a, const MAX_COLS: usize> {
     engine: Engine<'a, MAX_COLS>,
     objects: Objects,
     settings: Settings,
+    outputs: Outputs,
+    closures: Closures,
+    verdict: Option<Verdict>,
 }
 
 impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
@@ -41,11 +63,36 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
             engine,
             objects: Objects::new(),
             settings,
+            outputs: Outputs::DEFAULT,
+            closures: Closures::default(),
+            verdict: None,
         })
+    }
+
+    /// The verdict's rules (and the board's outputs) from now on;
+    /// [`Outputs::DEFAULT`] until set.
+    pub fn set_outputs(&mut self, outputs: Outputs) {
+        self.outputs = outputs;
+    }
+
+    pub fn outputs(&self) -> &Outputs {
+        &self.outputs
+    }
+
+    /// The verdict of the last finished scan (`None` before the first).
+    pub fn verdict(&self) -> Option<Verdict> {
+        self.verdict
+    }
+
+    /// Objects that count towards the verdict closed since the last call
+    /// (row-mode REJECT: the rows just emitted closed them).
+    pub fn take_closed(&mut self) -> u32 {
+        core::mem::take(&mut self.closures.untaken)
     }
 
     /// Starts a scan: the header line.
     pub fn begin(&mut self, sink: &mut impl LineSink) {
+        self.closures = Closures::default();
         let h = HeaderInfo::new(self.engine.scorer(), &self.settings);
         encode_header(&h, sink);
     }
@@ -55,8 +102,17 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
             engine,
             objects,
             settings,
+            outputs,
+            closures,
+            ..
         } = self;
-        engine.push(pos, frame, &mut |row| emit(row, settings, objects, sink))
+        let mut lines = Emit {
+            settings,
+            outputs,
+            closures,
+            sink,
+        };
+        engine.push(pos, frame, &mut |row| lines.row(row, objects))
     }
 
     /// Records that `pos` receives no frame (detector overrun, SPI error).
@@ -65,8 +121,17 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
             engine,
             objects,
             settings,
+            outputs,
+            closures,
+            ..
         } = self;
-        engine.mark_missing(pos, &mut |row| emit(row, settings, objects, sink))
+        let mut lines = Emit {
+            settings,
+            outputs,
+            closures,
+            sink,
+        };
+        engine.mark_missing(pos, &mut |row| lines.row(row, objects))
     }
 
     /// See [`Engine::count_misplaced`].
@@ -75,17 +140,29 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
     }
 
     /// Ends the scan: remaining rows, the objects still open, then the end
-    /// line with `lines_dropped` (score lines the output could not carry).
-    /// Returns the scan's totals.
+    /// line with `lines_dropped` (score lines the output could not carry)
+    /// and the part's verdict ([`Pipeline::verdict`]). Returns the scan's
+    /// totals.
     pub fn finish(&mut self, lines_dropped: u32, sink: &mut impl LineSink) -> Totals {
         let Pipeline {
             engine,
             objects,
             settings,
+            outputs,
+            closures,
+            verdict,
         } = self;
-        let mut totals = engine.finish(&mut |row| emit(row, settings, objects, sink));
-        objects.finish_with(&mut |o| encode_object(o, sink), &mut totals);
-        encode_end(&totals, lines_dropped, sink);
+        let mut lines = Emit {
+            settings,
+            outputs,
+            closures,
+            sink,
+        };
+        let mut totals = engine.finish(&mut |row| lines.row(row, objects));
+        objects.finish_with(&mut |o| lines.object(o), &mut totals);
+        let v = Verdict::of(&totals, closures.counted, outputs);
+        *verdict = Some(v);
+        encode_end(&totals, lines_dropped, v, sink);
         totals
     }
 
@@ -94,16 +171,32 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
     }
 }
 
-/// A finished row's lines, then the lines of the objects it closes. Out
-/// of line: one copy per sink type instead of one in each of the three
-/// closures that call it (about 16 KB of flash each on the target).
-#[inline(never)]
-fn emit(row: &RowView, settings: &Settings, objects: &mut Objects, sink: &mut impl LineSink) {
-    encode_row(
-        row,
-        settings.max_defect_lines_per_row,
-        settings.scores,
-        sink,
-    );
-    objects.push_row(row, &mut |o| encode_object(o, &mut *sink));
+/// Where a scan's row and object lines go, and what their closures count.
+struct Emit<'p, S> {
+    settings: &'p Settings,
+    outputs: &'p Outputs,
+    closures: &'p mut Closures,
+    sink: &'p mut S,
+}
+
+impl<S: LineSink> Emit<'_, S> {
+    /// A finished row's lines, then the lines of the objects it closes.
+    /// Out of line: one copy per sink type instead of one in each of the
+    /// three closures that call it (about 16 KB of flash each on the
+    /// target).
+    #[inline(never)]
+    fn row(&mut self, row: &RowView, objects: &mut Objects) {
+        encode_row(
+            row,
+            self.settings.max_defect_lines_per_row,
+            self.settings.scores,
+            self.sink,
+        );
+        objects.push_row(row, &mut |o| self.object(o));
+    }
+
+    fn object(&mut self, o: &Object) {
+        self.closures.close(o, self.outputs);
+        encode_object(o, self.sink);
+    }
 }

@@ -111,3 +111,65 @@ impl Source {
         Source::ALL.into_iter().find(|s| s.as_char() == c)
     }
 }
+
+/// When REJECT is asserted.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum RejectMode {
+    /// Once per part, at the scan's end, when the verdict rejects it.
+    Part,
+    /// A pulse each time a row closes an object that counts, `row_delay`
+    /// rows later.
+    Row,
+}
+
+/// The part verdict's rules and the READY and REJECT outputs: plain data,
+/// compiled defaults on the boards today, so that a command channel can
+/// later get and set the same value between scans. The pipeline reads the
+/// verdict's fields; the pins' fields are the board's.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Outputs {
+    /// An object rejects its part when its area (positions) is at least this.
+    pub min_area: u32,
+    /// ... and its peak strength (`Q16`, as the `O` line's `peak`) at
+    /// least this (65536: at its threshold, which every object reaches).
+    pub min_strength: u32,
+    /// Positions without data a scan may have and still be inspected.
+    pub max_missing: u32,
+    /// Misplaced frames a scan may have and still be inspected.
+    pub max_misplaced: u32,
+    pub reject_mode: RejectMode,
+    /// REJECT's pulse width, µs; 0 in part mode: held until the next
+    /// scan starts.
+    pub pulse_us: u32,
+    /// Row mode: the pulse starts this many rows after the closing row.
+    pub row_delay: u32,
+    /// READY's asserted level is high. High is the fail-safe choice: a
+    /// broken wire or an unpowered board reads low, "not ready".
+    pub ready_high: bool,
+    /// REJECT's asserted level is high.
+    pub reject_high: bool,
+}
+
+impl Outputs {
+    /// The defaults: every object and every lost position rejects the
+    /// part; REJECT held per part; both outputs active high.
+    pub const DEFAULT: Outputs = Outputs {
+        min_area: 0,
+        min_strength: 0,
+        max_missing: 0,
+        max_misplaced: 0,
+        reject_mode: RejectMode::Part,
+        pulse_us: 0,
+        row_delay: 0,
+        ready_high: true,
+        reject_high: true,
+    };
+}
+
+impl Default for Outputs {
+    fn default() -> Self {
+        Outputs::DEFAULT
+    }
+}

@@ -11,6 +11,7 @@ use cvm_core::protocol::{LineSink, Priority};
 use cvm_core::stream::Totals;
 
 use crate::acquire::BeamRecord;
+use crate::outputs::Progress;
 use crate::sequence::{Action, Payload, SequenceCounts, Sequencer};
 
 /// Where the frames behind beam records live (buffer indices on a board).
@@ -44,6 +45,8 @@ pub struct ScanDriver<'a, const MAX_COLS: usize> {
     dropped_at_begin: u32,
     /// Totals and dropped lines of the last finished scan.
     last: Option<(Totals, u32)>,
+    /// Scans begun and finished since start-up (the outputs' clock).
+    scans: (u32, u32),
 }
 
 impl<'a, const MAX_COLS: usize> ScanDriver<'a, MAX_COLS> {
@@ -54,7 +57,27 @@ impl<'a, const MAX_COLS: usize> ScanDriver<'a, MAX_COLS> {
             pending: None,
             dropped_at_begin: 0,
             last: None,
+            scans: (0, 0),
         }
+    }
+
+    /// Where the scans stand, for the READY and REJECT outputs.
+    pub fn progress(&self) -> Progress {
+        let (begun, finished) = self.scans;
+        let faulty = begun != finished
+            && cvm_core::Verdict::of(self.pipeline.totals(), 0, self.pipeline.outputs()).is_fault();
+        Progress {
+            begun,
+            finished,
+            verdict: self.pipeline.verdict(),
+            faulty,
+            rows: self.pipeline.totals().rows,
+        }
+    }
+
+    /// Objects that count, closed by the rows emitted since the last call.
+    pub fn take_closed(&mut self) -> u32 {
+        self.pipeline.take_closed()
     }
 
     /// Totals and dropped lines of the last finished scan.
@@ -107,10 +130,11 @@ impl<'a, const MAX_COLS: usize> ScanDriver<'a, MAX_COLS> {
             seq,
             dropped_at_begin,
             last,
+            scans,
             ..
         } = self;
         seq.beam(sync, payload, &mut |a| {
-            finished |= apply(pipeline, dropped_at_begin, last, a, frames, sink);
+            finished |= apply(pipeline, dropped_at_begin, last, scans, a, frames, sink);
         });
         finished
     }
@@ -133,10 +157,11 @@ impl<'a, const MAX_COLS: usize> ScanDriver<'a, MAX_COLS> {
             seq,
             dropped_at_begin,
             last,
+            scans,
             ..
         } = self;
         let more = seq.end_of_data(&mut |a| {
-            finished |= apply(pipeline, dropped_at_begin, last, a, frames, sink);
+            finished |= apply(pipeline, dropped_at_begin, last, scans, a, frames, sink);
         });
         (more, finished)
     }
@@ -155,6 +180,7 @@ fn apply<const MAX_COLS: usize, F: FrameStore, S: CountingSink>(
     pipeline: &mut Pipeline<'_, MAX_COLS>,
     dropped_at_begin: &mut u32,
     last: &mut Option<(Totals, u32)>,
+    scans: &mut (u32, u32),
     action: Action<usize>,
     frames: &mut F,
     sink: &mut S,
@@ -162,6 +188,7 @@ fn apply<const MAX_COLS: usize, F: FrameStore, S: CountingSink>(
     match action {
         Action::Begin => {
             *dropped_at_begin = sink.dropped();
+            scans.0 = scans.0.wrapping_add(1);
             pipeline.begin(sink);
         }
         Action::Place(pos, buf) => {
@@ -182,6 +209,7 @@ fn apply<const MAX_COLS: usize, F: FrameStore, S: CountingSink>(
             // The last rows' score lines go out as keep lines, so that no
             // line can be dropped after `dropped` was fixed for the end line.
             *last = Some((pipeline.finish(dropped, &mut Promote(sink)), dropped));
+            scans.1 = scans.1.wrapping_add(1);
             return true;
         }
     }

@@ -178,6 +178,11 @@ pub extern "C" fn _start() -> ! {
     // The scoring side's loop as the boards run it.
     let mut acq = Acquisition::<2, 64>::new();
     let mut driver = ScanDriver::new(pipeline, black_box(300), black_box(300));
+    // The READY and REJECT logic runs after every step on the H743.
+    let mut plc = cvm_fw_app::outputs::OutputLogic::start(
+        black_box(cvm_core::Outputs::DEFAULT),
+        black_box(cvm_core::protocol::ResetCause::PowerOn),
+    );
     let mut frames = Frames {
         bus: black_box(&*bus),
         cells: black_box(CELLS),
@@ -193,6 +198,7 @@ pub extern "C" fn _start() -> ! {
                     let rec: Option<BeamRecord> =
                         if driver.busy() { None } else { acq.take_next() };
                     black_box(driver.step(rec, &mut frames, &mut sink));
+                    black_box(plc.step(driver.progress(), driver.take_closed()));
                 }
             }
             3 => {

@@ -18,7 +18,8 @@
 //!   the watchdog feed never wait for a backlog to be scored.
 //!
 //! What they share is in `shared`; where the scoring side's memory lives,
-//! and why, in `scoring`.
+//! and why, in `scoring`. The scoring task also sets the READY and REJECT
+//! outputs after every step (`outputs`; TIM14 times REJECT's pulses).
 //!
 //! D-cache: left disabled (only the I-cache is enabled), so DMA buffers in
 //! AXI SRAM need no cache maintenance. DMA only touches statics in AXI SRAM
@@ -28,6 +29,7 @@ mod clocks;
 mod drdy;
 mod frame_reader;
 mod memory;
+mod outputs;
 mod pins;
 mod read_deadline;
 mod resets;
@@ -81,19 +83,22 @@ fn main() -> ! {
     frame_reader::install(pins.spi, pins.sck, pins.miso, pins.cs);
     let uart = uart(pins.uart, pins.uart_tx, pins.uart_tx_dma);
     let driver = scoring::scan_driver(cause, boots);
+    let plc = outputs::PlcOutputs::new(pins.outputs, cause);
     let mut wdg = IndependentWatchdog::new(pins.iwdg, WATCHDOG_US);
     wdg.unleash();
     QUEUE.lock(|q| q.borrow_mut().set_reserve(KEEP_RESERVE));
     drdy::enable(pins.drdy, pins.drdy_exti, pins.line_sync);
 
     let executor = EXECUTOR.init(Executor::new());
-    executor.run(|spawner| match (uart_task(uart), score_task(driver, wdg)) {
-        (Ok(u), Ok(s)) => {
-            spawner.spawn(u);
-            spawner.spawn(s);
-        }
-        _ => defmt::panic!("thread tasks already running"),
-    })
+    executor.run(
+        |spawner| match (uart_task(uart), score_task(driver, wdg, plc)) {
+            (Ok(u), Ok(s)) => {
+                spawner.spawn(u);
+                spawner.spawn(s);
+            }
+            _ => defmt::panic!("thread tasks already running"),
+        },
+    )
 }
 
 /// USART3 at `BAUD`, transmit only (the ST-LINK's virtual COM port).

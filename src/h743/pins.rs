@@ -5,8 +5,16 @@
 use embassy_stm32::Peri;
 use embassy_stm32::Peripherals;
 use embassy_stm32::peripherals::{
-    DMA1_CH2, EXTI9, IWDG1, PA5, PA6, PD8, PD14, PE9, PE11, SPI1, USART3,
+    DMA1_CH2, EXTI9, IWDG1, PA5, PA6, PB0, PB14, PD8, PD14, PE9, PE11, PE13, PE14, SPI1, USART3,
 };
+
+/// READY and REJECT (`outputs`) and the user LEDs that mirror them.
+pub struct OutputPins {
+    pub ready: Peri<'static, PE14>,
+    pub reject: Peri<'static, PE13>,
+    pub ready_led: Peri<'static, PB0>,
+    pub reject_led: Peri<'static, PB14>,
+}
 
 /// (SPI1's RX DMA, DMA1 stream 1, is driven by `frame_reader` directly.)
 pub struct Pins {
@@ -21,6 +29,7 @@ pub struct Pins {
     pub uart_tx: Peri<'static, PD8>,
     pub uart_tx_dma: Peri<'static, DMA1_CH2>,
     pub iwdg: Peri<'static, IWDG1>,
+    pub outputs: OutputPins,
 }
 
 pub fn take(p: Peripherals) -> Pins {
@@ -36,5 +45,11 @@ pub fn take(p: Peripherals) -> Pins {
         uart_tx: p.PD8, // ST-LINK VCP (PD9, its RX, is unused)
         uart_tx_dma: p.DMA1_CH2,
         iwdg: p.IWDG1,
+        outputs: OutputPins {
+            ready: p.PE14,      // D4
+            reject: p.PE13,     // D3
+            ready_led: p.PB0,   // LD1, green
+            reject_led: p.PB14, // LD3, red
+        },
     }
 }

@@ -16,7 +16,7 @@ use static_cell::ConstStaticCell;
 use super::memory::Noload;
 use crate::config::h743::{
     COLS, CORE, FIRMWARE_VERSION, FRAME_BUFFERS, FRAME_SAMPLES, MAX_COLS, MAX_DEFECT_LINES_PER_ROW,
-    POWER_THRESHOLD_UNITS, QUEUE_BYTES, ROWS, SCORES, THRESHOLD_UNITS,
+    OUTPUTS, POWER_THRESHOLD_UNITS, QUEUE_BYTES, ROWS, SCORES, THRESHOLD_UNITS,
 };
 use crate::frames::SampleBuffers;
 
@@ -115,9 +115,10 @@ pub fn scan_driver(cause: ResetCause, boots: u32) -> &'static mut ScanDriver<'st
         reset_cause: cause,
         boots,
     };
-    let pipeline = match Pipeline::<MAX_COLS>::with_near(scorer, settings, row_a, row_b, near) {
+    let mut pipeline = match Pipeline::<MAX_COLS>::with_near(scorer, settings, row_a, row_b, near) {
         Ok(p) => p,
         Err(e) => defmt::panic!("pipeline refused its buffers: {}", e),
     };
+    pipeline.set_outputs(OUTPUTS);
     unsafe { DRIVER.take() }.write(ScanDriver::new(pipeline, COLS as u32, ROWS))
 }

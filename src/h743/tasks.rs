@@ -11,6 +11,7 @@ use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_time::{Duration, Instant, with_timeout};
 
 use super::memory::Noload;
+use super::outputs::PlcOutputs;
 use super::shared::{ACQ, BEAMS, CELLS, FRAMES, KICK, QUEUE, ROOM};
 use crate::config::h743::{FEED_MS, IDLE_END_MS, MAX_COLS, SCORE_BURST};
 use crate::frames::Samples;
@@ -58,6 +59,7 @@ async fn wait_for_room(wdg: &mut IndependentWatchdog<'static, IWDG1>) {
 pub async fn score_task(
     driver: &'static mut ScanDriver<'static, MAX_COLS>,
     mut wdg: IndependentWatchdog<'static, IWDG1>,
+    mut plc: PlcOutputs,
 ) {
     let mut frames = Samples {
         bufs: &FRAMES,
@@ -86,7 +88,9 @@ pub async fn score_task(
             }
             last_beam = Instant::now();
             idle_ended = false;
-            if driver.step(rec, &mut frames, &mut sink) {
+            let finished = driver.step(rec, &mut frames, &mut sink);
+            plc.step(driver.progress(), driver.take_closed());
+            if finished {
                 report_scan(driver);
             }
             // Most beams queue no line (lines come per row): waking the
@@ -108,6 +112,7 @@ pub async fn score_task(
             loop {
                 wait_for_room(&mut wdg).await;
                 let (more, finished) = driver.end_of_data(&mut frames, &mut sink);
+                plc.step(driver.progress(), driver.take_closed());
                 KICK.signal(());
                 if finished {
                     warn!("no beam for {} ms: scan ended early", IDLE_END_MS);

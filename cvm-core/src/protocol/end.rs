@@ -3,15 +3,19 @@
 use super::fields::{Fields, ParseError};
 use super::frame::{LineBuf, LineSink, Priority};
 use crate::stream::Totals;
+use crate::verdict::Verdict;
 
-/// `E,rows=..,frames=..,missing=..,dark=..,sat=..,defects=..,rejected=..,extra=..,bad=..,clipped=..,misplaced=..,dropped=..`
-pub fn encode_end(t: &Totals, dropped: u32, sink: &mut impl LineSink) {
+/// `E,rows=..,frames=..,missing=..,dark=..,sat=..,defects=..,obj=..,unobj=..,rejected=..,extra=..,bad=..,clipped=..,misplaced=..,dropped=..,verdict=..`
+pub fn encode_end(t: &Totals, dropped: u32, verdict: Verdict, sink: &mut impl LineSink) {
     let mut l = LineBuf::new(b'E');
     let mut t = *t;
     for (key, field) in END_FIELDS {
         l.kv_u64(key.as_bytes(), *field(&mut t) as u64);
     }
     l.kv_u64(DROPPED.as_bytes(), dropped as u64);
+    l.field(VERDICT.as_bytes());
+    l.byte(b'=');
+    l.bytes(verdict.as_str().as_bytes());
     sink.line(l.finish(), Priority::Keep);
 }
 
@@ -40,11 +44,15 @@ pub type TotalsField = fn(&mut Totals) -> &mut u32;
 /// The end line's last key: score lines the link could not carry.
 pub const DROPPED: &str = "dropped";
 
-/// Totals as the end line carries them.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+/// The key after [`DROPPED`], the last: the part's verdict.
+pub const VERDICT: &str = "verdict";
+
+/// Totals and verdict as the end line carries them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct EndInfo {
     pub totals: Totals,
     pub dropped: u32,
+    pub verdict: Verdict,
 }
 
 pub(super) fn parse_end<'s>(
@@ -55,5 +63,10 @@ pub(super) fn parse_end<'s>(
         *field(&mut totals) = f.key_u32(key)?;
     }
     let dropped = f.key_u32(DROPPED)?;
-    Ok(EndInfo { totals, dropped })
+    let verdict = Verdict::parse(f.key(VERDICT)?).ok_or(ParseError::Format)?;
+    Ok(EndInfo {
+        totals,
+        dropped,
+        verdict,
+    })
 }

@@ -4,8 +4,14 @@
 
 use super::fields::ParseError;
 
-/// Upper bound on the length of any line, newline included.
-pub const MAX_LINE: usize = 256;
+/// Upper bound on the length of any line, newline included: the end
+/// line with every total at its widest and the longest verdict.
+pub const MAX_LINE: usize = 280;
+
+/// Upper bound on the length of every line but the header and the end
+/// line (`R`, `D`, `S`, `O`), newline included: what a queue reserves per
+/// line of a row.
+pub const MAX_ROW_LINE: usize = 256;
 
 /// Whether a line may be dropped when the link cannot keep up.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -8,7 +8,7 @@ use crate::scorer::Scorer;
 use crate::settings::{ResetCause, Settings};
 
 /// Protocol version written in the header.
-pub const VERSION: u32 = 4;
+pub const VERSION: u32 = 5;
 /// Longest firmware version string carried in the header.
 pub const MAX_FW: usize = 24;
 
@@ -77,7 +77,7 @@ impl HeaderInfo<'static> {
     }
 }
 
-/// `H,v=4,fw=..,j=15x15,cols=300,k=P,b=0,w=uniform,norm=1,fs=65535,thr=..,pthr=..,q=23,scores=0,dcap=0,rst=por,boots=1`
+/// `H,v=5,fw=..,j=15x15,cols=300,k=P,b=0,w=uniform,norm=1,fs=65535,thr=..,pthr=..,q=23,scores=0,dcap=0,rst=por,boots=1`
 pub fn encode_header(h: &HeaderInfo, sink: &mut impl LineSink) {
     let mut l = LineBuf::new(b'H');
     l.kv_u64(b"v", h.version as u64);

@@ -138,9 +138,10 @@ proptest! {
     fn end_line_round_trips(v in prop::collection::vec(any::<u32>(), 14)) {
         let t = Totals { rows: v[0], frames: v[1], missing: v[2], dark: v[3], saturated: v[4], defects: v[5], objects: v[12], unobjected: v[13], rejected: v[6], extra: v[7], bad: v[8], clipped: v[9], misplaced: v[10] };
         let mut s = Lines::default();
-        encode_end(&t, v[11], &mut s);
+        let verdict = cvm_core::Verdict::ALL[v[0] as usize % cvm_core::Verdict::ALL.len()];
+        encode_end(&t, v[11], verdict, &mut s);
         prop_assert!(s.0[0].0.len() <= MAX_LINE);
-        prop_assert_eq!(protocol::parse(&s.0[0].0), Ok(Line::End(protocol::EndInfo { totals: t, dropped: v[11] })));
+        prop_assert_eq!(protocol::parse(&s.0[0].0), Ok(Line::End(protocol::EndInfo { totals: t, dropped: v[11], verdict })));
     }
 
     /// Any object the labeller can close (rows and columns in order, a
@@ -291,7 +292,13 @@ fn worst_case_lines_fit() {
         clipped: u32::MAX,
         misplaced: u32::MAX,
     };
-    encode_end(&t, u32::MAX, &mut s);
+    // The longest verdict.
+    encode_end(
+        &t,
+        u32::MAX,
+        cvm_core::Verdict::Fault(cvm_core::Fault::Misplaced),
+        &mut s,
+    );
     let o = cvm_core::Object {
         id: u32::MAX,
         row0: u32::MAX,
@@ -312,6 +319,10 @@ fn worst_case_lines_fit() {
     assert_eq!(protocol::parse(&s.0.last().unwrap().0), Ok(Line::Object(o)));
     for (line, _) in &s.0 {
         assert!(line.len() <= MAX_LINE, "{} bytes", line.len());
+        // A queue reserves MAX_ROW_LINE for each line of a row.
+        if !matches!(line[0], b'H' | b'E') {
+            assert!(line.len() <= protocol::MAX_ROW_LINE, "{} bytes", line.len());
+        }
         assert!(
             protocol::parse(line).is_ok(),
             "{}",
@@ -326,7 +337,7 @@ fn worst_case_lines_fit() {
 fn garbage_is_rejected_with_a_reason() {
     assert_eq!(protocol::parse(b"hello"), Err(ParseError::NoChecksum));
     let mut s = Lines::default();
-    encode_end(&Totals::default(), 0, &mut s);
+    encode_end(&Totals::default(), 0, cvm_core::Verdict::Good, &mut s);
     let mut l = s.0[0].0.clone();
     l[0] = b'X';
     assert_eq!(protocol::parse(&l), Err(ParseError::Checksum));

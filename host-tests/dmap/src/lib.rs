@@ -24,3 +24,4 @@ pub mod stream;
 pub mod twin;
 pub mod twin_checks;
 pub mod twin_requests;
+pub mod twin_pins;

@@ -57,6 +57,7 @@ Faults (--fault KIND@BEAM[:ARG...], repeatable; beams count from 0 in raster ord
   uart-busy@B:MS   the UART line is held busy for MS milliseconds from beam B
   halt@B:MS        a debugger halts the core for MS milliseconds at beam B
   wedge@B          the firmware wedges at beam B (interrupts off; the watchdog must reset it)
+  drdy-miss@B      beam B raises no DRDY
 
 A burst must end by the scan's last beam, a sync-miss falls on a row start, a
 sync-glitch mid-row. A run's model time (--start-ms, the beams at --beam-us, the
@@ -96,6 +97,7 @@ pub struct TwinArgs {
     pub debugger: bool,
     #[command(flatten)]
     pub link: crate::twin_requests::TwinRequestArgs,
+    pub pins: crate::twin_pins::PinArgs,
 }
 
 /// The repository root (this crate lives in host-tests/dmap).
@@ -499,7 +501,7 @@ pub fn run(args: &TwinArgs) -> Result<()> {
         beams,
         [args.start_ms, args.beam_us, faults_ms, args.settle_ms],
     )?;
-    let config = h743_config(&header)?;
+    let config = h743_config(&header)? + &args.pins.build_keys()?;
     let file = twin_file(&header, &emufile)?;
     drop(emufile);
     for w in &warnings {
@@ -519,9 +521,12 @@ pub fn run(args: &TwinArgs) -> Result<()> {
     let scan_path = dir.path().join("scan.twin");
     std::fs::write(&scan_path, &file)
         .with_context(|| format!("writing {}", scan_path.display()))?;
+    let mut uart = Vec::new();
     let (stats, line) = run_model(&elf, &scan_path, dir, args, &mut |bytes| {
+        uart.extend_from_slice(bytes);
         crate::out::stdout(bytes)
     })?;
+    crate::twin_pins::report(&args.pins, &stats, &uart)?;
     // The counters stay the last line the model prints, before dmap's
     // own verdict.
     let _ = writeln!(std::io::stderr(), "{line}");

@@ -8,7 +8,7 @@ use std::path::Path;
 
 /// The fault kinds of the detector model and how many numbers follow the
 /// beam in each (`host-tests/twin/h743twin/detector.py`).
-pub const FAULT_KINDS: [(&str, usize); 10] = [
+pub const FAULT_KINDS: [(&str, usize); 11] = [
     ("gap", 1),
     ("burst", 2),
     ("sync-glitch", 0),
@@ -19,6 +19,7 @@ pub const FAULT_KINDS: [(&str, usize); 10] = [
     ("uart-busy", 1),
     ("halt", 1),
     ("wedge", 0),
+    ("drdy-miss", 0),
 ];
 
 /// The most model time a run may take, in milliseconds: far beyond any

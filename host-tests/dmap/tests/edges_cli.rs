@@ -499,7 +499,7 @@ fn endless_line_is_dropped_not_buffered() {
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(
         text.contains(&format!(
-            "line 1: line of {} bytes is longer than the protocol's 256",
+            "line 1: line of {} bytes is longer than the protocol's 280",
             (64 << 20) + 1
         )),
         "{text}"

@@ -573,9 +573,10 @@ fn bandwidth_figures_of_the_protocol_document() {
             misplaced: max,
         },
         max,
+        cvm_core::Verdict::Fault(cvm_core::Fault::Misplaced),
         &mut sink,
     );
-    assert_eq!(sink.0.len(), 253);
+    assert_eq!(sink.0.len(), 277);
     let mut sink = dmap::stream::VecSink::default();
     protocol::encode_header(
         &HeaderInfo {
@@ -626,10 +627,10 @@ fn absurd_geometry_in_valid_lines_costs_no_memory() {
     // keeps only the scores that arrived.
     let mut dec = Decoder::new();
     for body in [
-        "H,v=4,fw=x,j=3x3,cols=4000000000,k=P,b=0,w=uniform,norm=1,fs=65535,thr=1,pthr=3277,q=20,scores=1,dcap=16,rst=por,boots=1",
+        "H,v=5,fw=x,j=3x3,cols=4000000000,k=P,b=0,w=uniform,norm=1,fs=65535,thr=1,pthr=3277,q=20,scores=1,dcap=16,rst=por,boots=1",
         "R,2,0,-,0,-,0,0,1,0,0",
         "S,2,3999999999,AAAAAAAAB",
-        "E,rows=4000000000,frames=0,missing=0,dark=0,sat=0,defects=0,obj=0,unobj=0,rejected=0,extra=0,bad=0,clipped=0,misplaced=0,dropped=0",
+        "E,rows=4000000000,frames=0,missing=0,dark=0,sat=0,defects=0,obj=0,unobj=0,rejected=0,extra=0,bad=0,clipped=0,misplaced=0,dropped=0,verdict=good",
     ] {
         dec.feed(&line_with_crc(body));
     }
@@ -678,7 +679,7 @@ fn absurd_claimed_size_is_refused() {
         rows: 4_000_000,
         ..Default::default()
     };
-    cvm_core::protocol::encode_end(&t, 0, &mut sink);
+    cvm_core::protocol::encode_end(&t, 0, cvm_core::Verdict::Good, &mut sink);
     let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("absurd");
     std::fs::create_dir_all(&dir).unwrap();
     let input = dir.join("lines.txt");
@@ -763,6 +764,7 @@ fn protocol_document_examples_parse() {
         .map(|(k, _)| k.to_string())
         .collect();
     end_keys.push(protocol::DROPPED.to_string());
+    end_keys.push(protocol::VERDICT.to_string());
     assert_eq!(table_after("### `E`"), end_keys);
 }
 
@@ -929,12 +931,12 @@ fn full_scale_reaches_the_header_and_the_scoring() {
     let s = &dec.scans[0];
     assert_eq!(
         (s.version, s.full_scale, s.max_defect_lines, s.boots),
-        (4, 4095, 3, 1)
+        (5, 4095, 3, 1)
     );
     assert_eq!(s.reset_cause, Some(cvm_core::protocol::ResetCause::PowerOn));
     assert_eq!(s.end.unwrap().totals.saturated as usize, saturated);
     let text = String::from_utf8_lossy(&out.stdout);
-    assert!(text.starts_with("H,v=4,"), "{text}");
+    assert!(text.starts_with("H,v=5,"), "{text}");
     assert!(text.lines().next().unwrap().contains(",fs=4095,"), "{text}");
     let listen = std::process::Command::new(exe)
         .args(["listen", "--input", "-"])
@@ -952,7 +954,7 @@ fn full_scale_reaches_the_header_and_the_scoring() {
     let summary = String::from_utf8_lossy(&listen.stdout);
     assert!(
         summary.contains(
-            "protocol v4, full scale 4095, at most 3 defect line(s) per row, reset cause por, start 1 since power-on"
+            "protocol v5, full scale 4095, at most 3 defect line(s) per row, reset cause por, start 1 since power-on"
         ),
         "{summary}"
     );

@@ -270,7 +270,7 @@ fn back_to_back_scans_at(j: usize, beam_us: &str) {
     stack_to_spare(&c);
 }
 
-/// The end line's values by key.
+/// The end line's numeric values by key (the verdict is not a number).
 fn end_line(stdout: &[u8]) -> HashMap<String, u64> {
     let text = String::from_utf8_lossy(stdout);
     let line = text
@@ -279,9 +279,9 @@ fn end_line(stdout: &[u8]) -> HashMap<String, u64> {
         .unwrap_or_else(|| panic!("no end line in:\n{text}"));
     let line = &line[2..line.find('*').unwrap_or(line.len())];
     line.split(',')
-        .map(|kv| {
+        .filter_map(|kv| {
             let (k, v) = kv.split_once('=').unwrap();
-            (k.to_string(), v.parse().unwrap())
+            Some((k.to_string(), v.parse().ok()?))
         })
         .collect()
 }

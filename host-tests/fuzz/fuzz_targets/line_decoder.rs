@@ -143,8 +143,9 @@ fn round_trip(u: &mut Unstructured) -> Result<()> {
     let end = EndInfo {
         totals: totals(u)?,
         dropped: u.arbitrary()?,
+        verdict: *u.choose(&cvm_core::Verdict::ALL)?,
     };
-    protocol::encode_end(&end.totals, end.dropped, &mut out);
+    protocol::encode_end(&end.totals, end.dropped, end.verdict, &mut out);
 
     // Line by line, against what was encoded.
     let mut lines = out.0.iter();

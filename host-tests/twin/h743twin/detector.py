@@ -15,6 +15,7 @@ Faults (`--fault KIND@BEAM[:ARG[:ARG]]`, beams counted from 0):
   uart-busy@B:MS     the UART line is held busy for MS milliseconds from beam B
   halt@B:MS          a debugger halts the core for MS milliseconds at beam B
   wedge@B            the firmware is wedged at beam B (thread mode spins with interrupts off)
+  drdy-miss@B        beam B raises no DRDY (the detector's frame is never announced)
 """
 
 from .core import CLOCK_HZ
@@ -23,7 +24,8 @@ SYNC_LEAD = 40    # LINE_SYNC rises 100 ns before DRDY
 DRDY_WIDTH = 200  # DRDY and LINE_SYNC stay high 500 ns
 
 KINDS = {"gap": 1, "burst": 2, "sync-glitch": 0, "sync-miss": 0, "overrun": 0,
-         "dma-error": 0, "dma-stall": 0, "uart-busy": 1, "halt": 1, "wedge": 0}
+         "dma-error": 0, "dma-stall": 0, "uart-busy": 1, "halt": 1, "wedge": 0,
+         "drdy-miss": 0}
 
 
 def parse_fault(spec):
@@ -146,6 +148,11 @@ class Detector:
             elif kind == "wedge":
                 self._count(kind)
                 m.wedge()
+            elif kind == "drdy-miss":
+                self._count(kind)
+                # The beam passes without its edge (nor its LINE_SYNC).
+                self.beam = k
+                return
         if sync:
             m.pin("E", 11, 1)
         m.bus.at(m.core.cycles + self.lead, lambda: self._drdy(k), owner="world")

@@ -17,11 +17,16 @@ from .serial import Spi, Usart
 # The embassy time driver runs on TIM12 (time-driver-any picks it on this chip).
 TIM12_IRQ = 43
 TIM13_IRQ = 44
+# REJECT's pulse timer (TIM8_TRG_COM_TIM14).
+TIM14_IRQ = 45
 GPIO_PORTS = "ABCDEFGHIJK"
 # Pull-ups/downs and modes of the debug pins after reset (RM0433 §11.4).
 GPIO_RESET = {"A": {0x00: 0xABFF_FFFF, 0x08: 0x0C00_0000, 0x0C: 0x6400_0000},
               "B": {0x00: 0xFFFF_FEBF, 0x08: 0x0000_00C0, 0x0C: 0x0000_0100}}
 WEDGE_ADDR = 0x0000_0000  # ITCM: unused by the firmware
+# Output pins whose every change is recorded (docs/firmware.md's wiring):
+# the PLC's outputs on the Zio connector and the LEDs that mirror them.
+RECORDED_PINS = {("E", 14): "READY", ("E", 13): "REJECT", ("B", 0): "LD1", ("B", 14): "LD3"}
 
 
 class Machine:
@@ -42,6 +47,7 @@ class Machine:
             self.core.uc.mem_write(lo, STACK_PAINT * ((hi - lo) // 4))
         self.uart = []          # (byte, cycle)
         self.resets = []        # (cause, cycle)
+        self.pin_edges = []     # (cycle, name, level, beam), every recorded pin change
         self.detector = None
         self.halted_until = 0
         self.spi_rx_stream = 1
@@ -75,6 +81,8 @@ class Machine:
             bus, nvic, TIM12_IRQ, self.rcc.apb1_timer_hz, bits=16, channels=2), clock=(0xE8, 6, "TIM12"))
         self.tim13 = bus.add(0x4000_1C00, 0x400, system.Timer(
             bus, nvic, TIM13_IRQ, self.rcc.apb1_timer_hz, bits=16, channels=1), clock=(0xE8, 7, "TIM13"))
+        self.tim14 = bus.add(0x4000_2000, 0x400, system.Timer(
+            bus, nvic, TIM14_IRQ, self.rcc.apb1_timer_hz, bits=16, channels=1), clock=(0xE8, 8, "TIM14"))
         self.dma = bus.add(0x4002_0000, 0x400, Dma(bus, nvic), clock=(0xD8, 0, "DMA1"))
         bus.add(0x4002_0800, 0x400, Dmamux(self.dma))
         slave = self.detector if self.detector else NoSlave()
@@ -84,13 +92,22 @@ class Machine:
             bus, nvic, self.dma, self.rcc, lambda b, t: self.uart.append((b, t))),
             clock=(0xE8, 18, "USART3"))
         self.gpio["D"].listeners.append(self._gpiod_changed)
+        for port in {p for p, _ in RECORDED_PINS}:
+            self.gpio[port].listeners.append(
+                lambda pin, level, port=port: self._record_pin(port, pin, level))
         bus.posted = {}
-        bus.irq_owner = {TIM12_IRQ: 0x4000_1800, TIM13_IRQ: 0x4000_1C00, 35: 0x4001_3000,
+        bus.irq_owner = {TIM12_IRQ: 0x4000_1800, TIM13_IRQ: 0x4000_1C00, TIM14_IRQ: 0x4000_2000, 35: 0x4001_3000,
                          39: 0x4000_4800, FLASH_IRQ: 0x5200_2000, **{irq: 0x4002_0000 for irq in STREAM_IRQS}}
 
     def _gpiod_changed(self, pin, level):
         if pin == 14 and self.detector:
             self.detector.chip_select(level)
+
+    def _record_pin(self, port, pin, level):
+        name = RECORDED_PINS.get((port, pin))
+        if name:
+            beam = self.detector.beam if self.detector else -1
+            self.pin_edges.append((self.core.cycles, name, level, beam))
 
     def start_profile(self):
         """Counts instructions per function from now on."""
@@ -131,6 +148,13 @@ class Machine:
     # --- reset
     def reset(self, cause):
         self.resets.append((cause, self.core.cycles))
+        # A reset returns every pin to an input: a driven-high output falls
+        # (to the level of the receiver's pull-down).
+        for (port, pin), name in RECORDED_PINS.items():
+            g = self.gpio[port]
+            if g.mode(pin) == 1 and g.r[0x14] >> pin & 1:
+                self.pin_edges.append((self.core.cycles, name, 0,
+                                       self.detector.beam if self.detector else -1))
         flags = system.RSR_PIN | (system.RSR_IWDG1 if cause == "watchdog" else system.RSR_SFT)
         self.bus.drop_chip_events()
         self.bus.error = None
@@ -331,6 +355,10 @@ def _stats(self):
         s["beams"] = det.sent
         s["faults_injected"] = det.injected
         s["spi_reads_without_cs"] = det.reads_without_cs
+    cols = det.scan.cols if det is not None else 0
+    s["pins"] = [{"us": round(t * 1e6 / CLOCK_HZ, 3), "pin": name, "level": level,
+                  "beam": beam, "row": beam // cols if cols and beam >= 0 else -1}
+                 for t, name, level, beam in self.pin_edges]
     return s
 
 

@@ -17,7 +17,7 @@ from h743twin import flash as flashmod
 from h743twin import serial, system
 from h743twin.bus import Bus
 from h743twin.core import Core, Reset, Stop
-from h743twin.machine import GPIO_PORTS, TIM12_IRQ, TIM13_IRQ, Machine
+from h743twin.machine import GPIO_PORTS, TIM12_IRQ, TIM13_IRQ, TIM14_IRQ, Machine
 
 # Registers the model answers that metapac's H743 description leaves out,
 # each with where RM0433 documents it.
@@ -46,7 +46,7 @@ def bare_machine():
 
 def instances(m):
     """metapac instance name -> the model at its address."""
-    out = {"SPI1": m.spi, "USART3": m.usart, "TIM12": m.tim12, "TIM13": m.tim13,
+    out = {"SPI1": m.spi, "USART3": m.usart, "TIM12": m.tim12, "TIM13": m.tim13, "TIM14": m.tim14,
            "DMA1": m.dma, "RCC": m.rcc, "PWR": m.pwr, "FLASH": m.flash, "SYSCFG": m.syscfg,
            "EXTI": m.exti, "DBGMCU": m.dbgmcu, "IWDG1": m.iwdg}
     for port in GPIO_PORTS:
@@ -90,6 +90,7 @@ class Chip(unittest.TestCase):
         self.assertEqual(serial.USART3_IRQ, irq["USART3"])
         self.assertEqual(TIM12_IRQ, irq["TIM8_BRK_TIM12"])
         self.assertEqual(TIM13_IRQ, irq["TIM8_UP_TIM13"])
+        self.assertEqual(TIM14_IRQ, irq["TIM8_TRG_COM_TIM14"])
         self.assertEqual(list(dmamod.STREAM_IRQS), [irq[f"DMA1_STREAM{n}"] for n in range(8)])
         names = {0: "EXTI0", 1: "EXTI1", 2: "EXTI2", 3: "EXTI3", 4: "EXTI4", 5: "EXTI9_5",
                  10: "EXTI15_10"}

@@ -4,6 +4,8 @@
 
 use super::scan::{LineError, ScanResult, q8};
 use cvm_core::objects::Object;
+use cvm_core::protocol::EndInfo;
+use cvm_core::{Fault, Verdict};
 
 /// Cross-checks a finished scan: every row has its row line, every
 /// listed defect arrived, every position has a score when scores are on.
@@ -27,6 +29,14 @@ pub(super) fn check_complete(s: &mut ScanResult, line_no: usize) {
                 "row lines list {listed} defect line(s), {} arrived",
                 s.defects.len()
             ),
+        });
+    }
+    if let Some(e) = s.end
+        && let Some(what) = verdict_fault(&e)
+    {
+        s.add_problem(LineError {
+            line: line_no,
+            what,
         });
     }
     if let Some(e) = s.end {
@@ -155,4 +165,32 @@ fn ranges(v: &[(u32, u32)]) -> String {
         out.push(format!("and {} more ranges", v.len() - 12));
     }
     out.join(", ")
+}
+
+/// What is wrong with the end line's verdict given its own totals, as far
+/// as the totals decide it without the board's limits (how many missing
+/// or misplaced positions a scan may have, which objects count).
+pub(super) fn verdict_fault(e: &EndInfo) -> Option<String> {
+    let t = &e.totals;
+    let frames = t.bad > 0 || t.rejected > 0 || t.extra > 0;
+    let v = e.verdict;
+    let why = match v {
+        _ if frames != (v == Verdict::Fault(Fault::Frames)) => {
+            "bad, rejected and extra frames make the verdict fault-frames, and only they do"
+        }
+        Verdict::Good if t.unobjected > 0 => {
+            "defects left out of every object, yet the part is good"
+        }
+        Verdict::Objects if t.objects == 0 && t.unobjected == 0 => {
+            "no object, yet the verdict is obj"
+        }
+        Verdict::Fault(Fault::Missing) if t.missing == 0 => {
+            "no position without data, yet the verdict is fault-missing"
+        }
+        Verdict::Fault(Fault::Misplaced) if t.misplaced == 0 => {
+            "no misplaced frame, yet the verdict is fault-misplaced"
+        }
+        _ => return None,
+    };
+    Some(format!("end line: verdict {}: {why}", v.as_str()))
 }

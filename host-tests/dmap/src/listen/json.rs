@@ -14,6 +14,7 @@ pub fn totals_json(e: &EndInfo) -> serde_json::Value {
         m.insert(key.into(), (*field(&mut t)).into());
     }
     m.insert(protocol::DROPPED.into(), e.dropped.into());
+    m.insert(protocol::VERDICT.into(), e.verdict.as_str().into());
     serde_json::Value::Object(m)
 }
 
@@ -86,6 +87,7 @@ pub fn scan_json(s: &ScanResult, pitch_um: Option<f64>) -> serde_json::Value {
             "channels": channel_names(d.flags),
             "flags": d.flags,
         })).collect::<Vec<_>>(),
+        "verdict": s.end.map(|e| e.verdict.as_str()),
         "totals": s.end.as_ref().map(totals_json),
         "problems": problems_json(&s.problems),
         "problem_count": s.problem_count(),
@@ -112,6 +114,7 @@ pub fn summary_json(dec: &Decoder, pitch_um: Option<f64>) -> serde_json::Value {
         dec.error_count() + dec.scans.iter().map(|s| s.problem_count()).sum::<usize>();
     serde_json::json!({
         "objects": last.map_or_else(Vec::new, |s| s.objects.iter().map(|o| object_json(o, s, pitch_um)).collect()),
+        "verdict": last.and_then(|s| s.end.map(|e| e.verdict.as_str())),
         "totals": last.and_then(|s| s.end.as_ref().map(totals_json)),
         "problems": problems,
         "problem_count": problem_count,

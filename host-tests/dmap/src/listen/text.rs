@@ -136,6 +136,7 @@ pub fn summary_text_with(dec: &Decoder, pitch_um: Option<f64>) -> String {
         }
         match &s.end {
             Some(e) => {
+                let _ = writeln!(o, "  verdict: {}", verdict_text(e.verdict));
                 let _ = writeln!(o, "  totals: {}", totals_text(e));
             }
             None => {
@@ -181,5 +182,19 @@ fn totals_text(e: &EndInfo) -> String {
         })
         .collect();
     parts.push(format!("{} {}", protocol::DROPPED, e.dropped));
+    parts.push(format!("{} {}", protocol::VERDICT, e.verdict.as_str()));
     parts.join(" ")
+}
+
+/// The part's verdict in words, as a PLC's REJECT pin would act on it.
+fn verdict_text(v: cvm_core::Verdict) -> String {
+    use cvm_core::{Fault, Verdict};
+    let why = match v {
+        Verdict::Good => "part good",
+        Verdict::Objects => "part rejected: defect objects",
+        Verdict::Fault(Fault::Missing) => "part rejected: scan faulty, positions without data",
+        Verdict::Fault(Fault::Misplaced) => "part rejected: scan faulty, misplaced frames",
+        Verdict::Fault(Fault::Frames) => "part rejected: scan faulty, damaged frames",
+    };
+    format!("{} ({why})", v.as_str())
 }

@@ -1,0 +1,129 @@
+//! `dmap twin --pins FILE`: the timeline of the H743's READY and REJECT
+//! outputs (and the LEDs that mirror them) as the chip model recorded it,
+//! and the summary of every scan's verdict beside the pins' edges.
+
+use anyhow::{Context, Result};
+use clap::Args;
+use std::io::Write;
+use std::path::PathBuf;
+
+#[derive(Args, Clone, Debug)]
+pub struct PinArgs {
+    /// Write the output pins' timeline to FILE (CSV: us,pin,level,beam,row;
+    /// each edge with its model time in µs and the last beam whose DRDY
+    /// came before it, -1 before the first)
+    #[arg(long = "pins", value_name = "FILE")]
+    pub pins: Option<PathBuf>,
+    /// REJECT's mode in the firmware built: part (at the scan's end) or
+    /// row (a pulse per object, after the row that closes it)
+    #[arg(long, value_name = "MODE", default_value = "part", value_parser = ["part", "row"])]
+    pub reject: String,
+    /// REJECT's pulse width in µs (0: held until the next scan; row mode needs one)
+    #[arg(long, value_name = "US", default_value_t = 0)]
+    pub pulse_us: u32,
+    /// Row mode: rows between the row that closes an object and its pulse
+    #[arg(long, value_name = "ROWS", default_value_t = 0)]
+    pub row_delay: u32,
+}
+
+impl PinArgs {
+    /// The `CVM_H743_SCAN` keys of the outputs (none for the defaults, so
+    /// that the default build stays the one cached).
+    pub fn build_keys(&self) -> anyhow::Result<String> {
+        if self.reject == "row" && self.pulse_us == 0 {
+            anyhow::bail!("--reject row needs --pulse-us");
+        }
+        if self.pulse_us > 65_536 {
+            anyhow::bail!("--pulse-us: at most 65536 (TIM14 counts 16 bits of µs)");
+        }
+        if self.reject == "part" && self.pulse_us == 0 && self.row_delay == 0 {
+            return Ok(String::new());
+        }
+        Ok(format!(
+            " reject={} pulse_us={} row_delay={}",
+            self.reject, self.pulse_us, self.row_delay
+        ))
+    }
+}
+
+/// One recorded change of an output pin.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Edge {
+    pub us: f64,
+    pub pin: String,
+    pub level: u8,
+    pub beam: i64,
+    pub row: i64,
+}
+
+/// The edges of the model's counters (`pins`).
+pub fn edges(counters: &serde_json::Value) -> Vec<Edge> {
+    counters["pins"]
+        .as_array()
+        .map(|a| {
+            a.iter()
+                .filter_map(|e| {
+                    Some(Edge {
+                        us: e["us"].as_f64()?,
+                        pin: e["pin"].as_str()?.to_string(),
+                        level: u8::try_from(e["level"].as_u64()?).ok()?,
+                        beam: e["beam"].as_i64()?,
+                        row: e["row"].as_i64()?,
+                    })
+                })
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
+/// The timeline as the file holds it.
+pub fn timeline_csv(edges: &[Edge]) -> String {
+    let mut s = String::from("us,pin,level,beam,row\n");
+    for e in edges {
+        s += &format!("{:.3},{},{},{},{}\n", e.us, e.pin, e.level, e.beam, e.row);
+    }
+    s
+}
+
+/// The verdict of every end line in the firmware's output, in order.
+pub fn verdicts(uart: &[u8]) -> Vec<String> {
+    String::from_utf8_lossy(uart)
+        .lines()
+        .filter(|l| l.starts_with("E,"))
+        .filter_map(|l| {
+            let body = l.rsplit_once('*').map_or(l, |(b, _)| b);
+            body.rsplit(',')
+                .find_map(|f| f.strip_prefix("verdict="))
+                .map(str::to_string)
+        })
+        .collect()
+}
+
+/// Writes the timeline (with `--pins`) and prints the summary on
+/// standard error: each scan's verdict, then each edge of READY and REJECT.
+pub fn report(args: &PinArgs, counters: &serde_json::Value, uart: &[u8]) -> Result<()> {
+    let edges = edges(counters);
+    if let Some(path) = &args.pins {
+        std::fs::write(path, timeline_csv(&edges))
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    let mut err = std::io::stderr();
+    for (k, v) in verdicts(uart).iter().enumerate() {
+        let _ = writeln!(err, "scan {}: verdict {v}", k + 1);
+    }
+    for e in edges
+        .iter()
+        .filter(|e| e.pin == "READY" || e.pin == "REJECT")
+    {
+        let _ = writeln!(
+            err,
+            "pin {} {} at {:.3} us after beam {} (row {})",
+            e.pin,
+            if e.level == 1 { "high" } else { "low" },
+            e.us,
+            e.beam,
+            e.row
+        );
+    }
+    Ok(())
+}

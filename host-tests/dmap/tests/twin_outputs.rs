@@ -1,0 +1,404 @@
+//! READY and REJECT on the chip model: the H743 release firmware,
+//! unmodified, drives its output pins and the model records every change
+//! (`pins` in its counters, `dmap twin --pins`). The pins agree with the
+//! end lines' verdicts, which equal `dmap stream`'s: the demo part is
+//! rejected at its scan's end; defect-free parts are never rejected and
+//! READY stays up; each fault that loses beams drops READY, makes the
+//! part's verdict a fault and rejects it, and READY comes back only with
+//! the next clean scan. Needs what tests/twin.rs needs.
+
+use cvm_reference::Geometry;
+use dmap::npy::write_scan_u16;
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn dmap(args: &[&str]) -> Output {
+    let out = Command::new(env!("CARGO_BIN_EXE_dmap"))
+        .args(args)
+        .output()
+        .expect("running dmap");
+    assert!(
+        out.status.success(),
+        "dmap {args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+/// The model's counters: the last line of standard error.
+fn counters(stderr: &[u8]) -> serde_json::Value {
+    let err = String::from_utf8_lossy(stderr);
+    let last = err.lines().rfind(|l| l.starts_with('{')).unwrap_or("");
+    serde_json::from_str(last).unwrap_or_else(|e| panic!("no JSON counters ({e}) in:\n{err}"))
+}
+
+/// Recorded edges of `pin`: (µs, level, beam).
+fn edges(c: &serde_json::Value, pin: &str) -> Vec<(f64, u64, i64)> {
+    c["pins"]
+        .as_array()
+        .expect("pins in the counters")
+        .iter()
+        .filter(|e| e["pin"] == pin)
+        .map(|e| {
+            (
+                e["us"].as_f64().unwrap(),
+                e["level"].as_u64().unwrap(),
+                e["beam"].as_i64().unwrap(),
+            )
+        })
+        .collect()
+}
+
+/// The verdicts of the end lines, in order.
+fn verdicts(stdout: &[u8]) -> Vec<String> {
+    dmap::twin_pins::verdicts(stdout)
+}
+
+/// Defect-free maps: a flat field with a little noise.
+fn flat_samples(beams: usize, cells: usize, seed: u64) -> Vec<u16> {
+    let mut state = seed;
+    (0..beams * cells)
+        .map(|_| {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            600 + (state >> 33) as u16 % 8
+        })
+        .collect()
+}
+
+const J: usize = 3;
+const ROWS: usize = 3;
+const COLS: usize = 9;
+const BEAMS: usize = ROWS * COLS;
+
+/// `parts` defect-free parts of ROWS x COLS beams back to back through
+/// the firmware built for one part, with `faults`; returns the UART bytes
+/// and the counters. Each part alone, through `dmap stream`, is good.
+fn parts_on_the_twin(parts: usize, faults: &[&str], beam_us: &str) -> (Vec<u8>, serde_json::Value) {
+    let dir = tempfile::tempdir().unwrap();
+    let mut all = Vec::new();
+    for k in 0..parts {
+        let data = flat_samples(BEAMS, J * J, 11 + k as u64);
+        let scan = dir.path().join(format!("part{k}.npy"));
+        write_scan_u16(&scan, ROWS, COLS, Geometry::new(J, J).unwrap(), &data).unwrap();
+        let host = dmap(&["stream", scan.to_str().unwrap(), "--scores"]);
+        assert_eq!(
+            verdicts(&host.stdout),
+            ["good"],
+            "part {k} is not defect-free"
+        );
+        all.extend(data);
+    }
+    let mut file = b"CVMTWIN1".to_vec();
+    for v in [parts * ROWS, COLS, J, J] {
+        file.extend_from_slice(&(v as u32).to_le_bytes());
+    }
+    for v in &all {
+        file.extend_from_slice(&v.to_le_bytes());
+    }
+    let twin_scan = dir.path().join("parts.twin");
+    std::fs::write(&twin_scan, file).unwrap();
+    let elf = dmap::twin::build_elf(&format!(
+        "j1={J} j2={J} cols={COLS} rows={ROWS} scores=true fw={}",
+        cvm_core::VERSION
+    ))
+    .unwrap();
+    let twin = Path::new(env!("CARGO_MANIFEST_DIR")).join("../twin");
+    let mut cmd = Command::new("python3");
+    cmd.args(["-m", "h743twin"])
+        .arg(&elf)
+        .arg("--scan")
+        .arg(&twin_scan)
+        .args(["--beam-us", beam_us, "--scans", &parts.to_string()])
+        .env("PYTHONPATH", &twin);
+    for f in faults {
+        cmd.args(["--fault", f]);
+    }
+    let out = cmd.output().expect("running the chip model");
+    let c = counters(&out.stderr);
+    assert_eq!(c["fault"], serde_json::Value::Null, "{c}");
+    (out.stdout, c)
+}
+
+/// The last level of `e` at or before beam `beam` (`start` before any edge).
+fn level_after(e: &[(f64, u64, i64)], beam: i64, start: u64) -> u64 {
+    e.iter().rfind(|x| x.2 <= beam).map_or(start, |x| x.1)
+}
+
+#[test]
+fn five_good_parts_never_reject_and_ready_stays_up() {
+    let (out, c) = parts_on_the_twin(5, &[], "200");
+    assert_eq!(
+        verdicts(&out),
+        ["good"; 5],
+        "{}",
+        String::from_utf8_lossy(&out)
+    );
+    // READY rises once, at start-up before the first beam, and stays.
+    let ready = edges(&c, "READY");
+    assert_eq!(ready.len(), 1, "{ready:?}");
+    assert_eq!((ready[0].1, ready[0].2), (1, -1));
+    assert_eq!(edges(&c, "LD1").len(), 1);
+    assert!(edges(&c, "REJECT").is_empty(), "{:?}", edges(&c, "REJECT"));
+    assert!(edges(&c, "LD3").is_empty());
+}
+
+/// A fault in the first of three parts at beam `at`: READY drops within
+/// that scan, its verdict is `verdict`, REJECT goes up at its end and
+/// down when the next scan starts; READY comes back at the end of the
+/// second scan, the first clean one.
+fn fault_drops_ready_until_a_clean_scan(fault: &str, at: i64, verdict: &str) {
+    let (out, c) = parts_on_the_twin(3, &[fault], "200");
+    let kind = &fault[..fault.find('@').unwrap()];
+    assert!(c["faults_injected"][kind].as_u64() >= Some(1), "{c}");
+    let text = String::from_utf8_lossy(&out);
+    assert_eq!(verdicts(&out), [verdict, "good", "good"], "{text}");
+    let b = BEAMS as i64;
+    let ready = edges(&c, "READY");
+    assert_eq!(ready.len(), 3, "{fault}: {ready:?}");
+    assert_eq!((ready[0].1, ready[0].2), (1, -1), "{fault}");
+    assert_eq!(ready[1].1, 0, "{fault}");
+    assert!(
+        (at..b).contains(&ready[1].2),
+        "{fault}: READY dropped after beam {}, not within the faulty scan",
+        ready[1].2
+    );
+    assert_eq!(
+        (ready[2].1, ready[2].2),
+        (1, 2 * b - 1),
+        "{fault}: {ready:?}"
+    );
+    let reject = edges(&c, "REJECT");
+    let r: Vec<(u64, i64)> = reject.iter().map(|e| (e.1, e.2)).collect();
+    assert_eq!(r, [(1, b - 1), (0, b)], "{fault}");
+    // The pins agree with each scan's verdict at its end.
+    for (k, v) in verdicts(&out).iter().enumerate() {
+        let end = (k as i64 + 1) * b - 1;
+        assert_eq!(level_after(&reject, end, 0) == 1, v != "good", "scan {k}");
+        assert_eq!(
+            level_after(&ready, end, 0) == 1,
+            !v.starts_with("fault"),
+            "scan {k}"
+        );
+    }
+    // The LEDs mirror the pins edge for edge.
+    let times = |e: Vec<(f64, u64, i64)>| e.iter().map(|x| (x.1, x.2)).collect::<Vec<_>>();
+    assert_eq!(times(edges(&c, "LD1")), times(ready), "{fault}");
+    assert_eq!(times(edges(&c, "LD3")), r, "{fault}");
+}
+
+#[test]
+fn missing_drdy_drops_ready_and_rejects_the_part() {
+    fault_drops_ready_until_a_clean_scan("drdy-miss@13", 13, "fault-missing");
+}
+
+#[test]
+fn spi_overrun_drops_ready_and_rejects_the_part() {
+    fault_drops_ready_until_a_clean_scan("overrun@13", 13, "fault-missing");
+}
+
+#[test]
+fn stuck_detector_bus_drops_ready_and_rejects_the_part() {
+    // The detector's SPI DMA requests are never served: the read runs out
+    // its deadline.
+    fault_drops_ready_until_a_clean_scan("dma-stall@13", 13, "fault-missing");
+}
+
+/// A reset in the middle of a scan (the watchdog after a wedge): READY
+/// falls with the reset, the restarted firmware rejects the part it never
+/// judged and keeps READY down until a scan ends without a fault.
+#[test]
+fn reset_mid_scan_rejects_the_part_and_ready_waits_for_a_clean_scan() {
+    // Beams 8 ms apart: the watchdog (1 s) resets the firmware about 125
+    // beams after the wedge, and 12 parts leave it clean scans after.
+    let parts = 12;
+    let (out, c) = parts_on_the_twin(parts, &["wedge@13"], "8000");
+    let resets = c["resets"].as_array().unwrap();
+    assert_eq!(resets.len(), 1, "{c}");
+    let reset_us = resets[0]["ms"].as_f64().unwrap() * 1e3;
+    let text = String::from_utf8_lossy(&out);
+    let headers: Vec<&str> = text.lines().filter(|l| l.starts_with("H,")).collect();
+    assert!(
+        headers.len() >= 2 && headers[1].contains(",rst=wdg,"),
+        "{text}"
+    );
+    let ready = edges(&c, "READY");
+    let reject = edges(&c, "REJECT");
+    // Up at power-on, down with the reset, up again once.
+    let levels: Vec<u64> = ready.iter().map(|e| e.1).collect();
+    assert_eq!(levels, [1, 0, 1], "{ready:?}");
+    assert!((ready[1].0 - reset_us).abs() < 1.0, "{ready:?} {reset_us}");
+    // REJECT goes up at the restart, before any scan ends after it.
+    assert_eq!(reject[0].1, 1, "{reject:?}");
+    assert!(reject[0].0 > reset_us && reject[0].2 > 13, "{reject:?}");
+    // The part in progress at the reset has no end line; READY comes back
+    // with the first end line after it that is not a fault, and only then.
+    let v = verdicts(&out);
+    let first_clean = v.iter().position(|v| !v.starts_with("fault"));
+    assert!(
+        first_clean.is_some(),
+        "no clean scan after the reset: {v:?}"
+    );
+    // REJECT in part mode: up after every rejected part, down at the next
+    // scan's start; its rises after the restart are the rejected parts.
+    let rises_after = reject.iter().skip(1).filter(|e| e.1 == 1).count();
+    let rejected_before_clean = v[..first_clean.unwrap()].len();
+    assert!(rises_after >= rejected_before_clean, "{reject:?} {v:?}");
+    assert!(ready[2].0 > reject[0].0, "{ready:?}");
+}
+
+fn s(p: &Path) -> String {
+    p.to_str().unwrap().to_string()
+}
+
+/// The demo scan: dmap simulate's prototype lens (39 x 39 beams of 9x9
+/// maps, two defects), as `scripts/demo.sh` makes it.
+fn demo(dir: &Path) -> std::path::PathBuf {
+    let scan = dir.join("demo.npy");
+    dmap(&[
+        "simulate",
+        "--preset",
+        "prototype",
+        "--seed",
+        "1",
+        "-o",
+        &s(&scan),
+        "--truth",
+        &s(&dir.join("truth.npy")),
+    ]);
+    scan
+}
+
+/// The demo at the 9x9 SPI-limit beam rate: `dmap twin --pins` writes the
+/// timeline; REJECT goes up once, after the scan's last beam, as the end
+/// line says `obj`; READY stays up. The output is `dmap stream`'s byte for
+/// byte, and the QEMU board's end line carries the same verdict.
+#[test]
+fn demo_part_is_rejected_at_the_scans_end() {
+    let dir = tempfile::tempdir().unwrap();
+    let scan = demo(dir.path());
+    let host = dmap(&["stream", &s(&scan), "--scores", "--threshold", "0.5"]);
+    let pins = dir.path().join("pins.csv");
+    let twin = dmap(&[
+        "twin",
+        &s(&scan),
+        "--scores",
+        "--threshold",
+        "0.5",
+        "--beam-us",
+        "53",
+        "--pins",
+        &s(&pins),
+    ]);
+    assert!(
+        twin.stdout == host.stdout,
+        "the twin's lines differ from dmap stream's"
+    );
+    assert_eq!(verdicts(&host.stdout), ["obj"]);
+    let text = String::from_utf8_lossy(&host.stdout);
+    assert_eq!(text.lines().filter(|l| l.starts_with("O,")).count(), 2);
+    let csv = std::fs::read_to_string(&pins).unwrap();
+    let rows: Vec<Vec<&str>> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').collect())
+        .collect();
+    let of =
+        |pin: &str| -> Vec<Vec<&str>> { rows.iter().filter(|r| r[1] == pin).cloned().collect() };
+    let ready = of("READY");
+    assert_eq!(ready.len(), 1, "{csv}");
+    assert_eq!((ready[0][2], ready[0][3]), ("1", "-1"));
+    let reject = of("REJECT");
+    assert_eq!(reject.len(), 1, "{csv}");
+    // After the last beam (39 x 39), in the last row.
+    assert_eq!(
+        (reject[0][2], reject[0][3], reject[0][4]),
+        ("1", "1520", "38")
+    );
+    // The summary on standard error.
+    let err = String::from_utf8_lossy(&twin.stderr);
+    assert!(err.contains("scan 1: verdict obj"), "{err}");
+    assert!(err.contains("pin REJECT high at"), "{err}");
+    let us: f64 = reject[0][0].parse().unwrap();
+    // The last beam's DRDY: 20 ms after reset, then 1 520 periods of 53 µs.
+    let latency = us - (20_000.0 + 1520.0 * 53.0);
+    println!("demo: REJECT {latency:.1} us after the last beam's DRDY");
+    assert!(latency > 0.0 && latency < 1_000.0, "{latency}");
+    let qemu = dmap(&["emulate", &s(&scan), "--scores", "--threshold", "0.5"]);
+    assert_eq!(verdicts(&qemu.stdout), ["obj"]);
+}
+
+/// The demo in row mode (500 µs pulses, 2 rows' delay): one pulse per
+/// object, each 500 µs wide (±1 µs, one TIM14 tick), starting after the
+/// beam that puts out the row `row_delay` rows after the one closing the
+/// object (a row goes out when the next one is complete), or at the scan's
+/// end when the delay runs past it.
+#[test]
+fn demo_in_row_mode_pulses_once_per_object() {
+    let dir = tempfile::tempdir().unwrap();
+    let scan = demo(dir.path());
+    let pins = dir.path().join("pins.csv");
+    let (period, delay, cols, rows) = (53.0, 2, 39, 39);
+    let twin = dmap(&[
+        "twin",
+        &s(&scan),
+        "--scores",
+        "--threshold",
+        "0.5",
+        "--beam-us",
+        "53",
+        "--reject",
+        "row",
+        "--pulse-us",
+        "500",
+        "--row-delay",
+        "2",
+        "--pins",
+        &s(&pins),
+    ]);
+    let text = String::from_utf8_lossy(&twin.stdout);
+    assert_eq!(verdicts(&twin.stdout), ["obj"]);
+    let last_rows: Vec<i64> = text
+        .lines()
+        .filter(|l| l.starts_with("O,"))
+        .map(|l| l.split(',').nth(3).unwrap().parse().unwrap())
+        .collect();
+    assert_eq!(last_rows.len(), 2, "{text}");
+    let csv = std::fs::read_to_string(&pins).unwrap();
+    let reject: Vec<(f64, u8, i64)> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').collect::<Vec<_>>())
+        .filter(|f| f[1] == "REJECT")
+        .map(|f| {
+            (
+                f[0].parse().unwrap(),
+                f[2].parse().unwrap(),
+                f[3].parse().unwrap(),
+            )
+        })
+        .collect();
+    assert_eq!(reject.len(), 4, "{csv}");
+    for (k, row1) in last_rows.iter().enumerate() {
+        let (up, down) = (reject[2 * k], reject[2 * k + 1]);
+        assert_eq!((up.1, down.1), (1, 0), "{csv}");
+        let width = down.0 - up.0;
+        assert!((width - 500.0).abs() <= 1.0, "pulse {k}: {width} us");
+        // Closed by row row1 + 1, which goes out with the last beam of the
+        // row after it; due `delay` rows later.
+        let due_rows = row1 + 2 + delay;
+        let due_beam = if due_rows < rows {
+            (due_rows + 1) * cols - 1
+        } else {
+            rows * cols - 1
+        };
+        assert!(
+            (due_beam..=due_beam + 3).contains(&up.2),
+            "pulse {k} after beam {}, due after beam {due_beam}",
+            up.2
+        );
+        let latency = up.0 - (20_000.0 + due_beam as f64 * period);
+        println!("demo, row mode: pulse {k} {latency:.1} us after beam {due_beam}'s DRDY");
+    }
+}

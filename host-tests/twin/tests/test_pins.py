@@ -1,0 +1,56 @@
+"""The chip model records every change of the READY and REJECT pins and of
+the LEDs that mirror them (GPIO ODR and BSRR writes), with the time and the
+last beam, and their fall when a reset returns the pins to inputs."""
+
+import types
+import unittest
+
+from test_svd import bare_machine
+
+GPIOB, GPIOE = 0x5802_0400, 0x5802_1000
+MODER, ODR, BSRR = 0x00, 0x14, 0x18
+
+
+class Pins(unittest.TestCase):
+    def setUp(self):
+        m = bare_machine()
+        m.pin_edges = []
+        m.resets = []
+        m.detector = types.SimpleNamespace(beam=41)
+        self.m = m
+        # PE13, PE14 and PB0 as outputs (MODER = 01).
+        e = m.gpio["E"]
+        e.write(MODER, 4, (e.read(MODER, 4) & ~(0xF << 26)) | (0b0101 << 26))
+        b = m.gpio["B"]
+        b.write(MODER, 4, (b.read(MODER, 4) & ~0b11) | 0b01)
+
+    def edges(self):
+        return [(name, level, beam) for _, name, level, beam in self.m.pin_edges]
+
+    def test_bsrr_and_odr_changes_are_recorded_once(self):
+        e, b = self.m.gpio["E"], self.m.gpio["B"]
+        self.m.core.cycles = 4000  # 10 us
+        e.write(BSRR, 4, 1 << 14)          # READY high
+        e.write(BSRR, 4, 1 << 14)          # no change: no edge
+        b.write(BSRR, 4, 1 << 0)           # LD1 on
+        self.m.detector.beam = 42
+        e.write(ODR, 4, e.read(ODR, 4) | 1 << 13)   # REJECT high through ODR
+        e.write(BSRR, 4, 1 << (16 + 13))   # REJECT low
+        e.write(BSRR, 4, 1 << 9)           # PE9 (DRDY's pin) is not recorded
+        self.assertEqual(self.edges(), [("READY", 1, 41), ("LD1", 1, 41),
+                                        ("REJECT", 1, 42), ("REJECT", 0, 42)])
+        self.assertEqual(self.m.pin_edges[0][0], 4000)
+
+    def test_a_reset_releases_the_outputs_that_were_high(self):
+        e = self.m.gpio["E"]
+        e.write(BSRR, 4, 1 << 14)
+        self.m.pin_edges.clear()
+        self.m.core.cycles = 8000
+        self.m.core.reset = lambda: None
+        self.m.reset("watchdog")
+        self.assertEqual(self.edges(), [("READY", 0, 41)])
+        self.assertEqual(self.m.pin_edges[0][0], 8000)
+
+
+if __name__ == "__main__":
+    unittest.main()

@@ -1,0 +1,197 @@
+//! READY and REJECT, the PLC's outputs (docs/firmware.md, "READY and
+//! REJECT outputs"): two header pins, mirrored on the green and red user
+//! LEDs, driven with single BSRR writes (atomic, so the DRDY input on the
+//! same port is never disturbed). Which level each should have comes from
+//! `cvm_fw_app::outputs` after every scoring step. REJECT's pulses are
+//! timed by TIM14 in one-pulse mode, its interrupt releasing the pin: the
+//! scoring task only starts them and never waits for one.
+
+use core::cell::Cell;
+
+use cvm_core::protocol::ResetCause;
+use cvm_core::settings::RejectMode;
+use cvm_fw_app::outputs::{Asserted, Change, OutputLogic, level};
+use embassy_stm32::gpio::{Level, Output, Speed};
+use embassy_stm32::interrupt;
+use embassy_stm32::interrupt::InterruptExt;
+use embassy_stm32::pac;
+use embassy_stm32::pac::timer::vals::Urs;
+use embassy_sync::blocking_mutex::Mutex;
+use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+
+use super::clocks::APB1_TIMER_HZ;
+use super::pins::OutputPins;
+use crate::config::h743::OUTPUTS;
+
+/// Port E pins: READY on PE14 (D4), REJECT on PE13 (D3).
+const READY_PIN: usize = 14;
+const REJECT_PIN: usize = 13;
+/// Port B: the green LED LD1 (PB0) mirrors READY, the red LD3 (PB14) REJECT.
+const READY_LED: usize = 0;
+const REJECT_LED: usize = 14;
+
+/// One TIM14 count per microsecond.
+const PRESCALER: u32 = APB1_TIMER_HZ / 1_000_000;
+const _: () = assert!(
+    PRESCALER >= 1 && PRESCALER <= 1 << 16 && APB1_TIMER_HZ.is_multiple_of(1_000_000),
+    "TIM14 must count whole microseconds"
+);
+const _: () = assert!(
+    // (`checked_sub` rather than comparisons, which are trivially true
+    // for the default of 0 and trip the absurd-comparison lint.)
+    !matches!(OUTPUTS.reject_mode, RejectMode::Row) || OUTPUTS.pulse_us.checked_sub(1).is_some(),
+    "row mode pulses REJECT: it needs a pulse width"
+);
+const _: () = assert!(
+    (1u32 << 16).checked_sub(OUTPUTS.pulse_us).is_some(),
+    "TIM14 counts at most 65 536 µs per pulse"
+);
+
+/// REJECT's pulses: still to start, and whether one is on.
+#[derive(Clone, Copy)]
+struct Pulses {
+    left: u32,
+    on: bool,
+}
+
+static PULSES: Mutex<CriticalSectionRawMutex, Cell<Pulses>> =
+    Mutex::new(Cell::new(Pulses { left: 0, on: false }));
+
+fn write_ready(asserted: bool) {
+    let high = level(asserted, OUTPUTS.ready_high);
+    pac::GPIOE.bsrr().write(|w| {
+        w.set_bs(READY_PIN, high);
+        w.set_br(READY_PIN, !high);
+    });
+    pac::GPIOB.bsrr().write(|w| {
+        w.set_bs(READY_LED, asserted);
+        w.set_br(READY_LED, !asserted);
+    });
+}
+
+fn write_reject(asserted: bool) {
+    let high = level(asserted, OUTPUTS.reject_high);
+    pac::GPIOE.bsrr().write(|w| {
+        w.set_bs(REJECT_PIN, high);
+        w.set_br(REJECT_PIN, !high);
+    });
+    pac::GPIOB.bsrr().write(|w| {
+        w.set_bs(REJECT_LED, asserted);
+        w.set_br(REJECT_LED, !asserted);
+    });
+}
+
+/// Starts TIM14's one-shot count of `OUTPUTS.pulse_us`.
+fn start_timer() {
+    let t = pac::TIM14;
+    t.cnt().write(|w| w.set_cnt(0));
+    t.cr1().write(|w| {
+        w.set_urs(Urs::COUNTER_ONLY);
+        w.set_opm(true);
+        w.set_cen(true);
+    });
+}
+
+/// The end of a pulse, or of the gap after it: the next phase starts.
+#[interrupt]
+fn TIM8_TRG_COM_TIM14() {
+    let t = pac::TIM14;
+    if !t.sr().read().uif() {
+        return;
+    }
+    t.sr().write(|_| {});
+    PULSES.lock(|p| {
+        let mut s = p.get();
+        if s.on {
+            write_reject(false);
+            s.on = false;
+            // A gap as long as a pulse before the next, so that two
+            // objects closed together make two pulses.
+            if s.left > 0 {
+                start_timer();
+            }
+        } else if s.left > 0 {
+            s.left -= 1;
+            s.on = true;
+            write_reject(true);
+            start_timer();
+        }
+        p.set(s);
+    });
+}
+
+/// The outputs of the board, owned by the scoring task.
+pub struct PlcOutputs {
+    logic: OutputLogic,
+}
+
+impl PlcOutputs {
+    /// Configures the pins at their start-up levels (READY dropped after
+    /// any start but power-on) and TIM14.
+    pub fn new(pins: OutputPins, cause: ResetCause) -> Self {
+        let logic = OutputLogic::start(OUTPUTS, cause);
+        let a = logic.asserted();
+        let lv = |b: bool| if b { Level::High } else { Level::Low };
+        // Configured once and never dropped: a dropped `Output` would
+        // return its pin to an input.
+        core::mem::forget(Output::new(
+            pins.ready,
+            lv(level(a.ready, OUTPUTS.ready_high)),
+            Speed::Low,
+        ));
+        core::mem::forget(Output::new(
+            pins.reject,
+            lv(level(a.reject, OUTPUTS.reject_high)),
+            Speed::Low,
+        ));
+        core::mem::forget(Output::new(pins.ready_led, lv(a.ready), Speed::Low));
+        core::mem::forget(Output::new(pins.reject_led, lv(a.reject), Speed::Low));
+        pac::RCC.apb1lenr().modify(|w| w.set_tim14en(true));
+        let t = pac::TIM14;
+        t.cr1().write(|_| {});
+        t.psc().write_value((PRESCALER - 1) as u16);
+        t.arr()
+            .write(|w| w.set_arr((OUTPUTS.pulse_us.clamp(1, 1 << 16) - 1) as u16));
+        t.cr1().write(|w| w.set_urs(Urs::COUNTER_ONLY));
+        t.egr().write(|w| w.set_ug(true));
+        t.sr().write(|_| {});
+        t.dier().write(|w| w.set_uie(true));
+        let irq = interrupt::TIM8_TRG_COM_TIM14;
+        // Below DRDY and the reads' ends (P5): a pulse edge may wait for
+        // a read's end, never the reverse.
+        irq.set_priority(interrupt::Priority::P6);
+        // SAFETY: the handler touches only TIM14, GPIOB/E's BSRR and PULSES.
+        unsafe { irq.enable() };
+        PlcOutputs { logic }
+    }
+
+    /// After a scoring step: the pins follow the driver's progress.
+    pub fn step(&mut self, p: cvm_fw_app::outputs::Progress, closed: u32) {
+        let Some(Change { now, pulses }) = self.logic.step(p, closed) else {
+            return;
+        };
+        self.write(now);
+        if pulses > 0 {
+            PULSES.lock(|c| {
+                let mut s = c.get();
+                let idle = !s.on && s.left == 0 && !pac::TIM14.cr1().read().cen();
+                s.left = s.left.saturating_add(pulses);
+                if idle {
+                    s.left -= 1;
+                    s.on = true;
+                    write_reject(true);
+                    start_timer();
+                }
+                c.set(s);
+            });
+        }
+    }
+
+    fn write(&self, now: Asserted) {
+        write_ready(now.ready);
+        // With pulses, REJECT belongs to the timer.
+        if OUTPUTS.pulse_us == 0 {
+            write_reject(now.reject);
+        }
+    }
+}
