@@ -23,7 +23,6 @@ mod request;
 mod status;
 mod wire;
 
-pub use crate::protocol::MAX_LINE;
 pub use crate::settings::Source;
 pub use key::{Capacity, Key};
 pub use reader::{Event, LineReader, LinkError};
@@ -31,4 +30,4 @@ pub use refusal::Refusal;
 pub use reply::{Calibration, Reply, encode_reply, parse_reply};
 pub use request::{Request, encode_request, parse_request};
 pub use status::{LastScan, Status, Store, Verdict};
-pub use wire::{MAX_CALIBRATION_SCANS, REPLY, REQUEST, VERSION};
+pub use wire::{MAX_CALIBRATION_SCANS, MAX_LINE, REPLY, REQUEST, VERSION};

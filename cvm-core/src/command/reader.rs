@@ -2,7 +2,7 @@
 //! receiver's errors attached to the line they damaged.
 
 use super::refusal::Refusal;
-use crate::protocol::MAX_LINE;
+use super::wire::MAX_LINE;
 
 /// An error the serial receiver reported while a line was arriving.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -3,9 +3,9 @@
 use super::key::{Capacity, Key};
 use super::refusal::Refusal;
 use super::wire::{
-    FrameError, MAX_CALIBRATION_SCANS, REQUEST, checked_body, parse_u32, split_once,
+    FrameError, MAX_CALIBRATION_SCANS, MAX_LINE, REQUEST, checked_body, parse_u32, split_once,
 };
-use crate::protocol::{LineBuf, LineSink, MAX_LINE, Priority};
+use crate::protocol::{LineBuf, LineSink, Priority};
 
 /// A request, decoded.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -5,7 +5,12 @@ use crate::protocol::crc16;
 
 /// Version of the command channel, carried in the `status` reply (`pv=`):
 /// the result protocol's next version, the first with commands.
-pub const VERSION: u32 = 5;
+pub const VERSION: u32 = 6;
+/// Longest request or reply line, its `\n` included. Shorter than the
+/// result lines' `protocol::MAX_LINE` (whose end line grew with the part
+/// verdict): every command line fits the 256 bytes a small gateway's
+/// buffer is made for.
+pub const MAX_LINE: usize = 256;
 /// Type letter of a request line.
 pub const REQUEST: u8 = b'C';
 /// Type letter of a reply line.

@@ -137,7 +137,7 @@ fn replies_are_written_as_specified() {
         (
             Some(1),
             Reply::Status(status_example()),
-            "A,1,ok,status,pv=5,fw=0.1.0,j=15x15,cap=300x1000,store=ok,cols=300:d,rows=300:f,\
+            "A,1,ok,status,pv=6,fw=0.1.0,j=15x15,cap=300x1000,store=ok,cols=300:d,rows=300:f,\
              thr=4194304:c,pthr=3277:d,scores=0:d,dcap=0:f,rst=por,boots=3,last=2/14/1/fail",
         ),
         (
@@ -427,7 +427,7 @@ fn reply_parser_refuses_what_is_no_reply() {
         ("A,1,ok,thr=5", ParseError::Format),
         ("A,1,ok,thr=5:x", ParseError::Format),
         ("A,1,ok,save,extra", ParseError::Format),
-        ("A,1,ok,status,pv=4", ParseError::Format),
+        ("A,1,ok,status,pv=5", ParseError::Format),
     ];
     for (body, e) in cases {
         assert_eq!(parse_reply(&framed(body)), Err(e), "{body}");
