@@ -23,5 +23,5 @@ pub mod simulate;
 pub mod stream;
 pub mod twin;
 pub mod twin_checks;
-pub mod twin_requests;
 pub mod twin_pins;
+pub mod twin_requests;
