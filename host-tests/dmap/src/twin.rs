@@ -97,6 +97,7 @@ pub struct TwinArgs {
     pub debugger: bool,
     #[command(flatten)]
     pub link: crate::twin_requests::TwinRequestArgs,
+    #[command(flatten)]
     pub pins: crate::twin_pins::PinArgs,
 }
 
