@@ -6,6 +6,9 @@
 //! the flash interface themselves are tested rule by rule in
 //! host-tests/twin/tests (test_usart_rx.py, test_flash.py).
 
+mod common;
+
+use common::dmap_ok as dmap;
 use cvm_reference::Geometry;
 use dmap::npy::write_scan_u16;
 use dmap::twin_requests::write_requests;
@@ -28,20 +31,6 @@ fn write_scan(path: &Path) {
         data.push(500 + (state >> 33) as u16 % 300 + if blob { 6000 } else { 0 });
     }
     write_scan_u16(path, ROWS, COLS, Geometry::new(J, J).unwrap(), &data).unwrap();
-}
-
-fn dmap(args: &[&str]) -> Output {
-    let out = Command::new(env!("CARGO_BIN_EXE_dmap"))
-        .args(args)
-        .output()
-        .expect("running dmap");
-    assert!(
-        out.status.success(),
-        "dmap {args:?} failed ({}):\n{}",
-        out.status,
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out
 }
 
 fn counters(out: &Output) -> serde_json::Value {

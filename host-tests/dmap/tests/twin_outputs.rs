@@ -7,23 +7,13 @@
 //! part's verdict a fault and rejects it, and READY comes back only with
 //! the next clean scan. Needs what tests/twin.rs needs.
 
+mod common;
+
+use common::dmap_ok as dmap;
 use cvm_reference::Geometry;
 use dmap::npy::write_scan_u16;
 use std::path::Path;
-use std::process::{Command, Output};
-
-fn dmap(args: &[&str]) -> Output {
-    let out = Command::new(env!("CARGO_BIN_EXE_dmap"))
-        .args(args)
-        .output()
-        .expect("running dmap");
-    assert!(
-        out.status.success(),
-        "dmap {args:?}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out
-}
+use std::process::Command;
 
 /// The model's counters: the last line of standard error.
 fn counters(stderr: &[u8]) -> serde_json::Value {

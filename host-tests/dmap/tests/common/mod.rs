@@ -38,6 +38,19 @@ pub fn dmap(args: &[&str]) -> Output {
         .expect("run dmap")
 }
 
+/// Runs the built `dmap` binary and requires it to succeed (its arguments
+/// and stderr shown otherwise).
+pub fn dmap_ok(args: &[&str]) -> Output {
+    let out = dmap(args);
+    assert!(
+        out.status.success(),
+        "dmap {args:?} failed ({}):\n{}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
 /// A path `name` in a per-process scratch directory of the test file `tag`.
 pub fn tmp_in(tag: &str, name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("dmap-{tag}-{}", std::process::id()));
