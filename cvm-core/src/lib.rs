@@ -11,6 +11,7 @@ pub mod objects;
 pub mod pipeline;
 pub mod power;
 pub mod protocol;
+pub mod record;
 pub mod scorer;
 pub mod settings;
 pub mod stream;
