@@ -27,6 +27,7 @@
 
 mod clocks;
 mod drdy;
+mod flash_bank2;
 mod frame_reader;
 mod memory;
 mod outputs;
@@ -34,6 +35,7 @@ mod pins;
 mod read_deadline;
 mod resets;
 mod scoring;
+mod settings_store;
 mod shared;
 mod tasks;
 
@@ -82,7 +84,11 @@ fn main() -> ! {
 
     frame_reader::install(pins.spi, pins.sck, pins.miso, pins.cs);
     let uart = uart(pins.uart, pins.uart_tx, pins.uart_tx_dma);
-    let driver = scoring::scan_driver(cause, boots);
+    // Settings kept in flash (settings_store): read before the scoring side
+    // is built, their values in place of the compiled ones. The store is
+    // for `save` (the command channel's).
+    let (_store, _store_state, stored) = settings_store::load_at_boot(pins.flash, pins.flash_dma);
+    let driver = scoring::scan_driver(cause, boots, stored.as_ref());
     let plc = outputs::PlcOutputs::new(pins.outputs, cause);
     let mut wdg = IndependentWatchdog::new(pins.iwdg, WATCHDOG_US);
     wdg.unleash();

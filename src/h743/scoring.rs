@@ -11,6 +11,7 @@ use cvm_core::pipeline::{Pipeline, Settings};
 use cvm_core::protocol::ResetCause;
 use cvm_core::stream::{near_words, row_words_for};
 use cvm_fw_app::driver::ScanDriver;
+use cvm_fw_app::settings_store::{self, Values};
 use static_cell::ConstStaticCell;
 
 use super::memory::Noload;
@@ -87,8 +88,14 @@ static TAKEN: AtomicBool = AtomicBool::new(false);
 /// Builds the scoring side in its memory: the square kernels' factors
 /// (an f64 factorisation: before the watchdog starts), the scorer's tables
 /// in DTCM, the row buffers, the pipeline and the scan driver, whose
-/// header lines announce `cause` and `boots`.
-pub fn scan_driver(cause: ResetCause, boots: u32) -> &'static mut ScanDriver<'static, MAX_COLS> {
+/// header lines announce `cause` and `boots`; with the settings read from
+/// flash (`stored`, checked against this build) in place of the compiled
+/// ones.
+pub fn scan_driver(
+    cause: ResetCause,
+    boots: u32,
+    stored: Option<&Values>,
+) -> &'static mut ScanDriver<'static, MAX_COLS> {
     if TAKEN.swap(true, Ordering::Relaxed) {
         defmt::panic!("the scoring side is built once");
     }
@@ -105,7 +112,7 @@ pub fn scan_driver(cause: ResetCause, boots: u32) -> &'static mut ScanDriver<'st
     let (row_a, rest) = axi.split_at_mut(ROW_WORDS);
     let row_b = if ROWS_IN_AXI { rest } else { sram123 };
     let near = unsafe { NEAR.take_zeroed() };
-    let settings = Settings {
+    let mut settings = Settings {
         cols: COLS as u32,
         threshold: scorer.threshold_from_units(THRESHOLD_UNITS),
         power_threshold: cvm_core::power::threshold_from_units(POWER_THRESHOLD_UNITS),
@@ -115,10 +122,14 @@ pub fn scan_driver(cause: ResetCause, boots: u32) -> &'static mut ScanDriver<'st
         reset_cause: cause,
         boots,
     };
+    let mut rows = ROWS;
+    if let Some(v) = stored {
+        settings_store::apply(v, &mut settings, &mut rows);
+    }
     let mut pipeline = match Pipeline::<MAX_COLS>::with_near(scorer, settings, row_a, row_b, near) {
         Ok(p) => p,
         Err(e) => defmt::panic!("pipeline refused its buffers: {}", e),
     };
     pipeline.set_outputs(OUTPUTS);
-    unsafe { DRIVER.take() }.write(ScanDriver::new(pipeline, COLS as u32, ROWS))
+    unsafe { DRIVER.take() }.write(ScanDriver::new(pipeline, settings.cols, rows))
 }
