@@ -10,6 +10,8 @@ usage: scripts/measure.sh WHAT [ARGS]
                                square 15; TOP=n functions, default 20) (emulation.md)
   twin-profile                 instructions per beam by stage, H743 release ELF on the chip
                                model, 9x9 and 15x15 (KERNELS=square, TOP=n) (twin.md)
+  store-boot                   start-up cost of the settings store, H743 release ELF (default
+                               configuration) on the chip model, per bank-2 content (firmware.md)
   twin-cost [ARGS]             estimated cycles per beam on the H743 (the chip model's bus and
                                D-cache cost model; KERNELS, COLS, ROWS; ARGS go to
                                h743twin.cost, e.g. --dtcm ROW_A) (performance.md)
@@ -175,6 +177,23 @@ twin_profile() {
             --start-ms "$(twin_start_ms)")
         echo
     done
+}
+
+# The settings store at start-up: the default release ELF booted on the
+# chip model until it takes beams, with an erased bank 2 and with the
+# images `store_images` writes (one record; a full first page, the longest
+# load; a full page whose next save was cut while erasing, which the load
+# repairs with one erase).
+store_boot() {
+    bash "$root/scripts/setup.sh"
+    (cd "$root" && cargo build --release -q)
+    local work
+    scratch
+    work=${scratch_dirs[-1]}
+    (cd "$root/host-tests" && cargo run -q --release -p cvm-fw-app-tests --example store_images -- "$work")
+    (cd "$root/host-tests/twin" && python3 -m h743twin.bootcost \
+        "$root/target/thumbv7em-none-eabihf/release/cvm-fw" \
+        "$work/erased.bin" "$work/one.bin" "$work/full.bin" "$work/erase-cut.bin")
 }
 
 # The scan is as wide as the default configuration's (300 columns; COLS and
@@ -592,6 +611,7 @@ case $what in
     icount) icount ;;
     profile) profile "$@" ;;
     twin-profile) twin_profile ;;
+    store-boot) store_boot ;;
     twin-cost) twin_cost "$@" ;;
     objects) objects "$@" ;;
     experiments) experiments "$@" ;;
