@@ -25,7 +25,7 @@
 //! Decoding never panics on any input (fuzzed: `host-tests/fuzz`,
 //! `record`).
 
-use crate::command::{Capacity, Key};
+use crate::command::Key;
 use crate::config::{Config, Kernels, MAX_J, Weights};
 
 /// The record's first four bytes.
@@ -205,16 +205,4 @@ pub fn decode<const N: usize>(bytes: &[u8], tag: &Tag) -> Decoded<N> {
         *v = u32::from_le_bytes(w);
     }
     Decoded::Valid(out)
-}
-
-/// Whether every value is within its key's range on a board of capacity
-/// `cap` (values in [`Key::ALL`]'s order). A record of this build whose
-/// values are not (a build of the same scoring but smaller capacity made
-/// it) must not be applied.
-pub fn in_range<const N: usize>(values: &[u32; N], cap: &Capacity) -> bool {
-    N == Key::ALL.len()
-        && Key::ALL.iter().zip(values).all(|(k, &v)| {
-            let (lo, hi) = k.range(cap);
-            lo <= v && v <= hi
-        })
 }

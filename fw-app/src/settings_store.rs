@@ -14,12 +14,14 @@
 
 use core::ops::Range;
 
-use cvm_core::Settings;
-use cvm_core::command::{Capacity, Key, Store};
+use cvm_core::command::{Key, Store};
 use cvm_core::record::{self, Decoded, Tag};
 use embedded_storage_async::nor_flash::NorFlash;
 use sequential_storage::Error;
-use sequential_storage::cache::{Cache, Uncached};
+use sequential_storage::cache::Cache;
+use sequential_storage::cache::key_pointers::ArrayKeyPointers;
+use sequential_storage::cache::page_pointers::ArrayPagePointers;
+use sequential_storage::cache::page_states::ArrayPageStates;
 use sequential_storage::map::{MapConfig, MapStorage};
 
 /// Values in a record: one per runtime setting, in [`Key::ALL`]'s order.
@@ -61,44 +63,61 @@ impl<E> From<Error<E>> for StoreError {
     }
 }
 
+/// Erase sectors the store may span (the caches' size).
+pub const MAX_PAGES: usize = 8;
+
+/// `sequential-storage`'s caches (about 80 bytes): each page's state, each
+/// page's first free word, and where the newest record is. Without them a
+/// save that fills a sector copies the newest record after looking up, for
+/// each of the sector's records, whether it is the newest, each lookup
+/// reading the sector again: a sector of 1 000 records costs a million
+/// reads. The caches start empty at every start-up, so the first load reads
+/// the flash in full.
+type Caches =
+    Cache<ArrayPageStates<MAX_PAGES>, ArrayPagePointers<MAX_PAGES>, ArrayKeyPointers<(), 1>, ()>;
+
 /// The single key of the map: the record is its only item.
-type Map<S> = MapStorage<(), S, Cache<Uncached, Uncached, Uncached, ()>>;
+type Map<S> = MapStorage<(), S, Caches>;
 
 /// The settings record in a range of a NOR flash.
 pub struct SettingsStore<S: NorFlash> {
     map: Map<S>,
-    cap: Capacity,
     buf: [u8; BUF],
 }
 
 impl<S: NorFlash> SettingsStore<S> {
     /// The store on `range` of `flash` (whole erase sectors, at least
-    /// two); loaded values must fit a board of capacity `cap`.
-    pub fn new(flash: S, range: Range<u32>, cap: Capacity) -> Result<Self, StoreError> {
-        if S::READ_SIZE > 64 || S::WRITE_SIZE > 64 {
+    /// two).
+    pub fn new(flash: S, range: Range<u32>) -> Result<Self, StoreError> {
+        let pages = (range.end.saturating_sub(range.start) as usize) / S::ERASE_SIZE;
+        if S::READ_SIZE > 64 || S::WRITE_SIZE > 64 || pages > MAX_PAGES {
             return Err(StoreError::Internal);
         }
         let config = MapConfig::try_new(range).map_err(|_| StoreError::Internal)?;
+        let caches = Cache::new(
+            ArrayPageStates::new(),
+            ArrayPagePointers::new(),
+            ArrayKeyPointers::new(),
+        );
         Ok(SettingsStore {
-            map: MapStorage::new(flash, config, Cache::new_uncached()),
-            cap,
+            map: MapStorage::new(flash, config, caches),
             buf: [0; BUF],
         })
     }
 
-    /// The stored record, if it is one of this build (`tag`) with values
-    /// within the capacity: [`Store::Loaded`] and the values; otherwise
-    /// the state and no values ([`Store::Empty`]: nothing stored;
-    /// [`Store::Foreign`]: made by another build, or values out of this
-    /// board's range; [`Store::Unreadable`]: the flash or the record
-    /// could not be read). May repair what a power cut during an erase
-    /// left (one sector erase).
+    /// The stored record, if it is one of this build (`tag`):
+    /// [`Store::Loaded`] and its values (whether they fit the board's
+    /// ranges is the caller's to check); otherwise the state and no values
+    /// ([`Store::Empty`]: nothing stored; [`Store::Foreign`]: made by
+    /// another build; [`Store::Unreadable`]: the flash or the record could
+    /// not be read). May repair what a power cut during an erase left (one
+    /// sector erase).
     pub async fn load(&mut self, tag: &Tag) -> (Store, Option<Values>) {
         match self.map.fetch_item::<&[u8]>(&mut self.buf, &()).await {
             Ok(None) => (Store::Empty, None),
             Ok(Some(bytes)) => match record::decode::<VALUES>(bytes, tag) {
-                Decoded::Valid(v) if record::in_range(&v, &self.cap) => (Store::Loaded, Some(v)),
-                Decoded::Valid(_) | Decoded::Foreign => (Store::Foreign, None),
+                Decoded::Valid(v) => (Store::Loaded, Some(v)),
+                Decoded::Foreign => (Store::Foreign, None),
                 Decoded::Corrupt => (Store::Unreadable, None),
             },
             Err(_) => (Store::Unreadable, None),
@@ -129,20 +148,4 @@ impl<S: NorFlash> SettingsStore<S> {
     pub fn flash(&mut self) -> &mut S {
         self.map.flash()
     }
-}
-
-/// Puts stored values into the settings a board starts with: each key's
-/// value where [`Key::set`] keeps it, and `rows`, which the board keeps
-/// beside them. False if a value did not fit its field (that key keeps
-/// its compiled value).
-pub fn apply(values: &Values, settings: &mut Settings, rows: &mut u32) -> bool {
-    let mut all = true;
-    for (&key, &v) in Key::ALL.iter().zip(values) {
-        if key == Key::Rows {
-            *rows = v;
-        } else {
-            all &= key.set(settings, v);
-        }
-    }
-    all
 }

@@ -1,42 +1,36 @@
 //! The runtime settings kept in flash on this board: the store
 //! (`cvm_fw_app::settings_store`) on the range of bank 2 that
 //! `boards/h743/memory.x` reserves (`SETTINGS`), through the bank-2 driver
-//! (`flash_bank2`). At start-up the record is read before the scoring
-//! side is built, and its values replace the compiled ones; a save is
-//! [`save`], from an async task. Any failure leaves the compiled values in
-//! place: the board always starts.
+//! (`flash_bank2`). [`open`] takes the flash interface and DMA1 stream 7
+//! in `main`; [`load`] reads the record at start-up, [`save`] writes one
+//! (the store task's). Any failure is a state or an error, never a stop:
+//! the board starts with its compiled values when the record cannot be
+//! used.
 
-use cvm_core::command::{Capacity, Store};
+use cvm_core::command::Store;
 use cvm_core::record::Tag;
+use cvm_core::settings::KEYS;
 use cvm_fw_app::flash_words::Words;
-use cvm_fw_app::settings_store::{SettingsStore, StoreError, Values};
+use cvm_fw_app::settings_store::{SettingsStore, StoreError};
 use defmt::{info, warn};
 use embassy_stm32::Peri;
 use embassy_stm32::peripherals::{DMA1_CH7, FLASH};
+use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+use embassy_sync::mutex::Mutex;
 
 use super::flash_bank2::Bank2;
-use crate::config::MAX_DEFECT_LINES_PER_ROW;
-use crate::config::h743::{CORE, MAX_COLS};
+use crate::config::h743::CORE;
 
 /// The store of this board.
-pub type BoardStore = SettingsStore<Words<Bank2>>;
+type BoardStore = SettingsStore<Words<Bank2>>;
 
 /// What this build's records are made for: the settings layout, and the
 /// scoring configuration the tables were built for.
-pub const TAG: Tag = Tag::new(&CORE);
+const TAG: Tag = Tag::new(&CORE);
 
-/// The ranges stored values must fit (the record's values are checked
-/// against them before they are applied): the columns the row buffers
-/// hold, and the defect lines per row the queue's reserve is sized for
-/// (not this build's default, `config::h743::MAX_DEFECT_LINES_PER_ROW`).
-pub const CAPACITY: Capacity = {
-    assert!(MAX_COLS <= u16::MAX as usize, "cols must fit 16 bits");
-    Capacity {
-        max_cols: MAX_COLS as u16,
-        max_rows: u16::MAX,
-        max_dcap: MAX_DEFECT_LINES_PER_ROW,
-    }
-};
+/// The store, once [`open`] found its range usable. Only thread mode uses
+/// it: `main` at start-up, then the store task.
+static STORE: Mutex<CriticalSectionRawMutex, Option<BoardStore>> = Mutex::new(None);
 
 /// The range `boards/h743/memory.x` reserves, from its symbols.
 fn range() -> (u32, u32) {
@@ -49,34 +43,44 @@ fn range() -> (u32, u32) {
     (start, end.wrapping_sub(start))
 }
 
-/// Opens the store and reads the record (blocking: `main`, before the
-/// executor runs; a few flash reads, or one sector erase when a power cut
-/// interrupted one). The store is `None` when its range is unusable.
-pub fn load_at_boot(
-    flash: Peri<'static, FLASH>,
-    dma: Peri<'static, DMA1_CH7>,
-) -> (Option<BoardStore>, Store, Option<Values>) {
+/// Sets the store up on the reserved range of bank 2 (`main`, once,
+/// before [`load`]). Without a usable range, [`load`] says `bad` and
+/// [`save`] fails.
+pub fn open(flash: Peri<'static, FLASH>, dma: Peri<'static, DMA1_CH7>) {
     let (base, len) = range();
     let store = Bank2::new(flash, dma, base, len)
-        .and_then(|bank| SettingsStore::new(Words::new(bank), 0..len, CAPACITY).ok());
-    let Some(mut store) = store else {
-        warn!("settings flash: the reserved range is not usable; compiled settings");
-        return (None, Store::Unreadable, None);
+        .and_then(|bank| SettingsStore::new(Words::new(bank), 0..len).ok());
+    if store.is_none() {
+        warn!("settings flash: the reserved range is not usable");
+    }
+    if let Ok(mut s) = STORE.try_lock() {
+        *s = store;
+    }
+}
+
+/// The record read at start-up: [`Store::Loaded`] and its values when it
+/// is one of this build (`main` checks the values against the capacity);
+/// a few flash reads, or one sector erase when a power cut interrupted
+/// one.
+pub async fn load() -> (Store, Option<[u32; KEYS]>) {
+    let mut guard = STORE.lock().await;
+    let Some(store) = guard.as_mut() else {
+        return (Store::Unreadable, None);
     };
-    let (state, values) = embassy_futures::block_on(store.load(&TAG));
-    let poisoned = store.flash().poisoned;
+    let (state, values) = store.load(&TAG).await;
     info!(
         "settings flash: {} ({} unreadable flash words)",
         state.word(),
-        poisoned
+        store.flash().poisoned
     );
-    (Some(store), state, values)
+    (state, values)
 }
 
-/// Saves `values` as this build's record (from an async task: every wait
-/// for the flash yields).
-#[allow(dead_code, reason = "the command channel's `save` calls it")]
-pub async fn save(store: &mut BoardStore, values: &Values) -> Result<(), StoreError> {
+/// Writes `values` as this build's record, from an async task: every
+/// wait for the flash yields.
+pub async fn save(values: &[u32; KEYS]) -> Result<(), StoreError> {
+    let mut guard = STORE.lock().await;
+    let store = guard.as_mut().ok_or(StoreError::Internal)?;
     let r = store.save(&TAG, values).await;
     if let Err(e) = r {
         warn!("settings flash: save failed: {}", e);

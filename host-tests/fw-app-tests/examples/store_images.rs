@@ -10,24 +10,31 @@ use cvm_core::record::{Tag, encoded_len};
 use cvm_core::{Config, Geometry};
 use cvm_fw_app::flash_words::WORD;
 use cvm_fw_app::settings_store::{VALUES, Values};
-use cvm_fw_app_tests::bank::{Bank, EraseCut, H743_CAPACITY, SECTOR, h743_store};
+use cvm_fw_app_tests::bank::{Bank, EraseCut, SECTOR, h743_store};
 use embassy_futures::block_on;
 use std::path::PathBuf;
 
+/// Values within the release build's ranges, the threshold numbered.
 fn values(n: u32) -> Values {
     Key::ALL.map(|k| match k {
         Key::Cols => 300,
         Key::Rows => 200,
         Key::Threshold => 1_000_000 + n,
         Key::PowerThreshold => 9831,
-        Key::Scores => 1,
+        Key::Scores | Key::ReadyLevel | Key::RejectLevel => 1,
         Key::DefectCap => 4,
+        Key::MinArea
+        | Key::MinPeak
+        | Key::MaxMissing
+        | Key::MaxMisplaced
+        | Key::RejectMode
+        | Key::Pulse
+        | Key::RowDelay => 0,
     })
 }
 
 fn save(b: &Bank, tag: &Tag, n: u32) -> Result<(), String> {
-    block_on(h743_store(b, H743_CAPACITY).save(tag, &values(n)))
-        .map_err(|e| format!("save {n}: {e:?}"))
+    block_on(h743_store(b).save(tag, &values(n))).map_err(|e| format!("save {n}: {e:?}"))
 }
 
 fn main() -> Result<(), String> {

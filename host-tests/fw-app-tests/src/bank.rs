@@ -54,6 +54,7 @@ struct Cells {
     erase_cut: EraseCut,
     dead: bool,
     double_programs: u32,
+    reads: u64,
 }
 
 /// Bank 2's cells; clones share them (a store and the test that watches it).
@@ -78,6 +79,7 @@ impl Bank {
             erase_cut: EraseCut::FirstHalf,
             dead: false,
             double_programs: 0,
+            reads: 0,
         })))
     }
 
@@ -154,6 +156,11 @@ impl Bank {
         self.0.borrow().double_programs
     }
 
+    /// Flash words read so far.
+    pub fn reads(&self) -> u64 {
+        self.0.borrow().reads
+    }
+
     /// Whether the flash word at byte `offset` of the bank reads with a
     /// double ECC error.
     pub fn unreadable(&self, offset: usize) -> bool {
@@ -210,10 +217,11 @@ impl<const S: usize> FlashWords for Window<S> {
     }
 
     async fn read(&mut self, offset: u32, buf: &mut [u8]) -> Result<(), Fault> {
-        let c = self.bank.0.borrow();
+        let mut c = self.bank.0.borrow_mut();
         if c.dead {
             return Err(Fault::Read);
         }
+        c.reads += (buf.len() / WORD) as u64;
         let at = (self.base + offset) as usize;
         if (at / WORD..(at + buf.len()).div_ceil(WORD)).any(|w| c.bad[w]) {
             return Err(Fault::Ecc);
@@ -270,8 +278,8 @@ impl<const S: usize> FlashWords for Window<S> {
 }
 
 /// The capacity of the H743 release build with its default configuration
-/// (`src/h743/settings_store.rs`, `CAPACITY`: 300 columns); a build for
-/// another scan has that scan's columns.
+/// (`src/h743/mod.rs`, `CAPACITY`: 300 columns); a build for another scan
+/// has that scan's columns.
 pub const H743_CAPACITY: Capacity = h743_capacity(300);
 
 /// The capacity of an H743 build for scans of `cols` columns.
@@ -280,35 +288,31 @@ pub const fn h743_capacity(cols: u16) -> Capacity {
         max_cols: cols,
         max_rows: u16::MAX,
         max_dcap: 16,
+        max_pulse_us: 1 << 16,
     }
 }
 
-/// The settings store of the H743 firmware (capacity `cap`) on this bank.
-pub fn h743_store(bank: &Bank, cap: Capacity) -> SettingsStore<Words<Window<SECTOR>>> {
+/// The settings store of the H743 firmware on this bank.
+pub fn h743_store(bank: &Bank) -> SettingsStore<Words<Window<SECTOR>>> {
     let flash = Words::new(bank.window::<SECTOR>(H743_STORE));
-    match SettingsStore::new(flash, 0..H743_STORE.end, cap) {
+    match SettingsStore::new(flash, 0..H743_STORE.end) {
         Ok(s) => s,
         Err(e) => panic!("the H743 store's range is refused: {e:?}"),
     }
 }
 
-/// What an H743 firmware built for `tag` with capacity `cap` finds in the
-/// chip-model file `path` at start-up (the same code:
-/// `cvm_fw_app::settings_store`).
-pub fn read_record(
-    path: &Path,
-    tag: &Tag,
-    cap: Capacity,
-) -> Result<(Store, Option<Values>), String> {
+/// What an H743 firmware built for `tag` finds in the chip-model file
+/// `path` at start-up (the same code: `cvm_fw_app::settings_store`).
+pub fn read_record(path: &Path, tag: &Tag) -> Result<(Store, Option<Values>), String> {
     let bank = Bank::load(path)?;
-    Ok(embassy_futures::block_on(h743_store(&bank, cap).load(tag)))
+    Ok(embassy_futures::block_on(h743_store(&bank).load(tag)))
 }
 
 /// Saves `values` for `tag` into the chip-model file `path` (created
 /// erased if missing), as the H743 firmware would.
 pub fn write_record(path: &Path, tag: &Tag, values: &Values) -> Result<(), String> {
     let bank = Bank::load(path)?;
-    embassy_futures::block_on(h743_store(&bank, H743_CAPACITY).save(tag, values))
+    embassy_futures::block_on(h743_store(&bank).save(tag, values))
         .map_err(|e: StoreError| format!("save: {e:?}"))?;
     bank.save(path)
 }

@@ -5,15 +5,13 @@
 //! cross page switches (copy, erase) often, and at the chip's geometry.
 //! After each cut the board "reboots": a new store on the same cells.
 //! The load must find the record entirely old or entirely new, and the
-//! next save must work. No word may ever be programmed twice. And how a
-//! loaded record's values go into the settings a board starts with.
+//! next save must work. No word may ever be programmed twice.
 
 use cvm_core::command::{Key, Store};
-use cvm_core::protocol::ResetCause;
 use cvm_core::record::{Tag, encode, encoded_len};
-use cvm_core::{Config, Geometry, Settings};
+use cvm_core::{Config, Geometry};
 use cvm_fw_app::flash_words::{POISON, WORD, Words};
-use cvm_fw_app::settings_store::{SettingsStore, VALUES, Values, apply};
+use cvm_fw_app::settings_store::{SettingsStore, VALUES, Values};
 use cvm_fw_app_tests::bank::{self, Bank, EraseCut, H743_CAPACITY, SECTOR};
 use embassy_futures::block_on;
 
@@ -39,12 +37,7 @@ const SMALL: usize = 16 * WORD;
 
 fn small_store(b: &Bank) -> SettingsStore<Words<bank::Window<SMALL>>> {
     let range = 0..2 * SMALL as u32;
-    SettingsStore::new(
-        Words::new(b.window::<SMALL>(range.clone())),
-        range,
-        H743_CAPACITY,
-    )
-    .unwrap()
+    SettingsStore::new(Words::new(b.window::<SMALL>(range.clone())), range).unwrap()
 }
 
 fn load_small(b: &Bank) -> (Store, Option<Values>) {
@@ -52,7 +45,7 @@ fn load_small(b: &Bank) -> (Store, Option<Values>) {
 }
 
 fn load_h743(b: &Bank) -> (Store, Option<Values>) {
-    block_on(bank::h743_store(b, H743_CAPACITY).load(&tag()))
+    block_on(bank::h743_store(b).load(&tag()))
 }
 
 #[test]
@@ -66,21 +59,21 @@ fn the_test_values_differ_in_every_key() {
 fn an_erased_bank_is_empty_and_a_save_loads_back() {
     let b = Bank::erased();
     assert_eq!(load_h743(&b), (Store::Empty, None));
-    block_on(bank::h743_store(&b, H743_CAPACITY).save(&tag(), &values(1))).unwrap();
+    block_on(bank::h743_store(&b).save(&tag(), &values(1))).unwrap();
     assert_eq!(load_h743(&b), (Store::Loaded, Some(values(1))));
-    block_on(bank::h743_store(&b, H743_CAPACITY).save(&tag(), &values(2))).unwrap();
+    block_on(bank::h743_store(&b).save(&tag(), &values(2))).unwrap();
     assert_eq!(load_h743(&b), (Store::Loaded, Some(values(2))));
     // The first save: the page's start marker, the item's header word and
     // the record's data words (encoded_len rounded up to words).
     let b = Bank::erased();
-    block_on(bank::h743_store(&b, H743_CAPACITY).save(&tag(), &values(1))).unwrap();
+    block_on(bank::h743_store(&b).save(&tag(), &values(1))).unwrap();
     assert_eq!(b.ops() as usize, 1 + 1 + encoded_len(VALUES).div_ceil(WORD));
 }
 
 #[test]
 fn the_record_is_stored_as_the_record_module_encodes_it() {
     let b = Bank::erased();
-    block_on(bank::h743_store(&b, H743_CAPACITY).save(&tag(), &values(5))).unwrap();
+    block_on(bank::h743_store(&b).save(&tag(), &values(5))).unwrap();
     let mut want = [0u8; 256];
     let n = encode(&tag(), &values(5), &mut want).unwrap();
     // Word 0: the page marker; word 1: the item header; then the data.
@@ -95,32 +88,22 @@ fn the_record_is_stored_as_the_record_module_encodes_it() {
 fn a_record_of_another_build_is_foreign() {
     let b = Bank::erased();
     let other = Tag::new(&Config::paper(Geometry::new(9, 9).unwrap()));
-    block_on(bank::h743_store(&b, H743_CAPACITY).save(&other, &values(3))).unwrap();
+    block_on(bank::h743_store(&b).save(&other, &values(3))).unwrap();
     assert_eq!(load_h743(&b), (Store::Foreign, None));
     // And a save of this build's record replaces it.
-    block_on(bank::h743_store(&b, H743_CAPACITY).save(&tag(), &values(4))).unwrap();
+    block_on(bank::h743_store(&b).save(&tag(), &values(4))).unwrap();
     assert_eq!(load_h743(&b), (Store::Loaded, Some(values(4))));
-}
-
-#[test]
-fn values_beyond_the_capacity_are_not_applied() {
-    let b = Bank::erased();
-    let mut v = values(1);
-    let cols = Key::ALL.iter().position(|&k| k == Key::Cols).unwrap();
-    v[cols] = H743_CAPACITY.max_cols as u32 + 1;
-    block_on(bank::h743_store(&b, H743_CAPACITY).save(&tag(), &v)).unwrap();
-    assert_eq!(load_h743(&b), (Store::Foreign, None));
 }
 
 #[test]
 fn a_half_programmed_word_reads_as_poison_and_the_old_record_stays() {
     let b = Bank::erased();
-    block_on(bank::h743_store(&b, H743_CAPACITY).save(&tag(), &values(1))).unwrap();
+    block_on(bank::h743_store(&b).save(&tag(), &values(1))).unwrap();
     let next = (2 + encoded_len(VALUES).div_ceil(WORD)) * WORD;
     // The next item's header, cut while programming.
     b.half_program(next, &[0x12; WORD]);
     assert!(b.unreadable(next));
-    let mut store = bank::h743_store(&b, H743_CAPACITY);
+    let mut store = bank::h743_store(&b);
     assert_eq!(
         block_on(store.load(&tag())),
         (Store::Loaded, Some(values(1)))
@@ -143,7 +126,7 @@ fn a_half_programmed_page_marker_on_an_empty_bank() {
     let b = Bank::erased();
     b.half_program(0, &[0; WORD]);
     assert_eq!(load_h743(&b), (Store::Empty, None));
-    block_on(bank::h743_store(&b, H743_CAPACITY).save(&tag(), &values(7))).unwrap();
+    block_on(bank::h743_store(&b).save(&tag(), &values(7))).unwrap();
     assert_eq!(load_h743(&b), (Store::Loaded, Some(values(7))));
     assert_eq!(b.double_programs(), 0);
 }
@@ -155,7 +138,7 @@ fn ops_of_save(b: &Bank, v: &Values, small: bool) -> u32 {
     if small {
         block_on(small_store(&copy).save(&tag(), v)).unwrap();
     } else {
-        block_on(bank::h743_store(&copy, H743_CAPACITY).save(&tag(), v)).unwrap();
+        block_on(bank::h743_store(&copy).save(&tag(), v)).unwrap();
     }
     copy.ops() - before
 }
@@ -180,7 +163,7 @@ fn sweep(
         let r = if small {
             block_on(small_store(&run).save(&tag(), &new))
         } else {
-            block_on(bank::h743_store(&run, H743_CAPACITY).save(&tag(), &new))
+            block_on(bank::h743_store(&run).save(&tag(), &new))
         };
         assert!(r.is_err() && run.was_cut(), "cut at {k} of {ops}");
         run.reboot();
@@ -194,7 +177,7 @@ fn sweep(
         let r = if small {
             block_on(small_store(&run).save(&tag(), &after))
         } else {
-            block_on(bank::h743_store(&run, H743_CAPACITY).save(&tag(), &after))
+            block_on(bank::h743_store(&run).save(&tag(), &after))
         };
         assert_eq!(r, Ok(()), "the save after the cut at {k}");
         assert_eq!(
@@ -236,7 +219,7 @@ fn at_the_chips_geometry_a_full_page_switches_and_survives_cuts() {
     let mut n = 0;
     // Fill the first page.
     while n < per_page as u32 {
-        block_on(bank::h743_store(&b, H743_CAPACITY).save(&tag(), &values(n))).unwrap();
+        block_on(bank::h743_store(&b).save(&tag(), &values(n))).unwrap();
         n += 1;
     }
     assert_eq!(load_h743(&b), (Store::Loaded, Some(values(n - 1))));
@@ -249,55 +232,27 @@ fn at_the_chips_geometry_a_full_page_switches_and_survives_cuts() {
         let (ops, olds, news) = sweep(&b, Some(values(n - 1)), values(n), how, false);
         assert_eq!((olds, news), (ops, 0));
     }
+    // The firmware's store: loaded at start-up, then the save. The page
+    // switch reads each record of the full page once or twice (the
+    // caches say where the newest one is), not the page once per record.
+    let run = b.snapshot();
+    let mut store = bank::h743_store(&run);
+    assert_eq!(block_on(store.load(&tag())).0, Store::Loaded);
+    let before = run.reads();
+    block_on(store.save(&tag(), &values(n))).unwrap();
+    let reads = run.reads() - before;
+    let words_per_item = (item / WORD) as u64;
+    assert!(
+        reads <= 3 * words_per_item * per_page as u64,
+        "{reads} words read to switch pages ({per_page} records of {words_per_item} words)"
+    );
     let ops = ops_of_save(&b, &values(n), false);
     // Close page 0 (its end marker), open page 1 (its start marker), copy
     // the newest record there, erase page 0, then the new record.
     let item_words = 1 + encoded_len(VALUES).div_ceil(WORD) as u32;
     assert_eq!(ops, 2 + item_words + 1 + item_words, "a page switch");
-    block_on(bank::h743_store(&b, H743_CAPACITY).save(&tag(), &values(n))).unwrap();
+    block_on(bank::h743_store(&b).save(&tag(), &values(n))).unwrap();
     assert_eq!(load_h743(&b), (Store::Loaded, Some(values(n))));
     assert!(b.bytes(0..WORD).iter().all(|&x| x == 0xFF), "page 0 erased");
     assert_eq!(b.double_programs(), 0);
-}
-
-fn compiled() -> Settings {
-    Settings {
-        cols: 300,
-        threshold: 1,
-        power_threshold: 2,
-        scores: false,
-        max_defect_lines_per_row: 0,
-        firmware_version: "test",
-        reset_cause: ResetCause::PowerOn,
-        boots: 1,
-    }
-}
-
-#[test]
-fn apply_puts_each_value_where_its_key_reads_it() {
-    let (mut s, mut rows) = (compiled(), 200);
-    let v = values(5);
-    assert!(apply(&v, &mut s, &mut rows));
-    for (k, &x) in Key::ALL.iter().zip(&v) {
-        assert_eq!(k.get(&s).unwrap_or(rows), x, "{k:?}");
-    }
-    assert_eq!(
-        (s.firmware_version, s.boots),
-        ("test", 1),
-        "the start's facts stay"
-    );
-}
-
-#[test]
-fn a_value_its_field_cannot_hold_leaves_the_compiled_one() {
-    let (mut s, mut rows) = (compiled(), 200);
-    let mut v = values(5);
-    let dcap = Key::ALL.iter().position(|&k| k == Key::DefectCap).unwrap();
-    v[dcap] = 70_000;
-    assert!(!apply(&v, &mut s, &mut rows));
-    assert_eq!(s.max_defect_lines_per_row, 0);
-    assert_eq!(
-        s.threshold,
-        values(5)[Key::ALL.iter().position(|&k| k == Key::Threshold).unwrap()]
-    );
 }
