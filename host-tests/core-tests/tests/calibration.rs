@@ -156,10 +156,7 @@ fn power_threshold_above_every_magnitude_is_off() {
 #[test]
 fn nothing_taken_and_too_many_positions_are_errors() {
     let mut c = Box::new(Calibrator::new());
-    assert_eq!(
-        c.finish(&Rule::DEFAULT),
-        Err(CalibrationError::NoPositions)
-    );
+    assert_eq!(c.finish(&Rule::DEFAULT), Err(CalibrationError::NoPositions));
     c.add(7, 1);
     // Doubling by merging a copy: 2^31 positions after 31 merges, the 32nd
     // would make 2^32.
@@ -326,7 +323,10 @@ fn the_pipeline_hook_takes_the_armed_scans_positions() {
         }
     );
     run(&mut p, &scans[2]);
-    assert_eq!(p.calibrator().unwrap().progress(), Progress::Done { taken: 2 });
+    assert_eq!(
+        p.calibrator().unwrap().progress(),
+        Progress::Done { taken: 2 }
+    );
     run(&mut p, &scans[3]);
     let got = p.calibrator().unwrap().finish(&Rule::DEFAULT).unwrap();
 
@@ -341,14 +341,20 @@ fn the_pipeline_hook_takes_the_armed_scans_positions() {
         direct.end_scan();
     }
     assert_eq!(direct.finish(&Rule::DEFAULT).unwrap(), got);
-    assert_eq!((got.scans, got.positions), (2, (2 * rows * cols - 2) as u32));
+    assert_eq!(
+        (got.scans, got.positions),
+        (2, (2 * rows * cols - 2) as u32)
+    );
     // A complete scan: the batch scorer `dmap calibrate` takes magnitudes
     // from gives the same calibration as the pipeline's hook.
     let mut hooked = Box::new(Calibrator::new());
     p.attach_calibrator(&mut hooked);
     p.calibrator_mut().unwrap().arm(1);
     run(&mut p, &scans[3]);
-    let data: Vec<u16> = scans[3].iter().flat_map(|(_, f)| f.clone().unwrap()).collect();
+    let data: Vec<u16> = scans[3]
+        .iter()
+        .flat_map(|(_, f)| f.clone().unwrap())
+        .collect();
     let mut batch = Box::new(Calibrator::new());
     batch.add_row(&dmap::fixed::score_scan(&scorer, rows, cols, &data));
     batch.end_scan();

@@ -5,30 +5,45 @@
 //! and `dmap twin` apply with `--calibration` (docs/experiments.md,
 //! "Calibration").
 //!
-//! The rule, the same for each channel: with `m` the channel's magnitudes
-//! of every position of every reference (integers: the CVM gradient
-//! magnitudes in the scorer's `Q(q)` format, the power magnitudes in `Q15`,
-//! `cvm_core::power`),
+//! The rule is the board's own (`cvm_core::calibration`, which the board
+//! runs on live scans for `calibrate N`): each reference is scored, its
+//! positions with data go into a `Calibrator`, and the references'
+//! calibrators are merged, so the thresholds are those the board computes
+//! from the same scans. Per channel, over the magnitudes of every
+//! position with data of every reference (integers: the CVM gradient
+//! magnitudes in the scorer's `Q(q)` format, the power magnitudes in
+//! `Q15`, `cvm_core::power`), each taken as the representative of its
+//! histogram bin (itself below 256, else the middle of a bin under 0.8 %
+//! of the value wide),
 //!
 //! ```text
-//! thr = Q_p(m) + ceil(k * 1.4826 * MAD(m)) + 1
+//! thr = Q_p + ceil(k * 1.4826 * MAD) + 1
 //! ```
 //!
-//! `Q_p` the nearest-rank `p` quantile (default `p = 1`, the maximum),
-//! `MAD` the median absolute deviation from the median (1.4826 MAD is the
-//! standard deviation of a normal background), `k` the margin in those
-//! units (default 3). A position is defective when its magnitude reaches
-//! `thr`, so with `p = 1` no reference position is. The threshold in
-//! distance units is `thr * 2^-q`, which converts back to exactly `thr`;
-//! the power threshold as a contrast is `thr * 2^-15`, likewise exact. A
-//! power threshold above the largest magnitude ([`power::POWER_MAX`], a
-//! reference with a dark neighbour) is recorded as [`power::POWER_OFF`]:
-//! the channel is off.
+//! `Q_p` the top of the bin of the nearest-rank `p` quantile, capped at the
+//! exact maximum (default `p = 1`: the maximum itself), the median and
+//! `MAD` the lower medians (rank `ceil(n / 2)`) of the representatives and
+//! of their distances from the median (1.4826 MAD is the standard
+//! deviation of a normal background), `k` the margin in those units
+//! (default 3). `p` and `k` must be exact in millionths and thousandths:
+//! the integers the board computes with. A position is defective when its
+//! magnitude reaches `thr`, so with `p = 1` no reference position is. The
+//! threshold in distance units is `thr * 2^-q`, which converts back to
+//! exactly `thr`; the power threshold as a contrast is `thr * 2^-15`,
+//! likewise exact. A power threshold above the largest magnitude
+//! ([`power::POWER_MAX`], a reference with a dark neighbour) is recorded
+//! as [`power::POWER_OFF`]: the channel is off.
+//!
+//! `--scores` is another thing: a rule in f64 with exact medians on
+//! precomputed gradient images of any distance, for `dmap eval` only.
 //!
 //! The file records the scoring configuration (geometry, kernels, weights,
 //! normalisation, full scale); applying it to any other configuration is
 //! refused. Each channel has its entry in `"channels"` (`"cvm"`, `"power"`:
-//! `threshold`, `thr`, `q`). Version 1 files, made before the power
+//! `threshold`, `thr`, `q`, and the statistics, also as `integers`).
+//! Version 3 files come from this rule; version 2 files (the rule before
+//! it, exact medians over every magnitude) are still applied, their
+//! thresholds being the same kind of integer. Version 1 files, made before the power
 //! channel, have no power entry and are refused with a request to
 //! calibrate again: applying only half a calibration would leave the power
 //! channel at a default the references never checked.
@@ -68,10 +83,12 @@ pub struct CalibrateArgs {
     #[arg(long, value_name = "N", default_value_t = u16::MAX,
           value_parser = clap::value_parser!(u16).range(1..))]
     pub full_scale: u16,
-    /// Quantile of the reference magnitudes the threshold starts from (1 = their maximum)
+    /// Quantile of the reference magnitudes the threshold starts from (1 = their maximum; a
+    /// multiple of 0.000001)
     #[arg(long, value_name = "P", default_value_t = 1.0)]
     pub quantile: f64,
-    /// Margin above the quantile, in robust standard deviations (1.4826 MAD) of the reference magnitudes
+    /// Margin above the quantile, in robust standard deviations (1.4826 MAD) of the reference
+    /// magnitudes (a multiple of 0.001)
     #[arg(long, value_name = "K", default_value_t = 3.0)]
     pub k: f64,
     /// The references are gradient images (`dmap score` output, any distance), not scans:
