@@ -558,7 +558,8 @@ calibration_rule() { # [OUT_DIR]
 # defect-free parts), PREFIX_DIST.npy and PREFIX.truth.npy. For the plain
 # magnitude, the magnitude less a per-column background (median of each
 # column over the calibration parts) and less a per-position background
-# (mean over them), applies the rule max + 3 * 1.4826 * MAD on the
+# (mean over them), applies the rule max + 3 * 1.4826 * MAD (f64, exact
+# medians: the rule before the streaming one) on the
 # calibration parts and counts positions at or above it on the unseen parts
 # and on the defective part.
 background() { # PREFIX CAL_SEEDS TEST_SEEDS DIST

@@ -26,8 +26,8 @@
 
 /// Mantissa bits of the bins: relative bin width at most `2^-7` (0.8 %),
 /// exact below `2^8 = 256`. With 6 bits the prototype's CVM MAD came out
-/// 5 % low (its median is ten MADs, so a bin there is a sixth of a MAD
-/// wide); with 7, 0.5 % (docs/experiments.md, "Calibration").
+/// 4.6 % low (its median is nine MADs, so a bin there is a tenth of a MAD
+/// wide); with 7, 0.6 % high (docs/experiments.md, "Calibration").
 pub const MANTISSA_BITS: u32 = 7;
 
 /// Bins of a histogram of values below `2^value_bits` (`value_bits` in
