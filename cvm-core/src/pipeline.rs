@@ -33,7 +33,6 @@ pub struct Pipeline<'a, const MAX_COLS: usize> {
     engine: Engine<'a, MAX_COLS>,
     objects: Objects,
     settings: Settings,
-    outputs: Outputs,
     closures: Closures,
     verdict: Option<Verdict>,
     /// Takes every finished row while a calibration runs (see
@@ -67,7 +66,6 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
             engine,
             objects: Objects::new(),
             settings,
-            outputs: Outputs::DEFAULT,
             closures: Closures::default(),
             verdict: None,
             calibrator: None,
@@ -79,6 +77,9 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
     /// begin, finished rows and end go to it, and it takes them while
     /// armed ([`Calibrator::arm`]): from the begin of the next scan,
     /// for as many scans as armed. Not armed, it costs one test per row.
+    /// A scan forgotten before its end ([`Pipeline::configure`] in the
+    /// middle of one) would leave its rows taken but the scan not counted:
+    /// settings change between scans.
     pub fn attach_calibrator(&mut self, calibrator: &'a mut Calibrator) {
         self.calibrator = Some(calibrator);
     }
@@ -94,14 +95,28 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
         self.calibrator.as_deref_mut()
     }
 
-    /// The verdict's rules (and the board's outputs) from now on;
-    /// [`Outputs::DEFAULT`] until set.
+    /// The verdict's rules (and the board's outputs) from now on.
     pub fn set_outputs(&mut self, outputs: Outputs) {
-        self.outputs = outputs;
+        self.settings.outputs = outputs;
     }
 
     pub fn outputs(&self) -> &Outputs {
-        &self.outputs
+        &self.settings.outputs
+    }
+
+    /// The settings the next header states and the next scan uses.
+    pub fn settings(&self) -> &Settings {
+        &self.settings
+    }
+
+    /// Scans from the next [`Pipeline::begin`] on with `settings`: meant
+    /// for between scans (a scan in progress is forgotten). Refused, and
+    /// nothing changed, when the engine cannot hold its columns.
+    pub fn configure(&mut self, settings: Settings) -> Result<(), EngineError> {
+        self.engine.reconfigure(settings.cols, settings.threshold)?;
+        self.engine.set_power_threshold(settings.power_threshold);
+        self.settings = settings;
+        Ok(())
     }
 
     /// The verdict of the last finished scan (`None` before the first).
@@ -130,14 +145,12 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
             engine,
             objects,
             settings,
-            outputs,
             closures,
             calibrator,
             ..
         } = self;
         let mut lines = Emit {
             settings,
-            outputs,
             closures,
             calibrator: calibrator.as_deref_mut(),
             sink,
@@ -151,14 +164,12 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
             engine,
             objects,
             settings,
-            outputs,
             closures,
             calibrator,
             ..
         } = self;
         let mut lines = Emit {
             settings,
-            outputs,
             closures,
             calibrator: calibrator.as_deref_mut(),
             sink,
@@ -180,14 +191,12 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
             engine,
             objects,
             settings,
-            outputs,
             closures,
             verdict,
             calibrator,
         } = self;
         let mut lines = Emit {
             settings,
-            outputs,
             closures,
             calibrator: calibrator.as_deref_mut(),
             sink,
@@ -197,7 +206,7 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
             c.scan_ends();
         }
         objects.finish_with(&mut |o| lines.object(o), &mut totals);
-        let v = Verdict::of(&totals, closures.counted, outputs);
+        let v = Verdict::of(&totals, closures.counted, &settings.outputs);
         *verdict = Some(v);
         encode_end(&totals, lines_dropped, v, sink);
         totals
@@ -211,7 +220,6 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
 /// Where a scan's row and object lines go, and what their closures count.
 struct Emit<'p, S> {
     settings: &'p Settings,
-    outputs: &'p Outputs,
     closures: &'p mut Closures,
     calibrator: Option<&'p mut Calibrator>,
     sink: &'p mut S,
@@ -237,7 +245,7 @@ impl<S: LineSink> Emit<'_, S> {
     }
 
     fn object(&mut self, o: &Object) {
-        self.closures.close(o, self.outputs);
+        self.closures.close(o, &self.settings.outputs);
         encode_object(o, self.sink);
     }
 }

@@ -5,7 +5,7 @@
 use super::key::Key;
 use super::refusal::Refusal;
 use super::status::Status;
-use super::wire::{FrameError, REPLY, checked_body, kv, parse_u32, split_once, value_source};
+use super::wire::{FrameError, REPLY, checked_body, kv, parse_u32, split_once};
 use crate::protocol::{LineBuf, LineSink, ParseError, Priority};
 use crate::settings::Source;
 
@@ -38,7 +38,8 @@ pub struct Calibration {
 /// A reply, decoded.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Reply<'s> {
-    /// `ok,status,...` (see [`Status`]).
+    /// `ok,status,...` (see [`Status`]), followed by one [`Reply::Value`]
+    /// per setting.
     Status(Status<'s>),
     /// `ok,<key>=<value>:<source>`: the answer to `get`, and to `set`
     /// (the value now in effect for the next scan).
@@ -82,7 +83,9 @@ pub fn encode_reply(id: Option<u32>, r: &Reply, sink: &mut impl LineSink) {
             s.encode(&mut l);
         }
         Reply::Value { key, value, source } => {
-            l.kv_u64(key.name().as_bytes(), value as u64);
+            l.field(key.name().as_bytes());
+            l.byte(b'=');
+            key.encode(value, &mut l);
             l.byte(b':');
             l.byte(source.as_char());
         }
@@ -178,9 +181,7 @@ fn parse_ok<'s, I: Iterator<Item = &'s [u8]>>(f: &mut I) -> Result<Reply<'s>, Pa
             })
         }
         kv_field => {
-            let (name, rest) = split_once(kv_field, b'=').ok_or(ParseError::Format)?;
-            let key = Key::from_name(name).ok_or(ParseError::Format)?;
-            let (value, source) = value_source(rest).ok_or(ParseError::Format)?;
+            let (key, value, source) = key_value_source(kv_field).ok_or(ParseError::Format)?;
             Reply::Value { key, value, source }
         }
     })
@@ -197,4 +198,14 @@ fn parse_refusal<'s, I: Iterator<Item = &'s [u8]>>(f: &mut I) -> Result<Refusal,
         .into_iter()
         .find(|r| r.word().as_bytes() == word)
         .ok_or(ParseError::Format)
+}
+
+/// `key=value:source`, the form of a setting in replies.
+fn key_value_source(s: &[u8]) -> Option<(Key, u32, Source)> {
+    let (name, rest) = split_once(s, b'=')?;
+    let key = Key::from_name(name)?;
+    let colon = rest.iter().rposition(|&b| b == b':')?;
+    let (v, src) = (rest.get(..colon)?, rest.get(colon + 1..)?);
+    let [c] = src else { return None };
+    Some((key, key.decode(v)?, Source::from_char(*c)?))
 }

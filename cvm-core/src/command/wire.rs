@@ -82,10 +82,3 @@ pub(super) fn split_once(s: &[u8], sep: u8) -> Option<(&[u8], &[u8])> {
     let i = s.iter().position(|&b| b == sep)?;
     Some((s.get(..i)?, s.get(i + 1..)?))
 }
-
-/// `value:source`, the form of a setting in replies.
-pub(super) fn value_source(s: &[u8]) -> Option<(u32, crate::settings::Source)> {
-    let (v, src) = split_once(s, b':')?;
-    let [c] = src else { return None };
-    Some((parse_u32(v)?, crate::settings::Source::from_char(*c)?))
-}

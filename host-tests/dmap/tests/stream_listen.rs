@@ -80,8 +80,13 @@ fn stream_then_listen_reproduces_cvm_fixed() {
                 calibration: None,
                 ..OutputArgs::default()
             };
-            let bytes =
-                stream_scan(&scorer, out.settings(&scorer, cols).unwrap(), rows, &data).unwrap();
+            let bytes = stream_scan(
+                &scorer,
+                out.settings(&scorer, (rows, cols)).unwrap(),
+                rows,
+                &data,
+            )
+            .unwrap();
             let dec = decode(&bytes);
             assert!(dec.errors.is_empty(), "{:?}", dec.errors);
             assert_eq!(dec.scans.len(), 1);
@@ -197,7 +202,13 @@ fn sample_stream() -> (Scorer, Vec<u8>, usize, usize) {
         calibration: None,
         ..OutputArgs::default()
     };
-    let bytes = stream_scan(&scorer, out.settings(&scorer, cols).unwrap(), rows, &data).unwrap();
+    let bytes = stream_scan(
+        &scorer,
+        out.settings(&scorer, (rows, cols)).unwrap(),
+        rows,
+        &data,
+    )
+    .unwrap();
     (scorer, bytes, rows, cols)
 }
 
@@ -296,7 +307,7 @@ fn duplicated_and_missing_frames_reach_the_totals() {
         calibration: None,
         ..OutputArgs::default()
     }
-    .settings(&scorer, cols)
+    .settings(&scorer, (rows, cols))
     .unwrap();
     let words = cvm_core::stream::row_words(cols, j1 * j2, 1);
     let (mut a, mut b) = (vec![0i32; words], vec![0i32; words]);
@@ -441,7 +452,13 @@ fn bandwidth_figures_of_the_protocol_document() {
         calibration: None,
         ..OutputArgs::default()
     };
-    let bytes = stream_scan(&scorer, out.settings(&scorer, cols).unwrap(), rows, &data).unwrap();
+    let bytes = stream_scan(
+        &scorer,
+        out.settings(&scorer, (rows, cols)).unwrap(),
+        rows,
+        &data,
+    )
+    .unwrap();
     let ls = lines(&bytes);
     let per_type = |t: u8| {
         ls.iter()
@@ -597,15 +614,21 @@ fn bandwidth_figures_of_the_protocol_document() {
             max_defect_lines: u16::MAX,
             reset_cause: ResetCause::Other,
             boots: max,
+            // The longest origin: every source one letter, the longest store word.
+            origin: Some(cvm_core::protocol::Origin {
+                rows: max,
+                sources: [cvm_core::settings::Source::Changed; cvm_core::settings::KEYS],
+                store: cvm_core::settings::Store::Foreign,
+            }),
         },
         &mut sink,
     );
-    assert_eq!(sink.0.len(), 186);
+    assert_eq!(sink.0.len(), 236);
     // The score line of a row numbered 2^32 - 1 from a 10-digit col0.
     let s_max = "S,".len() + 10 + 1 + 10 + 1 + 24 * protocol::SCORE_CHARS + "*XXXX\n".len();
     assert_eq!(s_max, 246);
     assert!(
-        [107, 60, 154, 253, 186, 246]
+        [107, 60, 154, 253, 236, 246]
             .iter()
             .all(|&n| n <= protocol::MAX_LINE)
     );
@@ -672,6 +695,10 @@ fn absurd_claimed_size_is_refused() {
         firmware_version: "0.1.0",
         reset_cause: cvm_core::protocol::ResetCause::PowerOn,
         boots: 1,
+        rows: 1,
+        outputs: cvm_core::settings::Outputs::DEFAULT,
+        sources: [cvm_core::settings::Source::Default; cvm_core::settings::KEYS],
+        store: cvm_core::settings::Store::Empty,
     };
     let h = cvm_core::protocol::HeaderInfo::new(&scorer, &settings);
     cvm_core::protocol::encode_header(&h, &mut sink);
@@ -931,12 +958,12 @@ fn full_scale_reaches_the_header_and_the_scoring() {
     let s = &dec.scans[0];
     assert_eq!(
         (s.version, s.full_scale, s.max_defect_lines, s.boots),
-        (5, 4095, 3, 1)
+        (6, 4095, 3, 1)
     );
     assert_eq!(s.reset_cause, Some(cvm_core::protocol::ResetCause::PowerOn));
     assert_eq!(s.end.unwrap().totals.saturated as usize, saturated);
     let text = String::from_utf8_lossy(&out.stdout);
-    assert!(text.starts_with("H,v=5,"), "{text}");
+    assert!(text.starts_with("H,v=6,"), "{text}");
     assert!(text.lines().next().unwrap().contains(",fs=4095,"), "{text}");
     let listen = std::process::Command::new(exe)
         .args(["listen", "--input", "-"])
@@ -954,7 +981,7 @@ fn full_scale_reaches_the_header_and_the_scoring() {
     let summary = String::from_utf8_lossy(&listen.stdout);
     assert!(
         summary.contains(
-            "protocol v5, full scale 4095, at most 3 defect line(s) per row, reset cause por, start 1 since power-on"
+            "protocol v6, full scale 4095, at most 3 defect line(s) per row, reset cause por, start 1 since power-on"
         ),
         "{summary}"
     );

@@ -10,6 +10,9 @@ use cvm_core::RowSummary;
 use cvm_core::objects::Object;
 use cvm_core::protocol::{self, EndInfo, HeaderInfo, Line};
 
+/// The oldest protocol version whose streams this decoder reads.
+pub const OLDEST_VERSION: u32 = 5;
+
 /// Scans one run decodes by default, and at most (`--max-scans`).
 pub const DEFAULT_MAX_SCANS: u32 = 64;
 pub const MAX_SCANS: u32 = 4096;
@@ -228,12 +231,14 @@ impl Decoder {
             ..ScanResult::default()
         };
         s.threshold = s.units(h.threshold);
-        if h.version != protocol::VERSION {
+        // Version 6 only added fields to the header: 5 reads the same.
+        if !(OLDEST_VERSION..=protocol::VERSION).contains(&h.version) {
             s.problems.push(LineError {
                 line: self.line_no,
                 what: format!(
-                    "protocol version {} (this decoder reads {})",
+                    "protocol version {} (this decoder reads {} to {})",
                     h.version,
+                    OLDEST_VERSION,
                     protocol::VERSION
                 ),
             });
@@ -500,7 +505,7 @@ mod tests {
             max_defect_lines: 20,
             ..Default::default()
         }
-        .settings(&scorer, 10)
+        .settings(&scorer, (2, 10))
         .unwrap();
         // Two rows of ten columns: 2 row lines, 20 scores, 20 defects and
         // (every position a defect) one object a scan.
