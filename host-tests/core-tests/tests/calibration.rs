@@ -281,6 +281,10 @@ fn the_pipeline_hook_takes_the_armed_scans_positions() {
         firmware_version: "calibration-test",
         reset_cause: ResetCause::PowerOn,
         boots: 1,
+        rows: rows as u32,
+        outputs: cvm_core::settings::Outputs::DEFAULT,
+        sources: [cvm_core::settings::Source::Default; cvm_core::settings::KEYS],
+        store: cvm_core::settings::Store::Empty,
     };
     // Four scans: one before arming, two calibrated (the second with two
     // lost beams), one after.

@@ -40,7 +40,7 @@ fn part(preset: &[&str], seed: u32) -> (PathBuf, Vec<u16>, usize, usize, usize) 
 
 /// The scans through one pipeline armed for all of them: the result the
 /// board reports, checked to take exactly those scans.
-fn on_the_board(scorer: &Scorer, cols: usize, scans: &[Vec<u16>]) -> Calibration {
+fn on_the_board(scorer: &Scorer, rows: usize, cols: usize, scans: &[Vec<u16>]) -> Calibration {
     let settings = Settings {
         cols: cols as u32,
         threshold: scorer.threshold_from_units(0.1),
@@ -50,6 +50,10 @@ fn on_the_board(scorer: &Scorer, cols: usize, scans: &[Vec<u16>]) -> Calibration
         firmware_version: "calibrate-device-test",
         reset_cause: ResetCause::PowerOn,
         boots: 1,
+        rows: rows as u32,
+        outputs: cvm_core::settings::Outputs::DEFAULT,
+        sources: [cvm_core::settings::Source::Default; cvm_core::settings::KEYS],
+        store: cvm_core::settings::Store::Empty,
     };
     let words = cvm_core::stream::row_words_for(cols, scorer.config());
     let (mut a, mut b) = (vec![0i32; words], vec![0i32; words]);
@@ -120,7 +124,7 @@ fn n_scans_on_the_board_and_dmap_calibrate_agree() {
         let (_, _, rows, cols, j) = parts[0];
         let scorer = dmap::options::ScoringArgs::default().scorer(j, j).unwrap();
         let scans: Vec<Vec<u16>> = parts.iter().map(|p| p.1.clone()).collect();
-        let board = on_the_board(&scorer, cols, &scans);
+        let board = on_the_board(&scorer, rows, cols, &scans);
         let cal = tmp(&format!("{}.json", preset.join("-")));
         let mut args = vec!["calibrate"];
         args.extend(parts.iter().map(|p| s(&p.0)));
