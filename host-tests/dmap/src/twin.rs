@@ -88,12 +88,6 @@ pub struct TwinArgs {
     /// Run the model at most this many milliseconds after the last beam
     #[arg(long, value_name = "MS", default_value_t = 1500.0)]
     pub settle_ms: f64,
-    /// Wait after the last beam until this many end lines have come in all
-    /// (a scan ended early by a gap in the beams, or a `rows` changed by
-    /// --command, makes more than one)
-    #[arg(long, value_name = "N", default_value_t = 1,
-          value_parser = clap::value_parser!(u32).range(1..=1000))]
-    pub scans: u32,
     /// The first beam comes this many milliseconds after reset (square
     /// kernels build their factor table at start-up: about 80 ms at 15x15)
     #[arg(long, value_name = "MS", default_value_t = 20.0)]
@@ -101,6 +95,12 @@ pub struct TwinArgs {
     /// A debugger is attached (the DBGMCU freeze bits apply while the core is halted)
     #[arg(long)]
     pub debugger: bool,
+    /// The scan holds K parts, scanned one after the other without a
+    /// pause: the firmware is built for rows/K rows (each part is one of
+    /// its scans), and the run waits for K end lines
+    #[arg(long, value_name = "K", default_value_t = 1,
+          value_parser = clap::value_parser!(u32).range(1..=1000))]
+    pub parts: u32,
     #[command(flatten)]
     pub link: crate::twin_requests::TwinRequestArgs,
     #[command(flatten)]
@@ -418,7 +418,7 @@ pub fn run_model(
         .args(["--beam-us", &args.beam_us.to_string()])
         .args(["--settle-ms", &args.settle_ms.to_string()])
         .args(["--start-ms", &args.start_ms.to_string()])
-        .args(["--scans", &args.scans.to_string()])
+        .args(["--scans", &args.parts.to_string()])
         .env("PYTHONPATH", pythonpath);
     for f in &args.faults {
         cmd.args(["--fault", f]);
@@ -509,7 +509,20 @@ pub fn run(args: &TwinArgs) -> Result<()> {
         beams,
         [args.start_ms, args.beam_us, faults_ms, args.settle_ms],
     )?;
-    let config = h743_config(&header)? + &args.pins.build_keys()?;
+    if header.rows % args.parts != 0 {
+        bail!(
+            "--parts {}: the scan's {} rows do not split into {} parts of equal rows",
+            args.parts,
+            header.rows,
+            args.parts
+        );
+    }
+    // Each part is one scan of the firmware.
+    let part = ScanHeader {
+        rows: header.rows / args.parts,
+        ..header
+    };
+    let config = h743_config(&part)? + &args.pins.build_keys()?;
     let file = twin_file(&header, &emufile)?;
     drop(emufile);
     for w in &warnings {
@@ -547,13 +560,6 @@ pub fn run(args: &TwinArgs) -> Result<()> {
     // own verdict.
     let _ = writeln!(std::io::stderr(), "{line}");
     if stats["status"] == "time" {
-        if args.scans > 1 {
-            bail!(
-                "the firmware sent fewer than --scans {} complete end lines within --settle-ms {} after the last beam: a scan did not finish",
-                args.scans,
-                fmt_num(args.settle_ms)
-            );
-        }
         bail!(
             "the firmware sent no complete end line within --settle-ms {} after the last beam: the scan did not finish",
             fmt_num(args.settle_ms)

@@ -1,12 +1,10 @@
 //! `dmap twin --command` with the H743 release firmware on the chip
 //! model: requests in `dmap sensor`'s words reach the board at their
-//! beams, its replies come back between the result lines, and a setting
-//! changed during a scan shows in the next scan's header with its source.
-//! A gap in the beams longer than the firmware's idle end (500 ms) ends
-//! the first scan early, so that one short run has two scans (`--scans 2`
-//! waits for both end lines). Needs what
-//! tests/twin.rs needs (python3 with unicorn and pyelftools, the
-//! `thumbv7em-none-eabihf` target).
+//! beams, its replies come back between the result lines, and settings
+//! changed during a scan show in the next scan's header with their
+//! source. The scan holds two parts (`--parts 2`), so that one short run
+//! has two scans. Needs what tests/twin.rs needs (python3 with unicorn and
+//! pyelftools, the `thumbv7em-none-eabihf` target).
 
 mod common;
 
@@ -41,16 +39,13 @@ fn a_set_during_a_scan_shows_in_the_next_header() {
         "--scores",
         "--threshold",
         "0.05",
-        // Rows 0 and 1, then 600 ms without a beam: the first scan ends
-        // there, and beams 20..39 make the second.
-        "--fault",
-        "gap@20:600",
-        "--scans",
+        // Rows 0 and 1 are the first scan, rows 2 and 3 the second.
+        "--parts",
         "2",
         "--command",
         "0:status",
         "--command",
-        "5:set thr=100 rows=2",
+        "5:set thr=100 pthr=5000",
         "--command",
         "6:get thr",
         // Beyond this build's 10 columns: refused with the board's range.
@@ -78,12 +73,12 @@ fn a_set_during_a_scan_shows_in_the_next_header() {
     let o1 = first.origin.unwrap();
     let o2 = second.origin.unwrap();
     assert_eq!(o1.sources, [Source::Default; Key::ALL.len()]);
-    assert_eq!(o1.rows, ROWS as u32);
-    assert_eq!(second.threshold, 100);
-    assert_eq!(second.power_threshold, first.power_threshold);
-    assert_eq!(o2.rows, 2);
+    assert_eq!((o1.rows, o2.rows), (2, 2));
+    assert_ne!(first.threshold, 100);
+    assert_ne!(first.power_threshold, 5000);
+    assert_eq!((second.threshold, second.power_threshold), (100, 5000));
     for k in Key::ALL {
-        let want = if matches!(k, Key::Threshold | Key::Rows) {
+        let want = if matches!(k, Key::Threshold | Key::PowerThreshold) {
             Source::Changed
         } else {
             Source::Default
@@ -137,7 +132,7 @@ fn a_set_during_a_scan_shows_in_the_next_header() {
     for want in [
         "dmap: request 1 (0:status): status: firmware ",
         "dmap: request 2 (5:set thr=100): thr=100 (changed, not saved)",
-        "dmap: request 3 (5:set rows=2): rows=2 (changed, not saved)",
+        "dmap: request 3 (5:set pthr=5000): pthr=5000 (changed, not saved)",
         "dmap: request 4 (6:get thr): thr=100 (changed, not saved)",
         "dmap: request 5 (7:set cols=400): refused: value out of range 1..=10",
     ] {
