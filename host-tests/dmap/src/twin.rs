@@ -542,12 +542,20 @@ pub fn run(args: &TwinArgs) -> Result<()> {
     let scan_path = dir.path().join("scan.twin");
     std::fs::write(&scan_path, &file)
         .with_context(|| format!("writing {}", scan_path.display()))?;
+    let planned = args.link.planned(beams)?;
+    let with_commands = TwinArgs {
+        link: args.link.with_commands(&planned, dir.path())?,
+        ..args.clone()
+    };
     let mut uart = Vec::new();
-    let (stats, line) = run_model(&elf, &scan_path, dir, args, &mut |bytes| {
+    let (stats, line) = run_model(&elf, &scan_path, dir, &with_commands, &mut |bytes| {
         uart.extend_from_slice(bytes);
         crate::out::stdout(bytes)
     })?;
     crate::twin_pins::report(&args.pins, &stats, &uart)?;
+    for l in crate::sensor::twin::summary(&planned, &uart) {
+        let _ = writeln!(std::io::stderr(), "dmap: {l}");
+    }
     // The counters stay the last line the model prints, before dmap's
     // own verdict.
     let _ = writeln!(std::io::stderr(), "{line}");

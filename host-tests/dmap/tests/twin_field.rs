@@ -2,14 +2,16 @@
 //! over several simulated parts scanned one after the other (`dmap twin
 //! --parts`): settings changed on the command channel take effect when
 //! the next scan starts, never in the middle of one, and the header says
-//! where each value came from. Every part is checked against `dmap
-//! stream` of that part alone, with the settings the part was scanned
-//! with.
+//! where each value came from; `calibrate 5` on five defect-free parts
+//! gives the very thresholds `dmap calibrate` gives on those scans, and
+//! the next part is scored with them. Every part is checked against
+//! `dmap stream` of that part alone, with the settings the part was
+//! scanned with.
 
 mod common;
 
 use common::dmap_ok as dmap;
-use cvm_core::command::Key;
+use cvm_core::command::{Calibration, Key, Reply, parse_reply};
 use cvm_core::protocol::{self, Line};
 use cvm_core::settings::Source;
 use dmap::npy::{read_scan, write_scan_u16};
@@ -189,5 +191,102 @@ fn a_changed_setting_takes_effect_when_the_next_scan_starts() {
         got[1].iter().filter(|l| l.starts_with("D,")).count()
             > got[0].iter().filter(|l| l.starts_with("D,")).count(),
         "the lower threshold and the defect lines show"
+    );
+}
+
+/// What `dmap calibrate` wrote, in the reply's terms.
+fn from_the_file(v: &serde_json::Value) -> Calibration {
+    let int = |ch: &str, k: &str| v["channels"][ch]["integers"][k].as_u64().unwrap() as u32;
+    let thr = |ch: &str| v["channels"][ch]["thr"].as_u64().unwrap() as u32;
+    Calibration {
+        scans: v["scans"].as_u64().unwrap() as u16,
+        positions: v["channels"]["cvm"]["positions"].as_u64().unwrap() as u32,
+        threshold: thr("cvm"),
+        power_threshold: thr("power"),
+        median: int("cvm", "median"),
+        mad: int("cvm", "mad"),
+        power_median: int("power", "median"),
+        power_mad: int("power", "mad"),
+    }
+}
+
+#[test]
+fn calibrate_5_on_the_board_equals_dmap_calibrate_and_scores_the_next_part_with_it() {
+    let dir = tempfile::tempdir().unwrap();
+    // A part scanning while the request arrives, five defect-free
+    // references (seeds the rule never saw elsewhere), then a defective
+    // part.
+    let mut parts = vec![part(dir.path(), 40, false)];
+    parts.extend((41..46).map(|s| part(dir.path(), s, false)));
+    parts.push(part(dir.path(), 1, true));
+    let scan = dir.path().join("seven.npy");
+    concat(&parts, &scan);
+    let req = dir.path().join("req.txt");
+    write_requests(&req, &[(5, &framed("C,7,calibrate,5"))]).unwrap();
+    let out = dmap(
+        &[
+            &["twin", scan.to_str().unwrap()][..],
+            &OPTS,
+            &["--parts", "7", "--requests", req.to_str().unwrap()],
+        ]
+        .concat(),
+    );
+    let (replies, got) = scans(&out.stdout);
+    assert_eq!(got.len(), 7);
+    let decoded: Vec<_> = replies
+        .iter()
+        .map(|l| {
+            let l: &'static str = Box::leak(format!("{l}\n").into_boxed_str());
+            parse_reply(l.as_bytes()).unwrap()
+        })
+        .collect();
+    assert_eq!(decoded.len(), 2, "{replies:?}");
+    assert_eq!(decoded[0], (Some(7), Reply::Calibrating(5)));
+    let (Some(7), Reply::Calibrated(board)) = decoded[1] else {
+        panic!("{:?}", decoded[1])
+    };
+    // `dmap calibrate` on the five references, with the same options.
+    let cal = dir.path().join("cal.json");
+    let refs: Vec<&str> = parts[1..6].iter().map(|p| p.to_str().unwrap()).collect();
+    dmap(
+        &[
+            &["calibrate"][..],
+            &refs,
+            &OPTS,
+            &["-o", cal.to_str().unwrap()],
+        ]
+        .concat(),
+    );
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&cal).unwrap()).unwrap();
+    assert_eq!(board, from_the_file(&v));
+    assert_eq!(board.positions, (5 * ROWS * COLS) as u32);
+    // The parts before the calibration ended: compiled thresholds.
+    for (k, p) in parts[..6].iter().enumerate() {
+        assert_eq!(got[k], stream(p, &[]), "part {k}");
+    }
+    // The defective part: the calibrated thresholds, sourced `c`, and
+    // `dmap stream --calibration`'s lines.
+    let want = stream(&parts[6], &["--calibration", cal.to_str().unwrap()]);
+    let h = header(&got[6]);
+    assert_eq!(
+        (h.threshold, h.power_threshold),
+        (board.threshold, board.power_threshold)
+    );
+    let origin = h.origin.expect("a version 6 header");
+    for k in Key::ALL {
+        let calibrated = matches!(k, Key::Threshold | Key::PowerThreshold);
+        let want_src = if calibrated {
+            Source::Changed
+        } else {
+            Source::Default
+        };
+        assert_eq!(origin.sources[k.index()], want_src, "{}", k.name());
+    }
+    assert_eq!(got[6][1..], want[1..]);
+    assert!(
+        got[6].iter().any(|l| l.starts_with("O,")),
+        "the defective part's object: {:?}",
+        got[6]
     );
 }
