@@ -290,3 +290,153 @@ fn calibrate_5_on_the_board_equals_dmap_calibrate_and_scores_the_next_part_with_
         got[6]
     );
 }
+
+/// The twin's run with these requests (`(beam, body)`, framed here) on
+/// bank 2 kept in `flash`: its replies and its scans.
+fn run_with_flash(
+    scan: &Path,
+    parts: u32,
+    flash: &Path,
+    requests: &[(u64, &str)],
+) -> (
+    Vec<(Option<u32>, Reply<'static>)>,
+    Vec<Vec<String>>,
+    serde_json::Value,
+) {
+    let dir = scan.parent().unwrap();
+    let req = dir.join("req.txt");
+    let bursts: Vec<(u64, Vec<u8>)> = requests.iter().map(|(b, r)| (*b, framed(r))).collect();
+    let refs: Vec<(u64, &[u8])> = bursts.iter().map(|(b, v)| (*b, &v[..])).collect();
+    write_requests(&req, &refs).unwrap();
+    let parts_s = parts.to_string();
+    let out = dmap(
+        &[
+            &["twin", scan.to_str().unwrap()][..],
+            &OPTS,
+            &["--parts", &parts_s, "--requests", req.to_str().unwrap()],
+            &["--flash", flash.to_str().unwrap()],
+        ]
+        .concat(),
+    );
+    let (replies, got) = scans(&out.stdout);
+    let decoded = replies
+        .iter()
+        .map(|l| {
+            let l: &'static str = Box::leak(format!("{l}\n").into_boxed_str());
+            parse_reply(l.as_bytes()).unwrap_or_else(|e| panic!("{e:?}: {l}"))
+        })
+        .collect();
+    let err = String::from_utf8_lossy(&out.stderr);
+    let last = err.lines().rfind(|l| l.starts_with('{')).unwrap();
+    (decoded, got, serde_json::from_str(last).unwrap())
+}
+
+/// The value replies that follow a status reply, as (key, value, source).
+fn status_values(replies: &[(Option<u32>, Reply<'static>)], id: u32) -> Vec<(Key, u32, Source)> {
+    let at = replies
+        .iter()
+        .position(|r| matches!(r, (Some(i), Reply::Status(_)) if *i == id))
+        .expect("a status reply");
+    replies[at + 1..at + 1 + Key::ALL.len()]
+        .iter()
+        .map(|r| match *r {
+            (Some(i), Reply::Value { key, value, source }) if i == id => (key, value, source),
+            ref other => panic!("{other:?}"),
+        })
+        .collect()
+}
+
+#[test]
+fn set_save_and_reset_keep_the_settings_and_defaults_save_brings_the_compiled_ones_back() {
+    let dir = tempfile::tempdir().unwrap();
+    let parts = [part(dir.path(), 31, true), part(dir.path(), 32, true)];
+    let one = dir.path().join("one.npy");
+    concat(&parts[..1], &one);
+    let two = dir.path().join("two.npy");
+    concat(&parts, &two);
+    let flash = dir.path().join("bank2.bin");
+    let compiled = header(&stream(&parts[0], &[]));
+    let half = compiled.threshold / 2;
+
+    // Set, save, then status: every value now in flash.
+    let set = format!("C,1,set,thr={half}");
+    let (r, _, c) = run_with_flash(
+        &one,
+        1,
+        &flash,
+        &[
+            (2, &set),
+            (3, "C,2,set,area=3"),
+            (4, "C,3,save"),
+            (60, "C,4,status"),
+        ],
+    );
+    assert_eq!(c["status"], "done", "{c}");
+    assert_eq!(
+        r[0],
+        (
+            Some(1),
+            Reply::Value {
+                key: Key::Threshold,
+                value: half,
+                source: Source::Changed
+            }
+        )
+    );
+    assert_eq!(r[2], (Some(3), Reply::Saved));
+    let values = status_values(&r, 4);
+    assert!(values.iter().all(|v| v.2 == Source::Flash), "{values:?}");
+    assert_eq!(values[Key::Threshold.index()].1, half);
+    assert_eq!(values[Key::MinArea.index()].1, 3);
+
+    // A power cycle: the saved values, from flash; then defaults, save
+    // and a reset in the middle of the first scan.
+    let (r, got, c) = run_with_flash(
+        &two,
+        2,
+        &flash,
+        &[
+            (0, "C,5,status"),
+            (10, "C,6,defaults"),
+            (11, "C,7,save"),
+            (40, "C,8,reset"),
+        ],
+    );
+    let Some((_, Reply::Status(st))) = r.first() else {
+        panic!("{r:?}")
+    };
+    assert_eq!(st.store, cvm_core::command::Store::Loaded);
+    let values = status_values(&r, 5);
+    assert_eq!(
+        values[Key::Threshold.index()],
+        (Key::Threshold, half, Source::Flash)
+    );
+    assert_eq!(
+        values[Key::MinArea.index()],
+        (Key::MinArea, 3, Source::Flash)
+    );
+    let h = header(&got[0]);
+    assert_eq!((h.threshold, h.boots), (half, 1));
+    let o = h.origin.unwrap();
+    assert!(o.sources.iter().all(|&s| s == Source::Flash));
+    assert_eq!(o.store, cvm_core::command::Store::Loaded);
+    let tail: Vec<_> = r[1 + Key::ALL.len()..].to_vec();
+    assert_eq!(
+        tail,
+        [
+            (Some(6), Reply::Defaults),
+            (Some(7), Reply::Saved),
+            (Some(8), Reply::Resetting)
+        ]
+    );
+    assert_eq!(c["resets"].as_array().map(Vec::len), Some(1), "{c}");
+    // After the reset: a software reset, the second start, and the record
+    // now holds the compiled values.
+    let after = header(got.last().unwrap());
+    assert_eq!(after.reset_cause, cvm_core::protocol::ResetCause::Software);
+    assert_eq!(after.boots, 2);
+    assert_eq!(after.threshold, compiled.threshold);
+    let o = after.origin.unwrap();
+    assert!(o.sources.iter().all(|&s| s == Source::Flash));
+    assert_eq!(o.store, cvm_core::command::Store::Loaded);
+}
