@@ -291,6 +291,9 @@ fn calibrate_5_on_the_board_equals_dmap_calibrate_and_scores_the_next_part_with_
     );
 }
 
+/// Replies as decoded: the id they echo and the reply.
+type Replies = Vec<(Option<u32>, Reply<'static>)>;
+
 /// The twin's run with these requests (`(beam, body)`, framed here) on
 /// bank 2 kept in `flash`: its replies and its scans.
 fn run_with_flash(
@@ -298,11 +301,7 @@ fn run_with_flash(
     parts: u32,
     flash: &Path,
     requests: &[(u64, &str)],
-) -> (
-    Vec<(Option<u32>, Reply<'static>)>,
-    Vec<Vec<String>>,
-    serde_json::Value,
-) {
+) -> (Replies, Vec<Vec<String>>, serde_json::Value) {
     let dir = scan.parent().unwrap();
     let req = dir.join("req.txt");
     let bursts: Vec<(u64, Vec<u8>)> = requests.iter().map(|(b, r)| (*b, framed(r))).collect();
@@ -332,7 +331,7 @@ fn run_with_flash(
 }
 
 /// The value replies that follow a status reply, as (key, value, source).
-fn status_values(replies: &[(Option<u32>, Reply<'static>)], id: u32) -> Vec<(Key, u32, Source)> {
+fn status_values(replies: &Replies, id: u32) -> Vec<(Key, u32, Source)> {
     let at = replies
         .iter()
         .position(|r| matches!(r, (Some(i), Reply::Status(_)) if *i == id))
