@@ -65,6 +65,7 @@ fn decode_raw(data: &[u8]) {
         max_cols: u16::from_le_bytes([h[0], h[1]]),
         max_rows: u16::from_le_bytes([h[2], h[3]]),
         max_dcap: u16::from_le_bytes([h[4], h[5]]),
+        max_pulse_us: u32::from(u16::from_le_bytes([h[4], h[5]])) + 1,
     };
     let mut r = LineReader::new();
     for &b in rest {
@@ -87,6 +88,7 @@ fn round_trip(u: &mut Unstructured) -> Result<()> {
         max_cols: u.int_in_range(1..=u16::MAX)?,
         max_rows: u.int_in_range(1..=u16::MAX)?,
         max_dcap: u.arbitrary()?,
+        max_pulse_us: u.arbitrary()?,
     };
     let id: u32 = u.arbitrary()?;
     let key = *u.choose(&cvm_core::command::Key::ALL)?;
