@@ -12,7 +12,82 @@ use std::collections::{BTreeMap, BTreeSet};
 pub struct LineError {
     /// 1-based line number in the stream.
     pub line: usize,
+    pub kind: Kind,
     pub what: String,
+}
+
+/// What kind of damage a [`LineError`] is: a stable name for machines
+/// (`dmap listen --json`'s `"kind"`, the conformance vectors), beside the
+/// sentence for people. docs/protocol.md lists them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Kind {
+    /// No `*XXXX` trailer.
+    NoChecksum,
+    /// The CRC does not match.
+    Checksum,
+    /// Right CRC, fields that do not parse.
+    Malformed,
+    /// Right CRC, a field outside its range.
+    Range,
+    /// Right CRC, an unknown line type.
+    UnknownType,
+    /// Longer than the protocol allows.
+    TooLong,
+    /// Cut: by a signal, or by the start of another line in it.
+    Cut,
+    /// A line outside any scan.
+    OutsideScan,
+    /// A scan without its end line (a new header, the stream's end, a signal).
+    ScanCut,
+    /// No scan in the whole stream.
+    NoScan,
+    /// A scan beyond `--max-scans`.
+    MaxScans,
+    /// A header of another protocol version.
+    Version,
+    /// A line out of the protocol's order.
+    Order,
+    /// A row, score or object reported twice.
+    Duplicate,
+    /// Fields of one line that contradict each other or the header.
+    Field,
+    /// Lines that should have arrived and did not, or counts that do not add up.
+    Missing,
+    /// A line that contradicts other lines of its scan (`O`, `D`, `S`, `R`, `E`).
+    CrossCheck,
+    /// An end line whose verdict its own totals contradict.
+    Verdict,
+    /// Maps the firmware scored at a wrong position.
+    Misplaced,
+    /// More lines than the decoder holds.
+    Capacity,
+}
+
+impl Kind {
+    pub fn name(self) -> &'static str {
+        match self {
+            Kind::NoChecksum => "no-checksum",
+            Kind::Checksum => "checksum",
+            Kind::Malformed => "malformed",
+            Kind::Range => "range",
+            Kind::UnknownType => "unknown-type",
+            Kind::TooLong => "too-long",
+            Kind::Cut => "cut",
+            Kind::OutsideScan => "outside-scan",
+            Kind::ScanCut => "scan-cut",
+            Kind::NoScan => "no-scan",
+            Kind::MaxScans => "max-scans",
+            Kind::Version => "version",
+            Kind::Order => "order",
+            Kind::Duplicate => "duplicate",
+            Kind::Field => "field",
+            Kind::Missing => "missing",
+            Kind::CrossCheck => "cross-check",
+            Kind::Verdict => "verdict",
+            Kind::Misplaced => "misplaced",
+            Kind::Capacity => "capacity",
+        }
+    }
 }
 
 impl std::fmt::Display for LineError {
