@@ -32,7 +32,6 @@ pub struct Pipeline<'a, const MAX_COLS: usize> {
     engine: Engine<'a, MAX_COLS>,
     objects: Objects,
     settings: Settings,
-    outputs: Outputs,
     closures: Closures,
     verdict: Option<Verdict>,
 }
@@ -63,20 +62,33 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
             engine,
             objects: Objects::new(),
             settings,
-            outputs: Outputs::DEFAULT,
             closures: Closures::default(),
             verdict: None,
         })
     }
 
-    /// The verdict's rules (and the board's outputs) from now on;
-    /// [`Outputs::DEFAULT`] until set.
+    /// The verdict's rules (and the board's outputs) from now on.
     pub fn set_outputs(&mut self, outputs: Outputs) {
-        self.outputs = outputs;
+        self.settings.outputs = outputs;
     }
 
     pub fn outputs(&self) -> &Outputs {
-        &self.outputs
+        &self.settings.outputs
+    }
+
+    /// The settings the next header states and the next scan uses.
+    pub fn settings(&self) -> &Settings {
+        &self.settings
+    }
+
+    /// Scans from the next [`Pipeline::begin`] on with `settings`: meant
+    /// for between scans (a scan in progress is forgotten). Refused, and
+    /// nothing changed, when the engine cannot hold its columns.
+    pub fn configure(&mut self, settings: Settings) -> Result<(), EngineError> {
+        self.engine.reconfigure(settings.cols, settings.threshold)?;
+        self.engine.set_power_threshold(settings.power_threshold);
+        self.settings = settings;
+        Ok(())
     }
 
     /// The verdict of the last finished scan (`None` before the first).
@@ -102,13 +114,11 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
             engine,
             objects,
             settings,
-            outputs,
             closures,
             ..
         } = self;
         let mut lines = Emit {
             settings,
-            outputs,
             closures,
             sink,
         };
@@ -121,13 +131,11 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
             engine,
             objects,
             settings,
-            outputs,
             closures,
             ..
         } = self;
         let mut lines = Emit {
             settings,
-            outputs,
             closures,
             sink,
         };
@@ -148,19 +156,17 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
             engine,
             objects,
             settings,
-            outputs,
             closures,
             verdict,
         } = self;
         let mut lines = Emit {
             settings,
-            outputs,
             closures,
             sink,
         };
         let mut totals = engine.finish(&mut |row| lines.row(row, objects));
         objects.finish_with(&mut |o| lines.object(o), &mut totals);
-        let v = Verdict::of(&totals, closures.counted, outputs);
+        let v = Verdict::of(&totals, closures.counted, &settings.outputs);
         *verdict = Some(v);
         encode_end(&totals, lines_dropped, v, sink);
         totals
@@ -174,7 +180,6 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
 /// Where a scan's row and object lines go, and what their closures count.
 struct Emit<'p, S> {
     settings: &'p Settings,
-    outputs: &'p Outputs,
     closures: &'p mut Closures,
     sink: &'p mut S,
 }
@@ -196,7 +201,7 @@ impl<S: LineSink> Emit<'_, S> {
     }
 
     fn object(&mut self, o: &Object) {
-        self.closures.close(o, self.outputs);
+        self.closures.close(o, &self.settings.outputs);
         encode_object(o, self.sink);
     }
 }

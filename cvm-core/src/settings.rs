@@ -77,6 +77,85 @@ pub struct Settings {
     pub reset_cause: ResetCause,
     /// Starts since power-on, this one included (`boots`; 1 on the host).
     pub boots: u32,
+    /// Rows of a scan (`rows`): the boards end a scan after this many;
+    /// the host writes its scan's.
+    pub rows: u32,
+    /// The part verdict's rules and the READY and REJECT outputs.
+    pub outputs: Outputs,
+    /// Where each runtime setting's value came from, in the order of
+    /// `command::Key::ALL` (`src`).
+    pub sources: [Source; KEYS],
+    /// What became of the settings record in flash at start-up (`store`).
+    pub store: Store,
+}
+
+/// Runtime settings a command channel may get and set (`command::Key`).
+pub const KEYS: usize = 15;
+
+impl Settings {
+    /// Settings of `cols` x `rows` scans with these thresholds, everything
+    /// else at its default: no score or defect lines, [`Outputs::DEFAULT`],
+    /// every value compiled in, no settings record, a power-on start.
+    pub const fn new(
+        cols: u32,
+        rows: u32,
+        threshold: u32,
+        power_threshold: u32,
+        firmware_version: &'static str,
+    ) -> Self {
+        Settings {
+            cols,
+            threshold,
+            power_threshold,
+            scores: false,
+            max_defect_lines_per_row: 0,
+            firmware_version,
+            reset_cause: ResetCause::PowerOn,
+            boots: 1,
+            rows,
+            outputs: Outputs::DEFAULT,
+            sources: [Source::Default; KEYS],
+            store: Store::Empty,
+        }
+    }
+}
+
+/// What became of the settings record in flash at start-up.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Store {
+    /// No record: the compiled values are in use (`none`; the host and
+    /// the emulated board, which keep none, always say this).
+    Empty,
+    /// A record for this firmware was read (`ok`).
+    Loaded,
+    /// A record made for another build (settings layout, geometry, kernels
+    /// or full scale) was ignored (`foreign`).
+    Foreign,
+    /// The storage could not be read (`bad`).
+    Unreadable,
+}
+
+impl Store {
+    pub const ALL: [Store; 4] = [
+        Store::Empty,
+        Store::Loaded,
+        Store::Foreign,
+        Store::Unreadable,
+    ];
+
+    pub const fn word(self) -> &'static str {
+        match self {
+            Store::Empty => "none",
+            Store::Loaded => "ok",
+            Store::Foreign => "foreign",
+            Store::Unreadable => "bad",
+        }
+    }
+
+    pub fn parse(s: &[u8]) -> Option<Store> {
+        Store::ALL.into_iter().find(|v| v.word().as_bytes() == s)
+    }
 }
 
 /// Where a runtime setting's value came from, as the command channel's

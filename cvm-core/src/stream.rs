@@ -306,6 +306,25 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
         self.threshold
     }
 
+    /// Scores the next scan with `cols` columns and this threshold. Meant
+    /// for between scans: the scan in progress, if any, is forgotten (as
+    /// by [`Engine::reset`]). Refused, and nothing changed, when `cols` is
+    /// 0, above the capacity, or more than the row buffers hold.
+    pub fn reconfigure(&mut self, cols: u32, threshold: u32) -> Result<(), EngineError> {
+        let c = cols as usize;
+        if c == 0 || c > MAX_COLS {
+            return Err(EngineError::Columns);
+        }
+        let words = row_words_for(c, self.scorer.config());
+        if self.bufs.iter().any(|b| b.len() < words) {
+            return Err(EngineError::Buffer);
+        }
+        self.reset();
+        self.cols = c;
+        self.threshold = threshold;
+        Ok(())
+    }
+
     /// Sets the power channel's threshold (`Q15`; [`POWER_OFF`], the
     /// default, never fires).
     pub fn set_power_threshold(&mut self, t: u32) {

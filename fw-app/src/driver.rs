@@ -6,7 +6,7 @@
 //! so that the board can check the output queue's room between beams, even
 //! inside a long run of lost beams.
 
-use cvm_core::pipeline::Pipeline;
+use cvm_core::pipeline::{Pipeline, Settings};
 use cvm_core::protocol::{LineSink, Priority};
 use cvm_core::stream::Totals;
 
@@ -47,6 +47,10 @@ pub struct ScanDriver<'a, const MAX_COLS: usize> {
     last: Option<(Totals, u32)>,
     /// Scans begun and finished since start-up (the outputs' clock).
     scans: (u32, u32),
+    /// Settings for the next scan, applied when no scan is open.
+    next: Option<Settings>,
+    /// Settings were applied since [`ScanDriver::take_applied`] was called.
+    applied: bool,
 }
 
 impl<'a, const MAX_COLS: usize> ScanDriver<'a, MAX_COLS> {
@@ -58,7 +62,44 @@ impl<'a, const MAX_COLS: usize> ScanDriver<'a, MAX_COLS> {
             dropped_at_begin: 0,
             last: None,
             scans: (0, 0),
+            next: None,
+            applied: false,
         }
+    }
+
+    /// The next scan (not the one open, if any) uses `s`.
+    pub fn request(&mut self, s: Settings) {
+        self.next = Some(s);
+    }
+
+    /// True once after requested settings were applied: the board's
+    /// outputs follow [`ScanDriver::settings`] from then on.
+    pub fn take_applied(&mut self) -> bool {
+        core::mem::take(&mut self.applied)
+    }
+
+    /// The settings the last (or open) scan uses.
+    pub fn settings(&self) -> &Settings {
+        self.pipeline.settings()
+    }
+
+    /// Applies the requested settings if no scan is open and no record is
+    /// being expanded. Settings the pipeline
+    /// refuses (columns beyond its buffers: the command channel's ranges
+    /// prevent it) are dropped, and the old ones stay.
+    fn apply_next(&mut self) {
+        let Some(s) = self.next else {
+            return;
+        };
+        if self.pending.is_some() || !self.seq.set_geometry(s.cols, s.rows) {
+            return;
+        }
+        self.next = None;
+        if self.pipeline.configure(s).is_err() {
+            let old = self.pipeline.settings();
+            self.seq.set_geometry(old.cols, old.rows);
+        }
+        self.applied = true;
     }
 
     /// Where the scans stand, for the READY and REJECT outputs.
@@ -104,6 +145,7 @@ impl<'a, const MAX_COLS: usize> ScanDriver<'a, MAX_COLS> {
         sink: &mut S,
     ) -> bool {
         if self.pending.is_none() {
+            self.apply_next();
             self.pending = rec.map(|rec| Pending {
                 rec,
                 left: match rec {

@@ -119,6 +119,17 @@ impl OutputLogic {
         self.now
     }
 
+    /// New settings, between scans (the command channel's): pulses still
+    /// delayed by the old row delay keep their rows.
+    pub fn configure(&mut self, settings: Outputs) {
+        if settings.reject_mode != self.settings.reject_mode {
+            // What REJECT means changed: it starts released.
+            self.now.reject = false;
+            self.n_delayed = 0;
+        }
+        self.settings = settings;
+    }
+
     /// After a scoring step: the new states and the pulses to start, or
     /// `None` when nothing changes. `closed`: objects that count, closed
     /// by the rows this step emitted (row mode's pulses).

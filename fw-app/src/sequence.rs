@@ -165,6 +165,18 @@ impl<H: Copy> Sequencer<H> {
         &self.counts
     }
 
+    /// Numbers the next scan as `cols` x `rows` (each at least 1). Only
+    /// between scans, with no beam held: false, and nothing changed, while
+    /// a scan is open or a beam awaits its verdict.
+    pub fn set_geometry(&mut self, cols: u32, rows: u32) -> bool {
+        if !matches!(self.state, State::Between) {
+            return false;
+        }
+        self.cols = cols.max(1);
+        self.rows = rows.max(1);
+        true
+    }
+
     /// True while a frame is held back (rule 2): the caller must not reuse
     /// its buffer yet.
     pub fn holding(&self) -> bool {

@@ -127,6 +127,10 @@ pub extern "C" fn _start() -> ! {
         firmware_version: "nopanic",
         reset_cause: cvm_core::protocol::ResetCause::Watchdog,
         boots: black_box(2),
+        rows: black_box(100),
+        outputs: cvm_core::settings::Outputs::DEFAULT,
+        sources: [cvm_core::settings::Source::Default; cvm_core::settings::KEYS],
+        store: cvm_core::settings::Store::Empty,
     };
     // SAFETY: `_start` runs once and is the only user of these statics.
     let (row_a, row_b, near, queue, bus) = unsafe {

@@ -172,6 +172,10 @@ fn scan_driver(header: &ScanHeader) -> ScanDriver<'static, MAX_COLS> {
         // QEMU starts the board from power-on, once per run.
         reset_cause: ResetCause::PowerOn,
         boots: 1,
+        rows: header.rows,
+        outputs: cvm_core::settings::Outputs::DEFAULT,
+        sources: [cvm_core::settings::Source::Default; cvm_core::settings::KEYS],
+        store: cvm_core::settings::Store::Empty,
     };
     let words = row_words_for(header.cols as usize, scorer.config());
     let (Some(row_a), Some(row_b)) = (ROW_A.take().get_mut(..words), ROW_B.take().get_mut(..words))

@@ -26,6 +26,8 @@
 //! (frame buffers, the UART line buffer), never the DTCM stack.
 
 mod clocks;
+mod command_rx;
+mod commands;
 mod drdy;
 mod frame_reader;
 mod memory;
@@ -34,11 +36,16 @@ mod pins;
 mod read_deadline;
 mod resets;
 mod scoring;
+mod settings_store;
 mod shared;
 mod tasks;
 
+use core::cell::RefCell;
+
 use cortex_m_rt::entry;
+use cvm_core::command::Capacity;
 use cvm_core::protocol::ResetCause;
+use cvm_fw_app::control::Control;
 use defmt::info;
 use defmt_rtt as _;
 use embassy_executor::Executor;
@@ -50,12 +57,27 @@ use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{Peri, bind_interrupts, dma, interrupt};
 use static_cell::StaticCell;
 
+use crate::config::MAX_DEFECT_LINES_PER_ROW;
 use crate::config::h743::{
-    BAUD, COLS, CORE, FIRMWARE_VERSION, J1, J2, KEEP_RESERVE, ROWS, SCORES, SPI_HZ, SYSCLK_HZ,
-    THRESHOLD_UNITS, WATCHDOG_US,
+    BAUD, COLS, CORE, FIRMWARE_VERSION, J1, J2, KEEP_RESERVE, MAX_COLS, ROWS, SCORES, SPI_HZ,
+    SYSCLK_HZ, THRESHOLD_UNITS, WATCHDOG_US,
 };
+use commands::{command_task, store_task};
 use shared::QUEUE;
 use tasks::{score_task, uart_task};
+
+/// What the command channel may set (docs/protocol.md, "Settings"):
+/// columns up to the row buffers' size, defect lines up to what the
+/// queue's reserve is sized for, pulses up to TIM14's 16-bit count.
+const CAPACITY: Capacity = Capacity {
+    max_cols: MAX_COLS as u16,
+    max_rows: u16::MAX,
+    max_dcap: MAX_DEFECT_LINES_PER_ROW,
+    max_pulse_us: 1 << 16,
+};
+const _: () = assert!(MAX_COLS <= u16::MAX as usize);
+
+static CONTROL: StaticCell<RefCell<Control>> = StaticCell::new();
 
 bind_interrupts!(struct Irqs {
     DMA1_STREAM2 => dma::InterruptHandler<DMA1_CH2>;
@@ -82,23 +104,39 @@ fn main() -> ! {
 
     frame_reader::install(pins.spi, pins.sck, pins.miso, pins.cs);
     let uart = uart(pins.uart, pins.uart_tx, pins.uart_tx_dma);
-    let driver = scoring::scan_driver(cause, boots);
-    let plc = outputs::PlcOutputs::new(pins.outputs, cause);
+    command_rx::enable(pins.uart_rx);
+    // The settings record before the first scan: the scans and the
+    // outputs start with the settings in effect.
+    let (store, record) = embassy_futures::block_on(settings_store::load());
+    let compiled = scoring::compiled_settings(cause, boots);
+    let control = Control::new(compiled, CAPACITY, (J1 as u8, J2 as u8), store, record);
+    let settings = *control.settings();
+    info!("settings record: {}", store);
+    let control: &'static RefCell<Control> = CONTROL.init(RefCell::new(control));
+    let driver = scoring::scan_driver(settings);
+    let plc = outputs::PlcOutputs::new(pins.outputs, cause, &settings.outputs);
     let mut wdg = IndependentWatchdog::new(pins.iwdg, WATCHDOG_US);
     wdg.unleash();
     QUEUE.lock(|q| q.borrow_mut().set_reserve(KEEP_RESERVE));
     drdy::enable(pins.drdy, pins.drdy_exti, pins.line_sync);
 
     let executor = EXECUTOR.init(Executor::new());
-    executor.run(
-        |spawner| match (uart_task(uart), score_task(driver, wdg, plc)) {
-            (Ok(u), Ok(s)) => {
+    executor.run(|spawner| {
+        match (
+            uart_task(uart),
+            score_task(driver, wdg, plc, control),
+            command_task(control),
+            store_task(control),
+        ) {
+            (Ok(u), Ok(s), Ok(c), Ok(f)) => {
                 spawner.spawn(u);
                 spawner.spawn(s);
+                spawner.spawn(c);
+                spawner.spawn(f);
             }
             _ => defmt::panic!("thread tasks already running"),
-        },
-    )
+        }
+    })
 }
 
 /// USART3 at `BAUD`, transmit only (the ST-LINK's virtual COM port).

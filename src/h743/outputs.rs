@@ -7,9 +7,10 @@
 //! scoring task only starts them and never waits for one.
 
 use core::cell::Cell;
+use core::sync::atomic::{AtomicU32, Ordering};
 
 use cvm_core::protocol::ResetCause;
-use cvm_core::settings::RejectMode;
+use cvm_core::settings::{Outputs, RejectMode};
 use cvm_fw_app::outputs::{Asserted, Change, OutputLogic, level};
 use embassy_stm32::gpio::{Level, Output, Speed};
 use embassy_stm32::interrupt;
@@ -57,8 +58,21 @@ struct Pulses {
 static PULSES: Mutex<CriticalSectionRawMutex, Cell<Pulses>> =
     Mutex::new(Cell::new(Pulses { left: 0, on: false }));
 
+/// The outputs' settings the pins and TIM14 follow (they change between
+/// scans, by the command channel): bit 0 READY active high, bit 1 REJECT
+/// active high; the pulse width in µs.
+static LEVELS: AtomicU32 = AtomicU32::new(levels(&OUTPUTS));
+static PULSE_US: AtomicU32 = AtomicU32::new(OUTPUTS.pulse_us);
+
+const fn levels(o: &Outputs) -> u32 {
+    o.ready_high as u32 | (o.reject_high as u32) << 1
+}
+
+fn active_high(bit: u32) -> bool {
+    LEVELS.load(Ordering::Relaxed) & bit != 0
+}
 fn write_ready(asserted: bool) {
-    let high = level(asserted, OUTPUTS.ready_high);
+    let high = level(asserted, active_high(1));
     pac::GPIOE.bsrr().write(|w| {
         w.set_bs(READY_PIN, high);
         w.set_br(READY_PIN, !high);
@@ -70,7 +84,7 @@ fn write_ready(asserted: bool) {
 }
 
 fn write_reject(asserted: bool) {
-    let high = level(asserted, OUTPUTS.reject_high);
+    let high = level(asserted, active_high(2));
     pac::GPIOE.bsrr().write(|w| {
         w.set_bs(REJECT_PIN, high);
         w.set_br(REJECT_PIN, !high);
@@ -81,9 +95,11 @@ fn write_reject(asserted: bool) {
     });
 }
 
-/// Starts TIM14's one-shot count of `OUTPUTS.pulse_us`.
+/// Starts TIM14's one-shot count of the pulse width.
 fn start_timer() {
     let t = pac::TIM14;
+    let us = PULSE_US.load(Ordering::Relaxed).clamp(1, 1 << 16);
+    t.arr().write(|w| w.set_arr((us - 1) as u16));
     t.cnt().write(|w| w.set_cnt(0));
     t.cr1().write(|w| {
         w.set_urs(Urs::COUNTER_ONLY);
@@ -128,20 +144,22 @@ pub struct PlcOutputs {
 impl PlcOutputs {
     /// Configures the pins at their start-up levels (READY dropped after
     /// any start but power-on) and TIM14.
-    pub fn new(pins: OutputPins, cause: ResetCause) -> Self {
-        let logic = OutputLogic::start(OUTPUTS, cause);
+    pub fn new(pins: OutputPins, cause: ResetCause, o: &Outputs) -> Self {
+        LEVELS.store(levels(o), Ordering::Relaxed);
+        PULSE_US.store(o.pulse_us, Ordering::Relaxed);
+        let logic = OutputLogic::start(*o, cause);
         let a = logic.asserted();
         let lv = |b: bool| if b { Level::High } else { Level::Low };
         // Configured once and never dropped: a dropped `Output` would
         // return its pin to an input.
         core::mem::forget(Output::new(
             pins.ready,
-            lv(level(a.ready, OUTPUTS.ready_high)),
+            lv(level(a.ready, o.ready_high)),
             Speed::Low,
         ));
         core::mem::forget(Output::new(
             pins.reject,
-            lv(level(a.reject, OUTPUTS.reject_high)),
+            lv(level(a.reject, o.reject_high)),
             Speed::Low,
         ));
         core::mem::forget(Output::new(pins.ready_led, lv(a.ready), Speed::Low));
@@ -151,7 +169,7 @@ impl PlcOutputs {
         t.cr1().write(|_| {});
         t.psc().write_value((PRESCALER - 1) as u16);
         t.arr()
-            .write(|w| w.set_arr((OUTPUTS.pulse_us.clamp(1, 1 << 16) - 1) as u16));
+            .write(|w| w.set_arr((o.pulse_us.clamp(1, 1 << 16) - 1) as u16));
         t.cr1().write(|w| w.set_urs(Urs::COUNTER_ONLY));
         t.egr().write(|w| w.set_ug(true));
         t.sr().write(|_| {});
@@ -187,10 +205,23 @@ impl PlcOutputs {
         }
     }
 
+    /// The outputs' settings from the scan starting now on (levels, pulse
+    /// width, mode): the pins are written again at their new levels.
+    pub fn configure(&mut self, o: &Outputs) {
+        self.logic.configure(*o);
+        LEVELS.store(levels(o), Ordering::Relaxed);
+        PULSE_US.store(o.pulse_us, Ordering::Relaxed);
+        let now = self.logic.asserted();
+        write_ready(now.ready);
+        if !PULSES.lock(|p| p.get().on) {
+            write_reject(now.reject && o.pulse_us == 0);
+        }
+    }
+
     fn write(&self, now: Asserted) {
         write_ready(now.ready);
         // With pulses, REJECT belongs to the timer.
-        if OUTPUTS.pulse_us == 0 {
+        if PULSE_US.load(Ordering::Relaxed) == 0 {
             write_reject(now.reject);
         }
     }

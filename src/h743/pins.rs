@@ -5,7 +5,8 @@
 use embassy_stm32::Peri;
 use embassy_stm32::Peripherals;
 use embassy_stm32::peripherals::{
-    DMA1_CH2, EXTI9, IWDG1, PA5, PA6, PB0, PB14, PD8, PD14, PE9, PE11, PE13, PE14, SPI1, USART3,
+    DMA1_CH2, EXTI9, IWDG1, PA5, PA6, PB0, PB14, PD8, PD9, PD14, PE9, PE11, PE13, PE14, SPI1,
+    USART3,
 };
 
 /// READY and REJECT (`outputs`) and the user LEDs that mirror them.
@@ -28,6 +29,7 @@ pub struct Pins {
     pub uart: Peri<'static, USART3>,
     pub uart_tx: Peri<'static, PD8>,
     pub uart_tx_dma: Peri<'static, DMA1_CH2>,
+    pub uart_rx: Peri<'static, PD9>,
     pub iwdg: Peri<'static, IWDG1>,
     pub outputs: OutputPins,
 }
@@ -42,8 +44,9 @@ pub fn take(p: Peripherals) -> Pins {
         drdy_exti: p.EXTI9,
         line_sync: p.PE11, // D5
         uart: p.USART3,
-        uart_tx: p.PD8, // ST-LINK VCP (PD9, its RX, is unused)
+        uart_tx: p.PD8, // ST-LINK VCP, the result lines and replies
         uart_tx_dma: p.DMA1_CH2,
+        uart_rx: p.PD9, // ST-LINK VCP, the requests (`command_rx`)
         iwdg: p.IWDG1,
         outputs: OutputPins {
             ready: p.PE14,      // D4

@@ -9,6 +9,7 @@ use core::sync::atomic::{AtomicBool, Ordering};
 use cvm_core::Scorer;
 use cvm_core::pipeline::{Pipeline, Settings};
 use cvm_core::protocol::ResetCause;
+use cvm_core::settings::{KEYS, Source, Store};
 use cvm_core::stream::{near_words, row_words_for};
 use cvm_fw_app::driver::ScanDriver;
 use static_cell::ConstStaticCell;
@@ -84,11 +85,30 @@ static DRIVER: Noload<ScanDriver<'static, MAX_COLS>> = Noload::new();
 /// The statics above are handed out by [`scan_driver`] only, once.
 static TAKEN: AtomicBool = AtomicBool::new(false);
 
+/// The compiled settings (docs/firmware.md, "Build-time configuration"),
+/// with the start's reset cause and boot count.
+pub fn compiled_settings(cause: ResetCause, boots: u32) -> Settings {
+    Settings {
+        cols: COLS as u32,
+        threshold: TABLES.threshold_from_units(THRESHOLD_UNITS),
+        power_threshold: cvm_core::power::threshold_from_units(POWER_THRESHOLD_UNITS),
+        scores: SCORES,
+        max_defect_lines_per_row: MAX_DEFECT_LINES_PER_ROW,
+        firmware_version: FIRMWARE_VERSION,
+        reset_cause: cause,
+        boots,
+        rows: ROWS,
+        outputs: OUTPUTS,
+        sources: [Source::Default; KEYS],
+        store: Store::Empty,
+    }
+}
+
 /// Builds the scoring side in its memory: the square kernels' factors
 /// (an f64 factorisation: before the watchdog starts), the scorer's tables
-/// in DTCM, the row buffers, the pipeline and the scan driver, whose
-/// header lines announce `cause` and `boots`.
-pub fn scan_driver(cause: ResetCause, boots: u32) -> &'static mut ScanDriver<'static, MAX_COLS> {
+/// in DTCM, the row buffers, the pipeline and the scan driver, which
+/// starts with `settings`.
+pub fn scan_driver(settings: Settings) -> &'static mut ScanDriver<'static, MAX_COLS> {
     if TAKEN.swap(true, Ordering::Relaxed) {
         defmt::panic!("the scoring side is built once");
     }
@@ -105,20 +125,9 @@ pub fn scan_driver(cause: ResetCause, boots: u32) -> &'static mut ScanDriver<'st
     let (row_a, rest) = axi.split_at_mut(ROW_WORDS);
     let row_b = if ROWS_IN_AXI { rest } else { sram123 };
     let near = unsafe { NEAR.take_zeroed() };
-    let settings = Settings {
-        cols: COLS as u32,
-        threshold: scorer.threshold_from_units(THRESHOLD_UNITS),
-        power_threshold: cvm_core::power::threshold_from_units(POWER_THRESHOLD_UNITS),
-        scores: SCORES,
-        max_defect_lines_per_row: MAX_DEFECT_LINES_PER_ROW,
-        firmware_version: FIRMWARE_VERSION,
-        reset_cause: cause,
-        boots,
-    };
-    let mut pipeline = match Pipeline::<MAX_COLS>::with_near(scorer, settings, row_a, row_b, near) {
+    let pipeline = match Pipeline::<MAX_COLS>::with_near(scorer, settings, row_a, row_b, near) {
         Ok(p) => p,
         Err(e) => defmt::panic!("pipeline refused its buffers: {}", e),
     };
-    pipeline.set_outputs(OUTPUTS);
-    unsafe { DRIVER.take() }.write(ScanDriver::new(pipeline, COLS as u32, ROWS))
+    unsafe { DRIVER.take() }.write(ScanDriver::new(pipeline, settings.cols, settings.rows))
 }

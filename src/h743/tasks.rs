@@ -1,7 +1,11 @@
 //! The two tasks, both in thread mode: scoring and UART. (Frames are read
 //! from interrupts: `frame_reader`.)
 
+use core::cell::RefCell;
+use core::sync::atomic::Ordering;
+
 use cvm_core::protocol::MAX_LINE;
+use cvm_fw_app::control::Control;
 use cvm_fw_app::driver::ScanDriver;
 use defmt::{error, info, warn};
 use embassy_stm32::mode::Async;
@@ -10,6 +14,7 @@ use embassy_stm32::usart::UartTx;
 use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_time::{Duration, Instant, with_timeout};
 
+use super::commands::{CHANGED, REPLIES};
 use super::memory::Noload;
 use super::outputs::PlcOutputs;
 use super::shared::{ACQ, BEAMS, CELLS, FRAMES, KICK, QUEUE, ROOM};
@@ -29,7 +34,10 @@ pub async fn uart_task(mut uart: UartTx<'static, Async>) {
     // SAFETY: this task is TX_LINE's only user, and its pool holds one.
     let line = unsafe { TX_LINE.take_zeroed() };
     loop {
-        let n = QUEUE.lock(|q| q.borrow_mut().pop_into(line));
+        // Replies first: they are few and short, and a host waits for them.
+        let n = REPLIES
+            .lock(|q| q.borrow_mut().pop_into(line))
+            .or_else(|| QUEUE.lock(|q| q.borrow_mut().pop_into(line)));
         let Some(n) = n else {
             KICK.wait().await;
             continue;
@@ -60,6 +68,7 @@ pub async fn score_task(
     driver: &'static mut ScanDriver<'static, MAX_COLS>,
     mut wdg: IndependentWatchdog<'static, IWDG1>,
     mut plc: PlcOutputs,
+    control: &'static RefCell<Control>,
 ) {
     let mut frames = Samples {
         bufs: &FRAMES,
@@ -88,10 +97,17 @@ pub async fn score_task(
             }
             last_beam = Instant::now();
             idle_ended = false;
+            if CHANGED.load(Ordering::Acquire) {
+                CHANGED.store(false, Ordering::Release);
+                take_control(driver, control);
+            }
             let finished = driver.step(rec, &mut frames, &mut sink);
+            if driver.take_applied() {
+                plc.configure(&driver.settings().outputs);
+            }
             plc.step(driver.progress(), driver.take_closed());
             if finished {
-                report_scan(driver);
+                scan_ended(driver, control);
             }
             // Most beams queue no line (lines come per row): waking the
             // UART task then would only have it find the queue empty.
@@ -116,7 +132,7 @@ pub async fn score_task(
                 KICK.signal(());
                 if finished {
                     warn!("no beam for {} ms: scan ended early", IDLE_END_MS);
-                    report_scan(driver);
+                    scan_ended(driver, control);
                 }
                 if !more {
                     break;
@@ -134,6 +150,24 @@ pub async fn score_task(
         }
         reported = now;
     }
+}
+
+/// Settings the command channel changed go to the scan driver, which
+/// applies them when the next scan starts.
+fn take_control(driver: &mut ScanDriver<'static, MAX_COLS>, control: &RefCell<Control>) {
+    let mut c = control.borrow_mut();
+    if let Some(s) = c.take_changed() {
+        driver.request(s);
+    }
+}
+
+fn scan_ended(driver: &ScanDriver<'static, MAX_COLS>, control: &RefCell<Control>) {
+    if let Some((t, _)) = driver.last_scan() {
+        control
+            .borrow_mut()
+            .scan_ended(&t, driver.progress().verdict);
+    }
+    report_scan(driver);
 }
 
 fn report_scan(driver: &ScanDriver<'static, MAX_COLS>) {

@@ -30,6 +30,9 @@ pub enum Refusal {
     Noise,
     /// Writing the settings to flash failed (`storage`).
     Storage,
+    /// The value would leave the settings unable to work together, e.g.
+    /// row mode without a pulse width (`conflict`).
+    Conflict,
 }
 
 impl Refusal {
@@ -48,11 +51,12 @@ impl Refusal {
             Refusal::Framing => "framing",
             Refusal::Noise => "noise",
             Refusal::Storage => "storage",
+            Refusal::Conflict => "conflict",
         }
     }
 
     /// Every reason without a value, in the order of the protocol document.
-    pub const SIMPLE: [Refusal; 11] = [
+    pub const SIMPLE: [Refusal; 12] = [
         Refusal::Checksum,
         Refusal::Malformed,
         Refusal::TooLong,
@@ -64,6 +68,7 @@ impl Refusal {
         Refusal::Framing,
         Refusal::Noise,
         Refusal::Storage,
+        Refusal::Conflict,
     ];
 }
 
@@ -82,6 +87,9 @@ impl core::fmt::Display for Refusal {
             Refusal::Framing => f.write_str("framing error on the link"),
             Refusal::Noise => f.write_str("noise on the link"),
             Refusal::Storage => f.write_str("the settings could not be written to flash"),
+            Refusal::Conflict => {
+                f.write_str("conflicts with another setting (row mode needs a pulse width)")
+            }
         }
     }
 }

@@ -5,7 +5,7 @@
 use super::key::Key;
 use super::refusal::Refusal;
 use super::status::Status;
-use super::wire::{FrameError, REPLY, checked_body, kv, parse_u32, split_once, value_source};
+use super::wire::{FrameError, REPLY, checked_body, key_value_source, kv, parse_u32};
 use crate::protocol::{LineBuf, LineSink, ParseError, Priority};
 use crate::settings::Source;
 
@@ -31,7 +31,8 @@ pub struct Calibration {
 /// A reply, decoded.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Reply<'s> {
-    /// `ok,status,...` (see [`Status`]).
+    /// `ok,status,...` (see [`Status`]), followed by one [`Reply::Value`]
+    /// per setting.
     Status(Status<'s>),
     /// `ok,<key>=<value>:<source>`: the answer to `get`, and to `set`
     /// (the value now in effect for the next scan).
@@ -75,7 +76,9 @@ pub fn encode_reply(id: Option<u32>, r: &Reply, sink: &mut impl LineSink) {
             s.encode(&mut l);
         }
         Reply::Value { key, value, source } => {
-            l.kv_u64(key.name().as_bytes(), value as u64);
+            l.field(key.name().as_bytes());
+            l.byte(b'=');
+            key.encode(value, &mut l);
             l.byte(b':');
             l.byte(source.as_char());
         }
@@ -171,9 +174,7 @@ fn parse_ok<'s, I: Iterator<Item = &'s [u8]>>(f: &mut I) -> Result<Reply<'s>, Pa
             })
         }
         kv_field => {
-            let (name, rest) = split_once(kv_field, b'=').ok_or(ParseError::Format)?;
-            let key = Key::from_name(name).ok_or(ParseError::Format)?;
-            let (value, source) = value_source(rest).ok_or(ParseError::Format)?;
+            let (key, value, source) = key_value_source(kv_field).ok_or(ParseError::Format)?;
             Reply::Value { key, value, source }
         }
     })

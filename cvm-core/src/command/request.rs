@@ -40,7 +40,9 @@ pub fn encode_request(id: u32, r: &Request, sink: &mut impl LineSink) {
         }
         Request::Set(k, v) => {
             l.field(b"set");
-            l.kv_u64(k.name().as_bytes(), v as u64);
+            l.field(k.name().as_bytes());
+            l.byte(b'=');
+            k.encode(v, &mut l);
         }
         Request::Calibrate(n) => {
             l.field(b"calibrate");

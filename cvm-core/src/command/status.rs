@@ -1,73 +1,15 @@
 //! The `status` reply: what the board is, what it scans with and where
 //! each value came from, why it started, and how its last scan went.
 //!
-//! `A,<id>,ok,status,pv=5,fw=..,j=15x15,cap=<cols>x<rows>,store=..,cols=<v>:<s>,rows=..,thr=..,pthr=..,scores=..,dcap=..,rst=..,boots=..,last=<scans>/<defects>/<objects>/<verdict>`
+//! `A,<id>,ok,status,pv=6,fw=..,j=15x15,cap=<cols>x<rows>,store=..,rst=..,boots=..,last=<scans>/<defects>/<objects>/<verdict>,keys=<n>`,
+//! followed by `n` value replies (`A,<id>,ok,<key>=<value>:<source>`),
+//! one per setting in `Key::ALL`'s order: every setting with its source
+//! would not fit one line.
 
-use super::key::Key;
-use super::wire::{VERSION, kv, parse_u32, split_once, value_source};
+use super::wire::{VERSION, kv, parse_u32, split_once};
 use crate::protocol::{LineBuf, MAX_FW, ParseError};
-use crate::settings::{ResetCause, Source};
-
-/// What became of the settings record in flash at start-up.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum Store {
-    /// No record: the compiled values are in use (`none`).
-    Empty,
-    /// A record for this firmware was read (`ok`).
-    Loaded,
-    /// A record made for another build (settings layout, geometry, kernels
-    /// or full scale) was ignored (`foreign`).
-    Foreign,
-    /// The storage could not be read (`bad`).
-    Unreadable,
-}
-
-impl Store {
-    pub const ALL: [Store; 4] = [
-        Store::Empty,
-        Store::Loaded,
-        Store::Foreign,
-        Store::Unreadable,
-    ];
-
-    pub const fn word(self) -> &'static str {
-        match self {
-            Store::Empty => "none",
-            Store::Loaded => "ok",
-            Store::Foreign => "foreign",
-            Store::Unreadable => "bad",
-        }
-    }
-
-    fn parse(s: &[u8]) -> Option<Store> {
-        Store::ALL.into_iter().find(|v| v.word().as_bytes() == s)
-    }
-}
-
-/// How the last scan ended.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum Verdict {
-    /// No scan has ended since start-up (`none`).
-    NoScan,
-    /// No defect (`pass`).
-    Pass,
-    /// At least one defect (`fail`).
-    Fail,
-}
-
-impl Verdict {
-    pub const ALL: [Verdict; 3] = [Verdict::NoScan, Verdict::Pass, Verdict::Fail];
-
-    pub const fn word(self) -> &'static str {
-        match self {
-            Verdict::NoScan => "none",
-            Verdict::Pass => "pass",
-            Verdict::Fail => "fail",
-        }
-    }
-}
+use crate::settings::{KEYS, ResetCause, Store};
+use crate::verdict::Verdict;
 
 /// The last scan, as its end line counted it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -78,7 +20,8 @@ pub struct LastScan {
     pub defects: u32,
     /// Its defect objects (the end line's `objects`).
     pub objects: u32,
-    pub verdict: Verdict,
+    /// Its verdict, as its end line's (`none` before the first scan).
+    pub verdict: Option<Verdict>,
 }
 
 /// The `status` reply's content.
@@ -93,19 +36,9 @@ pub struct Status<'s> {
     pub max_cols: u16,
     pub max_rows: u16,
     pub store: Store,
-    /// Each runtime setting's value and source, in [`Key::ALL`]'s order;
-    /// `cols`, `rows` and `dcap` below 65536, as their ranges make them,
-    /// which keeps the longest reply within `MAX_LINE` (tested).
-    pub values: [(u32, Source); 6],
     pub reset_cause: ResetCause,
     pub boots: u32,
     pub last: LastScan,
-}
-
-fn value(l: &mut LineBuf, key: Key, (v, src): (u32, Source)) {
-    l.kv_u64(key.name().as_bytes(), v as u64);
-    l.byte(b':');
-    l.byte(src.as_char());
 }
 
 impl Status<'_> {
@@ -131,9 +64,6 @@ impl Status<'_> {
         l.u64(self.max_rows as u64);
         l.field(b"store=");
         l.bytes(self.store.word().as_bytes());
-        for (key, v) in Key::ALL.into_iter().zip(self.values) {
-            value(l, key, v);
-        }
         l.field(b"rst=");
         l.bytes(self.reset_cause.as_str().as_bytes());
         l.kv_u64(b"boots", self.boots as u64);
@@ -143,7 +73,11 @@ impl Status<'_> {
         l.byte(b'/');
         l.u64(self.last.objects as u64);
         l.byte(b'/');
-        l.bytes(self.last.verdict.word().as_bytes());
+        l.bytes(match self.last.verdict {
+            Some(v) => v.as_str().as_bytes(),
+            None => b"none",
+        });
+        l.kv_u64(b"keys", KEYS as u64);
     }
 
     /// Reads the fields after `status`.
@@ -163,15 +97,13 @@ impl Status<'_> {
         let (j1, j2) = pair(field("j")).ok_or(ParseError::Format)?;
         let (cols, rows) = pair(field("cap")).ok_or(ParseError::Format)?;
         let store = field("store").and_then(Store::parse);
-        let mut values = [(0, Source::Default); 6];
-        for (slot, key) in values.iter_mut().zip(Key::ALL) {
-            *slot = field(key.name())
-                .and_then(value_source)
-                .ok_or(ParseError::Format)?;
-        }
         let reset_cause = field("rst").and_then(ResetCause::parse);
         let boots = field("boots").and_then(parse_u32);
         let last = field("last").and_then(parse_last);
+        // The value replies that follow: this firmware's keys.
+        if field("keys").and_then(parse_u32) != Some(KEYS as u32) {
+            return Err(ParseError::Format);
+        }
         if f.next().is_some() {
             return Err(ParseError::Format);
         }
@@ -184,7 +116,6 @@ impl Status<'_> {
             max_cols: wide(cols).ok_or(ParseError::Format)?,
             max_rows: wide(rows).ok_or(ParseError::Format)?,
             store: store.ok_or(ParseError::Format)?,
-            values,
             reset_cause: reset_cause.ok_or(ParseError::Format)?,
             boots: boots.ok_or(ParseError::Format)?,
             last: last.ok_or(ParseError::Format)?,
@@ -198,9 +129,10 @@ fn parse_last(s: &[u8]) -> Option<LastScan> {
     let defects = parse_u32(p.next()?)?;
     let objects = parse_u32(p.next()?)?;
     let word = p.next()?;
-    let verdict = Verdict::ALL
-        .into_iter()
-        .find(|v| v.word().as_bytes() == word)?;
+    let verdict = match word {
+        b"none" => None,
+        w => Some(Verdict::parse(w)?),
+    };
     if p.next().is_some() {
         return None;
     }

@@ -83,9 +83,12 @@ pub(super) fn split_once(s: &[u8], sep: u8) -> Option<(&[u8], &[u8])> {
     Some((s.get(..i)?, s.get(i + 1..)?))
 }
 
-/// `value:source`, the form of a setting in replies.
-pub(super) fn value_source(s: &[u8]) -> Option<(u32, crate::settings::Source)> {
-    let (v, src) = split_once(s, b':')?;
+/// `key=value:source`, the form of a setting in replies.
+pub(super) fn key_value_source(s: &[u8]) -> Option<(super::Key, u32, crate::settings::Source)> {
+    let (name, rest) = split_once(s, b'=')?;
+    let key = super::Key::from_name(name)?;
+    let colon = rest.iter().rposition(|&b| b == b':')?;
+    let (v, src) = (rest.get(..colon)?, rest.get(colon + 1..)?);
     let [c] = src else { return None };
-    Some((parse_u32(v)?, crate::settings::Source::from_char(*c)?))
+    Some((key, key.decode(v)?, crate::settings::Source::from_char(*c)?))
 }

@@ -5,10 +5,10 @@ use super::fields::{Fields, ParseError, parse_i32, parse_u32};
 use super::frame::{LineBuf, LineSink, Priority};
 use crate::config::{Config, Kernels, Weights};
 use crate::scorer::Scorer;
-use crate::settings::{ResetCause, Settings};
+use crate::settings::{KEYS, ResetCause, Settings, Source, Store};
 
 /// Protocol version written in the header.
-pub const VERSION: u32 = 5;
+pub const VERSION: u32 = 6;
 /// Longest firmware version string carried in the header.
 pub const MAX_FW: usize = 24;
 
@@ -40,6 +40,19 @@ pub struct HeaderInfo<'s> {
     pub reset_cause: ResetCause,
     /// Starts since power-on, this one included (`boots`; 1 after power-on).
     pub boots: u32,
+    /// What version 6 added (`None` in a version 5 header).
+    pub origin: Option<Origin>,
+}
+
+/// The scan's rows and where its settings came from (version 6 on).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Origin {
+    /// Rows of the scan (`rows`).
+    pub rows: u32,
+    /// Each runtime setting's source, in `command::Key::ALL`'s order (`src`).
+    pub sources: [Source; KEYS],
+    /// What became of the settings record at start-up (`store`).
+    pub store: Store,
 }
 
 impl HeaderInfo<'static> {
@@ -73,11 +86,16 @@ impl HeaderInfo<'static> {
             max_defect_lines: settings.max_defect_lines_per_row,
             reset_cause: settings.reset_cause,
             boots: settings.boots,
+            origin: Some(Origin {
+                rows: settings.rows,
+                sources: settings.sources,
+                store: settings.store,
+            }),
         }
     }
 }
 
-/// `H,v=5,fw=..,j=15x15,cols=300,k=P,b=0,w=uniform,norm=1,fs=65535,thr=..,pthr=..,q=23,scores=0,dcap=0,rst=por,boots=1`
+/// `H,v=6,fw=..,j=15x15,cols=300,k=P,b=0,w=uniform,norm=1,fs=65535,thr=..,pthr=..,q=23,scores=0,dcap=0,rst=por,boots=1,rows=..,src=ddddddddddddddd,store=none`
 pub fn encode_header(h: &HeaderInfo, sink: &mut impl LineSink) {
     let mut l = LineBuf::new(b'H');
     l.kv_u64(b"v", h.version as u64);
@@ -112,6 +130,15 @@ pub fn encode_header(h: &HeaderInfo, sink: &mut impl LineSink) {
     l.field(b"rst=");
     l.bytes(h.reset_cause.as_str().as_bytes());
     l.kv_u64(b"boots", h.boots as u64);
+    if let Some(o) = &h.origin {
+        l.kv_u64(b"rows", o.rows as u64);
+        l.field(b"src=");
+        for s in o.sources {
+            l.byte(s.as_char());
+        }
+        l.field(b"store=");
+        l.bytes(o.store.word().as_bytes());
+    }
     sink.line(l.finish(), Priority::Keep);
 }
 
@@ -145,6 +172,26 @@ pub(super) fn parse_header<'s>(
     let max_defect_lines = u16::try_from(f.key_u32("dcap")?).map_err(|_| e)?;
     let reset_cause = ResetCause::parse(f.key("rst")?).ok_or(e)?;
     let boots = f.key_u32("boots")?;
+    // Version 5 ended here; from 6 on the fields are always there.
+    let origin = if version >= 6 {
+        let rows = f.key_u32("rows")?;
+        let src = f.key("src")?;
+        let mut sources = [Source::Default; KEYS];
+        if src.len() != KEYS {
+            return Err(e);
+        }
+        for (slot, &c) in sources.iter_mut().zip(src) {
+            *slot = Source::from_char(c).ok_or(e)?;
+        }
+        let store = Store::parse(f.key("store")?).ok_or(e)?;
+        Some(Origin {
+            rows,
+            sources,
+            store,
+        })
+    } else {
+        None
+    };
     Ok(HeaderInfo {
         version,
         firmware,
@@ -163,5 +210,6 @@ pub(super) fn parse_header<'s>(
         max_defect_lines,
         reset_cause,
         boots,
+        origin,
     })
 }

@@ -4,13 +4,14 @@
 //! trips of every request and reply, every refusal, the line length bound,
 //! the line reader, and arbitrary bytes.
 
-use cvm_core::Settings;
 use cvm_core::command::{
-    Calibration, Capacity, Event, Key, LastScan, LineReader, LinkError, MAX_CALIBRATION_SCANS,
-    MAX_LINE, Refusal, Reply, Request, Source, Status, Store, Verdict, encode_reply,
-    encode_request, parse_reply, parse_request,
+    Calibration, Capacity, Event, Key, Kind, LastScan, LineReader, LinkError,
+    MAX_CALIBRATION_SCANS, MAX_LINE, Refusal, Reply, Request, Source, Status, Store, conflict,
+    encode_reply, encode_request, parse_reply, parse_request,
 };
 use cvm_core::protocol::{LineSink, MAX_FW, ParseError, Priority, ResetCause};
+use cvm_core::settings::{KEYS, RejectMode};
+use cvm_core::{Fault, Settings, Verdict};
 use proptest::prelude::*;
 
 #[derive(Default)]
@@ -46,6 +47,7 @@ const CAP: Capacity = Capacity {
     max_cols: 300,
     max_rows: 1000,
     max_dcap: 16,
+    max_pulse_us: 65536,
 };
 
 fn request_line(id: u32, r: &Request) -> Vec<u8> {
@@ -72,8 +74,12 @@ fn crc_reference_is_the_catalogued_one() {
 
 #[test]
 fn requests_are_written_as_specified() {
-    let cases: [(u32, Request, &str); 9] = [
+    let cases: [(u32, Request, &str); 13] = [
         (1, Request::Status, "C,1,status"),
+        (2, Request::Set(Key::RejectMode, 1), "C,2,set,mode=row"),
+        (3, Request::Set(Key::ReadyLevel, 0), "C,3,set,ready=low"),
+        (4, Request::Set(Key::RejectLevel, 1), "C,4,set,reject=high"),
+        (5, Request::Set(Key::MinArea, 12), "C,5,set,area=12"),
         (42, Request::Get(Key::Threshold), "C,42,get,thr"),
         (7, Request::Get(Key::Rows), "C,7,get,rows"),
         (
@@ -102,21 +108,13 @@ fn status_example() -> Status<'static> {
         max_cols: 300,
         max_rows: 1000,
         store: Store::Loaded,
-        values: [
-            (300, Source::Default),
-            (300, Source::Flash),
-            (4194304, Source::Changed),
-            (3277, Source::Default),
-            (0, Source::Default),
-            (0, Source::Flash),
-        ],
         reset_cause: ResetCause::PowerOn,
         boots: 3,
         last: LastScan {
             scans: 2,
             defects: 14,
             objects: 1,
-            verdict: Verdict::Fail,
+            verdict: Some(Verdict::Objects),
         },
     }
 }
@@ -137,8 +135,8 @@ fn replies_are_written_as_specified() {
         (
             Some(1),
             Reply::Status(status_example()),
-            "A,1,ok,status,pv=6,fw=0.1.0,j=15x15,cap=300x1000,store=ok,cols=300:d,rows=300:f,\
-             thr=4194304:c,pthr=3277:d,scores=0:d,dcap=0:f,rst=por,boots=3,last=2/14/1/fail",
+            "A,1,ok,status,pv=6,fw=0.1.0,j=15x15,cap=300x1000,store=ok,rst=por,boots=3,\
+             last=2/14/1/obj,keys=15",
         ),
         (
             Some(42),
@@ -148,6 +146,24 @@ fn replies_are_written_as_specified() {
                 source: Source::Flash,
             },
             "A,42,ok,thr=4194304:f",
+        ),
+        (
+            Some(43),
+            Reply::Value {
+                key: Key::RejectMode,
+                value: 1,
+                source: Source::Changed,
+            },
+            "A,43,ok,mode=row:c",
+        ),
+        (
+            Some(44),
+            Reply::Value {
+                key: Key::ReadyLevel,
+                value: 0,
+                source: Source::Default,
+            },
+            "A,44,ok,ready=low:d",
         ),
         (Some(9), Reply::Calibrating(5), "A,9,ok,calibrate,5"),
         (
@@ -194,6 +210,7 @@ fn every_refusal_has_its_word_and_round_trips() {
         "framing",
         "noise",
         "storage",
+        "conflict",
     ];
     for (r, w) in Refusal::SIMPLE.into_iter().zip(words) {
         let line = reply_line(Some(77), &Reply::Refused(r));
@@ -220,6 +237,12 @@ fn every_refusal_of_a_request() {
         ("C,5,set,scores=01", Some(5), Refusal::WrongType),
         ("C,5,set,scores=yes", Some(5), Refusal::WrongType),
         ("C,5,calibrate,five", Some(5), Refusal::WrongType),
+        ("C,5,set,mode=rows", Some(5), Refusal::WrongType),
+        ("C,5,set,mode=1", Some(5), Refusal::WrongType),
+        ("C,5,set,ready=HIGH", Some(5), Refusal::WrongType),
+        ("C,5,set,reject=", Some(5), Refusal::WrongType),
+        ("C,5,set,pulse=65537", Some(5), range(0, 65536)),
+        ("C,5,set,area=4294967296", Some(5), range(0, u32::MAX)),
         ("C,5,set,cols=0", Some(5), range(1, 300)),
         ("C,5,set,cols=301", Some(5), range(1, 300)),
         ("C,5,set,rows=1001", Some(5), range(1, 1000)),
@@ -311,42 +334,52 @@ fn protocol_document_example() {
 
 #[test]
 fn keys_read_and_write_the_settings_value() {
-    let mut s = Settings {
-        cols: 300,
-        threshold: 4194304,
-        power_threshold: 3277,
-        scores: false,
-        max_defect_lines_per_row: 0,
-        firmware_version: "t",
-        reset_cause: ResetCause::PowerOn,
-        boots: 1,
-    };
-    assert_eq!(Key::Threshold.get(&s), Some(4194304));
-    assert_eq!(Key::Rows.get(&s), None);
-    assert!(Key::Threshold.set(&mut s, 7));
-    assert!(Key::PowerThreshold.set(&mut s, 8));
-    assert!(Key::Scores.set(&mut s, 1));
-    assert!(Key::DefectCap.set(&mut s, 16));
-    assert!(Key::Cols.set(&mut s, 9));
-    assert!(!Key::Rows.set(&mut s, 9));
+    let mut s = Settings::new(300, 200, 4194304, 3277, "t");
+    // Each key reads its own field: a distinct value in each, checked
+    // against the field, not against the key's own code.
+    let values: [u32; KEYS] = [9, 8, 7, 6, 1, 16, 5, 4, 3, 2, 1, 1000, 11, 0, 0];
+    for (k, v) in Key::ALL.into_iter().zip(values) {
+        assert!(k.set(&mut s, v), "{}", k.name());
+    }
+    let o = s.outputs;
+    assert_eq!(
+        (s.cols, s.rows, s.threshold, s.power_threshold, s.scores),
+        (9, 8, 7, 6, true)
+    );
+    assert_eq!(s.max_defect_lines_per_row, 16);
+    assert_eq!(
+        (o.min_area, o.min_strength, o.max_missing, o.max_misplaced),
+        (5, 4, 3, 2)
+    );
+    assert_eq!(o.reject_mode, RejectMode::Row);
+    assert_eq!((o.pulse_us, o.row_delay), (1000, 11));
+    assert!(!o.ready_high && !o.reject_high);
+    for (k, v) in Key::ALL.into_iter().zip(values) {
+        assert_eq!(k.get(&s), v, "{}", k.name());
+    }
+    // Values a field cannot hold change nothing.
+    let before = s;
     assert!(!Key::Scores.set(&mut s, 2));
     assert!(!Key::DefectCap.set(&mut s, 70000));
     assert!(!Key::Cols.set(&mut s, 0));
-    assert_eq!(
-        (
-            s.threshold,
-            s.power_threshold,
-            s.scores,
-            s.max_defect_lines_per_row,
-            s.cols
-        ),
-        (7, 8, true, 16, 9)
-    );
+    assert!(!Key::Rows.set(&mut s, 0));
+    assert!(!Key::RejectMode.set(&mut s, 2));
+    assert!(!Key::ReadyLevel.set(&mut s, 2));
+    assert_eq!(s, before);
+
     let names: Vec<_> = Key::ALL.iter().map(|k| k.name()).collect();
-    assert_eq!(names, ["cols", "rows", "thr", "pthr", "scores", "dcap"]);
-    for k in Key::ALL {
+    assert_eq!(
+        names,
+        [
+            "cols", "rows", "thr", "pthr", "scores", "dcap", "area", "peak", "miss", "misp",
+            "mode", "pulse", "delay", "ready", "reject"
+        ]
+    );
+    for (i, k) in Key::ALL.into_iter().enumerate() {
         assert_eq!(Key::from_name(k.name().as_bytes()), Some(k));
+        assert_eq!(k.index(), i);
     }
+    assert_eq!(Key::RejectMode.kind(), Kind::Choice(["part", "row"]));
     for src in Source::ALL {
         assert_eq!(Source::from_char(src.as_char()), Some(src));
     }
@@ -358,6 +391,19 @@ fn keys_read_and_write_the_settings_value() {
 }
 
 #[test]
+fn row_mode_without_a_pulse_is_a_conflict() {
+    let mut s = Settings::new(300, 200, 1, 1, "t");
+    assert!(!conflict(&s));
+    assert!(Key::RejectMode.set(&mut s, 1));
+    assert!(conflict(&s), "row mode with the default pulse of 0");
+    assert!(Key::Pulse.set(&mut s, 1));
+    assert!(!conflict(&s));
+    assert!(Key::RejectMode.set(&mut s, 0));
+    assert!(Key::Pulse.set(&mut s, 0));
+    assert!(!conflict(&s), "part mode holds REJECT with a pulse of 0");
+}
+
+#[test]
 fn the_longest_status_fits_a_line() {
     let mut s = status_example();
     s.firmware = "0123456789abcdefghijklmnopqrstuvwxyz";
@@ -365,26 +411,18 @@ fn the_longest_status_fits_a_line() {
     s.j2 = 15;
     s.max_cols = u16::MAX;
     s.max_rows = u16::MAX;
-    s.store = Store::Unreadable;
-    s.values = [
-        (65535, Source::Changed),
-        (65535, Source::Changed),
-        (u32::MAX, Source::Changed),
-        (u32::MAX, Source::Changed),
-        (1, Source::Changed),
-        (65535, Source::Changed),
-    ];
+    s.store = Store::Foreign;
     s.reset_cause = ResetCause::Other;
     s.boots = u32::MAX;
     s.last = LastScan {
         scans: u32::MAX,
         defects: u32::MAX,
         objects: u32::MAX,
-        verdict: Verdict::NoScan,
+        verdict: Some(Verdict::Fault(Fault::Misplaced)),
     };
     let line = reply_line(Some(u32::MAX), &Reply::Status(s));
     let star = line.iter().rposition(|&c| c == b'*').unwrap();
-    assert!(star <= 250, "{star} bytes before the `*`");
+    assert!(star < MAX_LINE - 5, "{star} bytes before the `*`");
     let mut want = s;
     want.firmware = &"0123456789abcdefghijklmnopqrstuvwxyz"[..MAX_FW];
     assert_eq!(
@@ -403,6 +441,18 @@ fn the_longest_status_fits_a_line() {
         power_mad: u32::MAX,
     };
     assert!(reply_line(Some(u32::MAX), &Reply::Calibrated(c)).len() <= MAX_LINE);
+    // Every value reply: the longest key with the longest value.
+    for k in Key::ALL {
+        let (_, hi) = k.range(&CAP);
+        let r = Reply::Value {
+            key: k,
+            value: hi,
+            source: Source::Changed,
+        };
+        let line = reply_line(Some(u32::MAX), &r);
+        assert!(line.len() <= MAX_LINE);
+        assert_eq!(parse_reply(&line), Ok((Some(u32::MAX), r)));
+    }
 }
 
 #[test]
@@ -418,7 +468,7 @@ fn firmware_characters_that_would_break_the_line_are_replaced() {
 
 #[test]
 fn reply_parser_refuses_what_is_no_reply() {
-    let cases: [(&str, ParseError); 9] = [
+    let cases: [(&str, ParseError); 10] = [
         ("C,1,status", ParseError::Type),
         ("A,1,maybe", ParseError::Format),
         ("A,-,ok,save", ParseError::Format),
@@ -428,6 +478,7 @@ fn reply_parser_refuses_what_is_no_reply() {
         ("A,1,ok,thr=5:x", ParseError::Format),
         ("A,1,ok,save,extra", ParseError::Format),
         ("A,1,ok,status,pv=5", ParseError::Format),
+        ("A,1,ok,mode=1:c", ParseError::Format),
     ];
     for (body, e) in cases {
         assert_eq!(parse_reply(&framed(body)), Err(e), "{body}");
@@ -518,46 +569,26 @@ fn status(fw: &str) -> impl Strategy<Value = Status<'_>> {
     (
         (1u8..=15, 1u8..=15, any::<u16>(), any::<u16>()),
         prop::sample::select(Store::ALL.to_vec()),
-        prop::array::uniform6((any::<u32>(), source())).prop_map(|mut v| {
-            // Each value within its key's range on the largest capacity
-            // (16 bits for cols, rows and dcap), as a board reports them.
-            let widest = Capacity {
-                max_cols: u16::MAX,
-                max_rows: u16::MAX,
-                max_dcap: u16::MAX,
-            };
-            for (slot, k) in v.iter_mut().zip(Key::ALL) {
-                let (lo, hi) = k.range(&widest);
-                slot.0 = lo + slot.0 % (hi - lo).saturating_add(1).max(1);
-                if hi == u32::MAX {
-                    slot.0 = slot.0.max(lo);
-                }
-            }
-            v
-        }),
         (prop::sample::select(ResetCause::ALL.to_vec()), any::<u32>()),
         (any::<u32>(), any::<u32>(), any::<u32>()),
-        prop::sample::select(Verdict::ALL.to_vec()),
+        prop::option::of(prop::sample::select(Verdict::ALL.to_vec())),
     )
         .prop_map(
-            move |((j1, j2, max_cols, max_rows), store, values, (rst, boots), (a, b, c), v)| {
-                Status {
-                    firmware: fw,
-                    j1,
-                    j2,
-                    max_cols,
-                    max_rows,
-                    store,
-                    values,
-                    reset_cause: rst,
-                    boots,
-                    last: LastScan {
-                        scans: a,
-                        defects: b,
-                        objects: c,
-                        verdict: v,
-                    },
-                }
+            move |((j1, j2, max_cols, max_rows), store, (rst, boots), (a, b, c), v)| Status {
+                firmware: fw,
+                j1,
+                j2,
+                max_cols,
+                max_rows,
+                store,
+                reset_cause: rst,
+                boots,
+                last: LastScan {
+                    scans: a,
+                    defects: b,
+                    objects: c,
+                    verdict: v,
+                },
             },
         )
 }
@@ -584,12 +615,14 @@ proptest! {
     #[test]
     fn every_reply_round_trips(
         id in any::<u32>(),
-        key in key(), value in any::<u32>(), src in source(),
+        key in key(), v in any::<u32>(), src in source(),
         n in 1..=MAX_CALIBRATION_SCANS,
         cal in prop::array::uniform7(any::<u32>()),
         why in refusal(),
         st in status("0.1.0-rc.1+g3af9"),
     ) {
+        // A value of the key's kind: flags and choices are 0 or 1.
+        let value = if key.kind() == Kind::Number { v } else { v & 1 };
         let c = Calibration {
             scans: n, positions: cal[0], threshold: cal[1], power_threshold: cal[2],
             median: cal[3], mad: cal[4], power_median: cal[5], power_mad: cal[6],

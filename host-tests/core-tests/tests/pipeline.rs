@@ -42,6 +42,10 @@ fn header_rows_and_end_match_the_engine() {
             firmware_version: "pipeline-test",
             reset_cause: ResetCause::Watchdog,
             boots: 7,
+            rows: rows as u32,
+            outputs: cvm_core::settings::Outputs::DEFAULT,
+            sources: [cvm_core::settings::Source::Default; cvm_core::settings::KEYS],
+            store: cvm_core::settings::Store::Empty,
         };
         let data = random_scan(&mut r, rows, cols, j, j);
         let n = j * j;

@@ -2,9 +2,10 @@
 //! line length bounds.
 
 use cvm_core::protocol::{
-    self, HeaderInfo, Line, LineSink, MAX_LINE, ParseError, Priority, ResetCause, crc16,
+    self, HeaderInfo, Line, LineSink, MAX_LINE, Origin, ParseError, Priority, ResetCause, crc16,
     decode_score, encode_end, encode_header, encode_row, encode_score,
 };
+use cvm_core::settings::{KEYS, Source, Store};
 use cvm_core::{PositionScore, RowSummary, RowView, Totals};
 use proptest::prelude::*;
 
@@ -42,7 +43,60 @@ fn header(fw: &'static str, q: i32) -> HeaderInfo<'static> {
         max_defect_lines: 16,
         reset_cause: ResetCause::Watchdog,
         boots: 3,
+        origin: Some(Origin {
+            rows: 200,
+            sources: SOURCES,
+            store: Store::Loaded,
+        }),
     }
+}
+
+/// Every source somewhere, in an order no default would give.
+const SOURCES: [Source; KEYS] = {
+    let mut s = [Source::Flash; KEYS];
+    s[0] = Source::Changed;
+    s[3] = Source::Default;
+    s[KEYS - 1] = Source::Changed;
+    s
+};
+
+#[test]
+fn header_origin_is_written_as_specified_and_version_5_still_reads() {
+    let mut s = Lines::default();
+    encode_header(&header("fw", 23), &mut s);
+    let line = String::from_utf8(s.0[0].0.clone()).unwrap();
+    let src = format!("cffd{}c", "f".repeat(KEYS - 5));
+    let want_tail = format!(",rst=wdg,boots=3,rows=200,src={src},store=ok*");
+    assert!(line.contains(&want_tail), "{line}");
+    assert!(line.starts_with("H,v=6,"), "{line}");
+    // A version 5 header: no origin fields, and none may follow boots.
+    let v5 = "H,v=5,fw=0.1.0,j=15x15,cols=300,k=P,b=0,w=uniform,norm=1,fs=65535,thr=4194304,pthr=3277,q=23,scores=0,dcap=0,rst=por,boots=1";
+    let framed = |body: &str| format!("{body}*{:04X}\n", crc16(body.as_bytes())).into_bytes();
+    let v5_line = framed(v5);
+    let Ok(Line::Header(h)) = protocol::parse(&v5_line) else {
+        panic!("version 5 header refused")
+    };
+    assert_eq!((h.version, h.origin, h.boots), (5, None, 1));
+    let v6_short = v5.replace("v=5", "v=6");
+    assert!(
+        protocol::parse(&framed(&v6_short)).is_err(),
+        "version 6 needs its origin"
+    );
+    let d = "d".repeat(KEYS);
+    let short = "d".repeat(KEYS - 1);
+    for bad in [
+        format!(",rows=1,src={short},store=none"),
+        format!(",rows=1,src={short}x,store=none"),
+        format!(",rows=1,src={d}d,store=none"),
+        format!(",rows=1,src={d},store=maybe"),
+        format!(",rows=1,src={d}"),
+        format!(",rows=x,src={d},store=none"),
+    ] {
+        let l = format!("{v6_short}{bad}");
+        assert!(protocol::parse(&framed(&l)).is_err(), "{l}");
+    }
+    let good = format!("{v6_short},rows=1,src={d},store=none");
+    assert!(protocol::parse(&framed(&good)).is_ok(), "{good}");
 }
 
 #[test]

@@ -30,6 +30,9 @@ fn header_with(key: &str, value: &str) -> Vec<u8> {
         ("dcap", "0".into()),
         ("rst", "por".into()),
         ("boots", "1".into()),
+        ("rows", "300".into()),
+        ("src", "d".repeat(15)),
+        ("store", "none".into()),
     ];
     let body: Vec<String> = fields
         .iter()

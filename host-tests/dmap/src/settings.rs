@@ -82,7 +82,7 @@ pub fn resolve(
     let settings = pipeline_settings(
         &scorer,
         output,
-        cols,
+        (rows, cols),
         threshold_units,
         power_threshold_units,
     );
@@ -163,7 +163,7 @@ fn check_cols(cols: usize) -> Result<()> {
 fn pipeline_settings(
     scorer: &Scorer,
     output: &OutputArgs,
-    cols: usize,
+    (rows, cols): (usize, usize),
     threshold_units: f64,
     power_threshold_units: f64,
 ) -> Settings {
@@ -176,6 +176,10 @@ fn pipeline_settings(
         firmware_version: cvm_core::VERSION,
         reset_cause: cvm_core::protocol::ResetCause::PowerOn,
         boots: 1,
+        rows: rows as u32,
+        outputs: cvm_core::settings::Outputs::DEFAULT,
+        sources: [cvm_core::settings::Source::Default; cvm_core::settings::KEYS],
+        store: cvm_core::settings::Store::Empty,
     }
 }
 
@@ -210,7 +214,7 @@ impl OutputArgs {
     /// already made, from these options alone: the threshold given or the
     /// default whatever the normalisation (tests build pipelines this way;
     /// a command resolves its whole run with [`resolve`]).
-    pub fn settings(&self, scorer: &Scorer, cols: usize) -> Result<Settings> {
+    pub fn settings(&self, scorer: &Scorer, (rows, cols): (usize, usize)) -> Result<Settings> {
         let t = self.threshold.unwrap_or(DEFAULT_THRESHOLD);
         if t.is_nan() || t < 0.0 || t.is_infinite() {
             bail!(
@@ -223,7 +227,7 @@ impl OutputArgs {
             Some(path) => Calibration::load(path)?.power_threshold,
             None => power_threshold_units(self.power_threshold)?,
         };
-        Ok(pipeline_settings(scorer, self, cols, t, power))
+        Ok(pipeline_settings(scorer, self, (rows, cols), t, power))
     }
 }
 

@@ -938,7 +938,7 @@ fn banded_scoring_equals_whole_scan_scoring() {
     };
     let want = dmap::stream::stream_scan(
         &scorer,
-        output.settings(&scorer, cols).unwrap(),
+        output.settings(&scorer, (rows, cols)).unwrap(),
         rows,
         &data,
     )

@@ -80,8 +80,13 @@ fn stream_then_listen_reproduces_cvm_fixed() {
                 calibration: None,
                 ..OutputArgs::default()
             };
-            let bytes =
-                stream_scan(&scorer, out.settings(&scorer, cols).unwrap(), rows, &data).unwrap();
+            let bytes = stream_scan(
+                &scorer,
+                out.settings(&scorer, (rows, cols)).unwrap(),
+                rows,
+                &data,
+            )
+            .unwrap();
             let dec = decode(&bytes);
             assert!(dec.errors.is_empty(), "{:?}", dec.errors);
             assert_eq!(dec.scans.len(), 1);
@@ -197,7 +202,13 @@ fn sample_stream() -> (Scorer, Vec<u8>, usize, usize) {
         calibration: None,
         ..OutputArgs::default()
     };
-    let bytes = stream_scan(&scorer, out.settings(&scorer, cols).unwrap(), rows, &data).unwrap();
+    let bytes = stream_scan(
+        &scorer,
+        out.settings(&scorer, (rows, cols)).unwrap(),
+        rows,
+        &data,
+    )
+    .unwrap();
     (scorer, bytes, rows, cols)
 }
 
@@ -296,7 +307,7 @@ fn duplicated_and_missing_frames_reach_the_totals() {
         calibration: None,
         ..OutputArgs::default()
     }
-    .settings(&scorer, cols)
+    .settings(&scorer, (rows, cols))
     .unwrap();
     let words = cvm_core::stream::row_words(cols, j1 * j2, 1);
     let (mut a, mut b) = (vec![0i32; words], vec![0i32; words]);
@@ -441,7 +452,13 @@ fn bandwidth_figures_of_the_protocol_document() {
         calibration: None,
         ..OutputArgs::default()
     };
-    let bytes = stream_scan(&scorer, out.settings(&scorer, cols).unwrap(), rows, &data).unwrap();
+    let bytes = stream_scan(
+        &scorer,
+        out.settings(&scorer, (rows, cols)).unwrap(),
+        rows,
+        &data,
+    )
+    .unwrap();
     let ls = lines(&bytes);
     let per_type = |t: u8| {
         ls.iter()
@@ -597,6 +614,12 @@ fn bandwidth_figures_of_the_protocol_document() {
             max_defect_lines: u16::MAX,
             reset_cause: ResetCause::Other,
             boots: max,
+            // The longest origin: every source one letter, the longest store word.
+            origin: Some(cvm_core::protocol::Origin {
+                rows: max,
+                sources: [cvm_core::settings::Source::Changed; cvm_core::settings::KEYS],
+                store: cvm_core::settings::Store::Foreign,
+            }),
         },
         &mut sink,
     );
@@ -672,6 +695,10 @@ fn absurd_claimed_size_is_refused() {
         firmware_version: "0.1.0",
         reset_cause: cvm_core::protocol::ResetCause::PowerOn,
         boots: 1,
+        rows: 1,
+        outputs: cvm_core::settings::Outputs::DEFAULT,
+        sources: [cvm_core::settings::Source::Default; cvm_core::settings::KEYS],
+        store: cvm_core::settings::Store::Empty,
     };
     let h = cvm_core::protocol::HeaderInfo::new(&scorer, &settings);
     cvm_core::protocol::encode_header(&h, &mut sink);

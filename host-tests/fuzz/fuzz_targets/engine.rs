@@ -524,6 +524,10 @@ fn run(u: &mut Unstructured) -> Result<()> {
         firmware_version: "fuzz",
         reset_cause: cvm_core::protocol::ResetCause::ALL[u.int_in_range(0..=4)?],
         boots: u.arbitrary()?,
+        rows: 1,
+        outputs: cvm_core::settings::Outputs::DEFAULT,
+        sources: [cvm_core::settings::Source::Default; cvm_core::settings::KEYS],
+        store: cvm_core::settings::Store::Empty,
     };
     let cells = scorer.cells();
     let words = row_words_for(cols as usize, scorer.config());

@@ -85,6 +85,10 @@ impl Scan {
             firmware_version: "test",
             reset_cause: cvm_core::protocol::ResetCause::PowerOn,
             boots: 1,
+            rows: self.rows,
+            outputs: cvm_core::settings::Outputs::DEFAULT,
+            sources: [cvm_core::settings::Source::Default; cvm_core::settings::KEYS],
+            store: cvm_core::settings::Store::Empty,
         }
     }
 

@@ -210,7 +210,7 @@ impl Kernels {
             max_defect_lines: 16,
             ..OutputArgs::default()
         }
-        .settings(&self.scorer, scan.cols)?;
+        .settings(&self.scorer, (scan.rows, scan.cols))?;
         let n = scan.cells();
         let words = cvm_core::stream::row_words_for(scan.cols, self.scorer.config());
         let (mut a, mut b) = (vec![0i32; words], vec![0i32; words]);

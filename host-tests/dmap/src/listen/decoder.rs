@@ -7,6 +7,9 @@
 use super::scan::{Kind, LineError, MAX_IMAGE_POSITIONS, ScanResult};
 use cvm_core::protocol::{self, Line};
 
+/// The oldest protocol version whose streams this decoder reads.
+pub const OLDEST_VERSION: u32 = 5;
+
 /// Scans one run decodes by default, and at most (`--max-scans`).
 pub const DEFAULT_MAX_SCANS: u32 = 64;
 pub const MAX_SCANS: u32 = 4096;
@@ -326,7 +329,7 @@ mod tests {
             max_defect_lines: 20,
             ..Default::default()
         }
-        .settings(&scorer, 10)
+        .settings(&scorer, (2, 10))
         .unwrap();
         // Two rows of ten columns: 2 row lines, 20 scores, 20 defects and
         // (every position a defect) one object a scan.

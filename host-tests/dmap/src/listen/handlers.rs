@@ -3,7 +3,7 @@
 //! filed with its scan.
 
 use super::checks::{check_complete, header_fault, object_fault};
-use super::decoder::{Decoder, MAX_DEFECTS};
+use super::decoder::{Decoder, MAX_DEFECTS, OLDEST_VERSION};
 use super::scan::{Defect, Kind, LineError, MAX_IMAGE_POSITIONS, Order, ScanResult};
 use cvm_core::RowSummary;
 use cvm_core::objects::Object;
@@ -61,13 +61,15 @@ impl Decoder {
                 what,
             });
         }
-        if h.version != protocol::VERSION {
+        // Version 6 only added fields to the header: 5 reads the same.
+        if !(OLDEST_VERSION..=protocol::VERSION).contains(&h.version) {
             s.problems.push(LineError {
                 line: self.line_no,
                 kind: Kind::Version,
                 what: format!(
-                    "protocol version {} (this decoder reads {})",
+                    "protocol version {} (this decoder reads {} to {})",
                     h.version,
+                    OLDEST_VERSION,
                     protocol::VERSION
                 ),
             });

@@ -1,0 +1,162 @@
+//! USART3's receiver: the command channel's bytes, each with the errors
+//! the receiver flagged for it, into a ring that the command task drains.
+//!
+//! Interrupt-driven rather than DMA: the receiver's error flags (framing,
+//! noise, parity) belong to the byte at the head of its FIFO, and only a
+//! handler that reads the flags before each byte can keep them with the
+//! byte, which is what lets a damaged line be refused with its reason
+//! (docs/protocol.md, "Refusals"). At 921 600 baud a byte comes every
+//! 10.9 µs; the handler costs about 60 instructions a byte and runs below
+//! DRDY and the reads' ends, which preempt it.
+
+use core::cell::RefCell;
+
+use cvm_core::command::LinkError;
+use embassy_stm32::interrupt::{InterruptExt, Priority};
+use embassy_stm32::pac;
+use embassy_stm32::pac::gpio::vals::Moder;
+use embassy_stm32::peripherals::PD9;
+use embassy_stm32::{Peri, interrupt};
+use embassy_sync::blocking_mutex::Mutex;
+use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+use embassy_sync::signal::Signal;
+
+/// Received bytes the ring holds: several request lines, so that a
+/// burst of requests waits here while the command task is busy.
+const RING: usize = 1024;
+
+/// One received item: a byte with the errors it arrived with, or an
+/// overrun (bytes lost before the next one).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Rx {
+    Byte(u8, Option<LinkError>),
+    Overrun,
+}
+
+struct Ring {
+    buf: [Rx; RING],
+    head: usize,
+    len: usize,
+    /// Items lost because the ring was full; reported as one overrun.
+    full: bool,
+}
+
+impl Ring {
+    const fn new() -> Self {
+        Ring {
+            buf: [Rx::Overrun; RING],
+            head: 0,
+            len: 0,
+            full: false,
+        }
+    }
+
+    fn push(&mut self, x: Rx) {
+        if self.len == RING {
+            self.full = true;
+            return;
+        }
+        if let Some(slot) = self.buf.get_mut((self.head + self.len) % RING) {
+            *slot = x;
+            self.len += 1;
+        }
+    }
+
+    fn pop(&mut self) -> Option<Rx> {
+        if self.full {
+            // What the full ring dropped comes after what it holds; an
+            // overrun now damages the line those items belonged to.
+            if self.len == 0 {
+                self.full = false;
+                return Some(Rx::Overrun);
+            }
+        }
+        if self.len == 0 {
+            return None;
+        }
+        let x = self.buf.get(self.head).copied();
+        self.head = (self.head + 1) % RING;
+        self.len -= 1;
+        x
+    }
+}
+
+static RX: Mutex<CriticalSectionRawMutex, RefCell<Ring>> = Mutex::new(RefCell::new(Ring::new()));
+/// Receiver -> command task: a line end, an error, or a ring half full.
+pub static RX_READY: Signal<CriticalSectionRawMutex, ()> = Signal::new();
+
+/// The next received item, if any.
+pub fn take() -> Option<Rx> {
+    RX.lock(|r| r.borrow_mut().pop())
+}
+
+#[interrupt]
+fn USART3() {
+    let u = pac::USART3;
+    let mut wake = false;
+    RX.lock(|r| {
+        let mut r = r.borrow_mut();
+        loop {
+            let isr = u.isr().read();
+            if isr.ore() {
+                u.icr().write(|w| w.set_ore(true));
+                r.push(Rx::Overrun);
+                wake = true;
+            }
+            if !isr.rxne() {
+                break;
+            }
+            // The flags are the head byte's: read them before the byte.
+            let e = if isr.fe() {
+                Some(LinkError::Framing)
+            } else if isr.ne() || isr.pe() {
+                Some(LinkError::Noise)
+            } else {
+                None
+            };
+            if isr.fe() || isr.ne() || isr.pe() {
+                u.icr().write(|w| {
+                    w.set_fe(true);
+                    w.set_ne(true);
+                    w.set_pe(true);
+                });
+            }
+            let b = u.rdr().read().dr() as u8;
+            r.push(Rx::Byte(b, e));
+            wake |= b == b'\n' || e.is_some() || r.len >= RING / 2;
+        }
+    });
+    if wake {
+        RX_READY.signal(());
+    }
+}
+
+/// Starts receiving on PD9 (USART3 RX, the ST-LINK's virtual COM port),
+/// once `main` has configured USART3 for transmission (baud rate, frame
+/// format and FIFO are shared).
+pub fn enable(_rx: Peri<'static, PD9>) {
+    // PD9 as alternate function 7 (USART3_RX), pulled up so that an
+    // unconnected line idles high instead of reading breaks.
+    let d = pac::GPIOD;
+    d.pupdr()
+        .modify(|w| w.set_pupdr(9, pac::gpio::vals::Pupdr::PULL_UP));
+    d.afr(1).modify(|w| w.set_afr(1, 7));
+    d.moder().modify(|w| w.set_moder(9, Moder::ALTERNATE));
+    let u = pac::USART3;
+    u.icr().write(|w| {
+        w.set_fe(true);
+        w.set_ne(true);
+        w.set_pe(true);
+        w.set_ore(true);
+    });
+    u.cr3().modify(|w| w.set_eie(true));
+    u.cr1().modify(|w| {
+        w.set_re(true);
+        w.set_rxneie(true);
+        w.set_peie(true);
+    });
+    let irq = interrupt::USART3;
+    irq.set_priority(Priority::P6);
+    // SAFETY: the handler touches only USART3's receiver and RX.
+    unsafe { irq.enable() };
+}
