@@ -11,9 +11,10 @@ use serde_json::Value;
 
 const TAG: &str = "listen-input";
 
-/// The stream of a small scan of seed `seed`, with score and defect lines.
-fn stream(seed: u64) -> Vec<u8> {
-    let scan = tmp_in(TAG, &format!("scan{seed}.npy"));
+/// The stream of a small scan of seed `seed`, with score and defect lines
+/// (its scan file named for the test, `tag`: tests run in parallel).
+fn stream(tag: &str, seed: u64) -> Vec<u8> {
+    let scan = tmp_in(TAG, &format!("{tag}-scan{seed}.npy"));
     spot_scan(&scan, 7, 50, 5, seed);
     dmap_ok(&[
         "stream",
@@ -96,7 +97,7 @@ fn no_scan_is_a_failure_and_the_json_says_so() {
 /// scan's lines are lines outside a scan, and the run fails.
 #[test]
 fn headers_a_scorer_cannot_write_are_refused() {
-    let bytes = stream(1);
+    let bytes = stream("ranges", 1);
     let ls = lines(&bytes);
     let head = String::from_utf8(ls[0].clone()).unwrap();
     let body = head.split('*').next().unwrap();
@@ -140,7 +141,7 @@ fn headers_a_scorer_cannot_write_are_refused() {
 /// reported.
 #[test]
 fn a_header_q_its_configuration_cannot_have_is_reported() {
-    let bytes = stream(1);
+    let bytes = stream("q", 1);
     let mut ls = lines(&bytes);
     let cfg = cvm_core::Config::paper(cvm_core::Geometry::new(5, 5).unwrap());
     let q = cvm_core::Scorer::new(&cfg).unwrap().score_frac_bits();
@@ -169,7 +170,7 @@ fn a_header_q_its_configuration_cannot_have_is_reported() {
 /// cut, and no row of the second is filed with the first.
 #[test]
 fn a_scan_after_a_line_cut_mid_way_is_found_and_kept_apart() {
-    let (first, second) = (stream(1), stream(2));
+    let (first, second) = (stream("cut", 1), stream("cut", 2));
     let (_, alone, _) = listen("second-alone", &second, &[]);
     let first_ls = lines(&first);
     // Cut in a short line (the joined line stays within the limit) and in
@@ -225,7 +226,7 @@ fn a_scan_after_a_line_cut_mid_way_is_found_and_kept_apart() {
 /// same stream whole writes it.
 #[test]
 fn a_cut_scan_does_not_replace_an_existing_image() {
-    let bytes = stream(3);
+    let bytes = stream("o", 3);
     let img = tmp_in(TAG, "kept.npy");
     std::fs::write(&img, b"a good image of an earlier run").unwrap();
     let cut = &bytes[..bytes.len() * 2 / 3];

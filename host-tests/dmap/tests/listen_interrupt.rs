@@ -21,10 +21,11 @@ const TAG: &str = "listen-interrupt";
 
 /// Two different scans' streams (with score lines, so that every line
 /// type but `D` occurs, and defect lines too).
-fn two_streams() -> (Vec<u8>, Vec<u8>) {
+/// Tests run in parallel: each names its own scan files with `tag`.
+fn two_streams(tag: &str) -> (Vec<u8>, Vec<u8>) {
     let mut out = Vec::new();
     for seed in [1, 2] {
-        let scan = tmp_in(TAG, &format!("scan{seed}.npy"));
+        let scan = tmp_in(TAG, &format!("{tag}-scan{seed}.npy"));
         spot_scan(&scan, 8, 30, 5, seed);
         let o = dmap_ok(&[
             "stream",
@@ -160,7 +161,9 @@ fn mid_line(second: &[u8]) -> usize {
 /// second scan: scan 1 as the reference, scan 2 cut, its image not
 /// written and a file already there left alone.
 fn check_cut(code: Option<i32>, v: &Value, err: &str, first: &[u8], img: &Path, img2: &Path) {
-    let (want, want_img) = reference("first-alone", first);
+    // Tests run in parallel: the reference's files are named for `img`.
+    let name = format!("{}-alone", img.file_stem().unwrap().to_string_lossy());
+    let (want, want_img) = reference(&name, first);
     assert_eq!(code, Some(1), "{err}");
     assert_eq!(v["interrupted"], "SIGINT");
     let scans = v["scans"].as_array().unwrap();
@@ -193,7 +196,7 @@ fn outputs(name: &str) -> (PathBuf, PathBuf) {
 /// A FIFO: one complete scan and part of a second, then SIGINT.
 #[test]
 fn sigint_on_a_fifo_keeps_the_complete_scan_and_reports_the_cut_one() {
-    let (first, second) = two_streams();
+    let (first, second) = two_streams("fifo");
     let fifo = tmp_in(TAG, "fifo");
     let _ = std::fs::remove_file(&fifo);
     let c = std::ffi::CString::new(s(&fifo)).unwrap();
@@ -220,7 +223,7 @@ fn sigint_on_a_fifo_keeps_the_complete_scan_and_reports_the_cut_one() {
 /// Standard input from a pipe (`... | dmap listen --input -`).
 #[test]
 fn sigint_on_standard_input_keeps_the_complete_scan() {
-    let (first, second) = two_streams();
+    let (first, second) = two_streams("stdin");
     let (img, img2) = outputs("stdin");
     let mut child = Command::new(env!("CARGO_BIN_EXE_dmap"))
         .args(["listen", "--input", "-", "--json", "-o", s(&img)])
@@ -290,7 +293,7 @@ fn pty() -> (std::fs::File, std::fs::File, String) {
 /// images written); with a scan under way, it is reported cut.
 #[test]
 fn sigint_ends_a_port_run_of_scans_0() {
-    let (first, second) = two_streams();
+    let (first, second) = two_streams("port");
     let both = [first.clone(), second.clone()].concat();
     let (want, _) = reference("both", &both);
     for cut in [false, true] {
@@ -331,7 +334,7 @@ fn sigint_ends_a_port_run_of_scans_0() {
 /// SIGTERM (a service stopped) is handled like SIGINT.
 #[test]
 fn sigterm_between_scans_is_a_clean_end() {
-    let (first, _) = two_streams();
+    let (first, _) = two_streams("term");
     let (want, want_img) = reference("term", &first);
     let img = tmp_in(TAG, "term-out.npy");
     let mut child = Command::new(env!("CARGO_BIN_EXE_dmap"))

@@ -2,9 +2,10 @@
 //! fits its box and the scan, and a finished scan whose lines agree with
 //! one another and with its end line.
 
+use super::crosscheck::cross_check;
 use super::scan::{Kind, LineError, ScanResult, q8};
 use cvm_core::objects::Object;
-use cvm_core::protocol::{EndInfo, HeaderInfo};
+use cvm_core::protocol::{self, EndInfo, HeaderInfo};
 use cvm_core::{Fault, Verdict};
 
 /// Cross-checks a finished scan: every row has its row line, every
@@ -80,18 +81,24 @@ pub(super) fn check_complete(s: &mut ScanResult, line_no: usize) {
         });
     }
     if s.scores_enabled {
-        let dropped = s.end.map_or(0, |e| e.dropped);
-        let expected = rows as usize * s.cols;
-        let (with, without) = s.coverage();
-        if with + without < expected {
+        // A score line the firmware dropped and counted is allowed; one
+        // lost otherwise (or one too many counted) is damage.
+        let dropped = s.end.map_or(0, |e| u64::from(e.dropped));
+        let expected = u64::from(rows) * s.cols.div_ceil(protocol::SCORES_PER_LINE) as u64;
+        let missing = expected.saturating_sub(s.score_lines);
+        if missing != dropped {
             s.add_problem(LineError {
                 line: line_no,
                 kind: Kind::Missing,
                 what: format!(
-                    "{} of {expected} positions have no score ({dropped} score line(s) reported dropped by the firmware)",
-                    expected - with - without
+                    "{missing} of {expected} score line(s) missing, but the end line counts {dropped} dropped"
                 ),
             });
+        }
+    }
+    if let Some(e) = s.end {
+        for p in cross_check(s, &e, line_no) {
+            s.add_problem(p);
         }
     }
 }

@@ -4,6 +4,7 @@
 
 use super::checks::{check_complete, header_fault, object_fault};
 use super::decoder::{Decoder, MAX_DEFECTS, OLDEST_VERSION};
+use super::linechecks::{defect_fault, end_fault, row_fault, scores_fault};
 use super::scan::{Defect, Kind, LineError, MAX_IMAGE_POSITIONS, Order, ScanResult};
 use cvm_core::RowSummary;
 use cvm_core::objects::Object;
@@ -54,6 +55,9 @@ impl Decoder {
             ..ScanResult::default()
         };
         s.threshold = s.units(h.threshold);
+        s.thr = h.threshold;
+        s.pthr = h.power_threshold;
+        s.header_rows = h.origin.map(|o| o.rows);
         if let Some(what) = header_fault(h) {
             s.problems.push(LineError {
                 line: self.line_no,
@@ -121,8 +125,13 @@ impl Decoder {
             );
         }
         s.unlisted_defects += (summary.defects - listed.min(summary.defects)) as u64;
+        let faults = row_fault(s, &summary, listed);
         s.rows.insert(summary.row, summary);
+        s.row_lines.insert(summary.row, self.line_no);
         self.kept += 1;
+        for what in faults {
+            self.problem(Kind::Field, what);
+        }
     }
 
     /// A `D` line: one of the row's strongest defects, checked against its
@@ -157,6 +166,9 @@ impl Decoder {
             power: cvm_core::power::to_units(pmag as u32),
             strength,
             flags,
+            mag,
+            pmag,
+            line: self.line_no,
         });
         let order = &mut s.order;
         let what = match order.row {
@@ -186,8 +198,16 @@ impl Decoder {
             *arrived += 1;
         }
         order.last_defect = Some((strength, col));
+        let faults = s
+            .defects
+            .last()
+            .map(|d| defect_fault(s, d))
+            .unwrap_or_default();
         if let Some(what) = what {
             self.problem(Kind::Order, what);
+        }
+        for what in faults {
+            self.problem(Kind::Field, what);
         }
     }
 
@@ -248,7 +268,12 @@ impl Decoder {
             }
         }
         s.n_scores += added;
+        s.score_lines += u64::from(added == n);
         self.kept += added;
+        let faults = scores_fault(s, row, col0, chars);
+        for what in faults {
+            self.problem(Kind::Field, what);
+        }
         if dup {
             self.problem(
                 Kind::Duplicate,
@@ -263,8 +288,12 @@ impl Decoder {
             return self.error(Kind::OutsideScan, "end line outside a scan (header lost?)");
         };
         s.end = Some(e);
+        let faults = end_fault(&s, &e);
         let order = s.order;
         self.current = Some(s);
+        for what in faults {
+            self.problem(Kind::Field, what);
+        }
         self.check_defects_arrived(order);
         let Some(mut s) = self.current.take() else {
             return;
@@ -349,6 +378,7 @@ impl Decoder {
         }
         self.kept += 1;
         s.objects.push(o);
+        s.object_lines.push(self.line_no);
     }
 
     /// After the last line of a row: as many `D` lines as its `R` line listed.

@@ -12,10 +12,12 @@
 
 mod args;
 mod checks;
+mod crosscheck;
 mod decoder;
 mod handlers;
 mod interrupt;
 mod json;
+mod linechecks;
 mod reader;
 mod run;
 mod scan;

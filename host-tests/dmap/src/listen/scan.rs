@@ -109,6 +109,12 @@ pub struct Defect {
     /// `Q16` (65536 = at the threshold).
     pub strength: u32,
     pub flags: u8,
+    /// The magnitude and power magnitude as the line carries them
+    /// (`Q(q)`, `Q15`).
+    pub mag: u32,
+    pub pmag: u16,
+    /// Its line number in the stream.
+    pub line: usize,
 }
 
 /// Strength (`Q16` ratio to the threshold) as a ratio.
@@ -167,6 +173,12 @@ pub struct ScanResult {
     /// Score format: integer scores are `s / 2^q` distance units.
     pub q: i32,
     pub threshold: f64,
+    /// The header's thresholds as the lines compare with them (`thr`, `Q(q)`;
+    /// `pthr`, `Q15`).
+    pub thr: u32,
+    pub pthr: u32,
+    /// The header's `rows` (version 6 on).
+    pub header_rows: Option<u32>,
     /// Power channel threshold as a contrast (`pthr / 2^15`); `None`: the
     /// channel is off (`pthr` above every power magnitude).
     pub power_threshold: Option<f64>,
@@ -188,13 +200,18 @@ pub struct ScanResult {
     /// follows the lines received, never the geometry a (possibly
     /// corrupted) header claims.
     pub scores: BTreeMap<u32, BTreeMap<u32, ScoreValue>>,
-    /// Row summaries received.
+    /// Row summaries received, and the line each came on.
     pub rows: BTreeMap<u32, cvm_core::RowSummary>,
+    pub(super) row_lines: BTreeMap<u32, usize>,
+    /// `S` lines filed (within the columns, not repeated).
+    pub(super) score_lines: u64,
     pub defects: Vec<Defect>,
     /// Defects counted by row lines but not listed (per-row cap).
     pub unlisted_defects: u64,
-    /// Defect objects (`O` lines) in the order they arrived.
+    /// Defect objects (`O` lines) in the order they arrived, and the line
+    /// each came on.
     pub objects: Vec<Object>,
+    pub(super) object_lines: Vec<usize>,
     /// `O` lines that arrived in the scan, kept or not (for the end
     /// line's `obj`).
     pub objects_arrived: u64,
