@@ -192,14 +192,20 @@ impl Decoder {
             }
             return;
         }
-        // MAX_LINE counts the newline.
-        if trimmed.len() >= protocol::MAX_LINE {
+        // Both limits count the newline, not a carriage return before it.
+        let limit = match trimmed.first() {
+            Some(b'H' | b'E') => protocol::MAX_LINE,
+            _ => protocol::MAX_ROW_LINE,
+        };
+        if trimmed.len() >= limit {
+            if let Some(at) = resync(trimmed, 1) {
+                return self.decode_resynced(trimmed, at);
+            }
             self.error(
                 Kind::TooLong,
                 format!(
-                    "line of {} bytes is longer than the protocol's {} (garbage or a lost newline)",
+                    "line of {} bytes is longer than the protocol's {limit} for its type (garbage or a lost newline)",
                     trimmed.len() + 1,
-                    protocol::MAX_LINE
                 ),
             );
             return;
@@ -355,23 +361,35 @@ mod tests {
     }
 
     #[test]
-    fn a_line_of_max_line_bytes_is_whole_one_more_is_damage() {
-        // A valid frame padded with digits in a field to the exact length.
-        let line = |len: usize| {
-            let body = "R,0,0,-,0,0,0,0,";
+    fn a_line_of_its_limit_is_whole_one_byte_more_is_damage() {
+        // A frame padded with digits in a field to the exact length: the
+        // limit is the type's (newline included), whatever the fields.
+        let line = |body: &str, len: usize| {
             let mut b = body.to_string();
             while b.len() + 6 < len {
                 b.push('0');
             }
             format!("{b}*{:04X}\n", protocol::crc16(b.as_bytes()))
         };
-        for (len, damaged) in [(protocol::MAX_LINE, false), (protocol::MAX_LINE + 1, true)] {
-            let mut d = Decoder::new();
-            let l = line(len);
-            assert_eq!(l.len(), len);
-            d.feed(l.as_bytes());
-            let too_long = d.errors.iter().any(|e| e.what.contains("longer than"));
-            assert_eq!(too_long, damaged, "{len}");
+        for (body, limit) in [
+            ("R,0,0,-,0,0,0,0,", protocol::MAX_ROW_LINE),
+            ("O,1,", protocol::MAX_ROW_LINE),
+            ("E,rows=", protocol::MAX_LINE),
+            ("H,v=", protocol::MAX_LINE),
+        ] {
+            for (len, damaged) in [(limit, false), (limit + 1, true)] {
+                let mut d = Decoder::new();
+                let l = line(body, len);
+                assert_eq!(l.len(), len);
+                d.feed(l.as_bytes());
+                let too_long = d.errors.iter().any(|e| e.kind == Kind::TooLong);
+                assert_eq!(too_long, damaged, "{body} {len}");
+                // A carriage return before the newline does not count.
+                let mut d = Decoder::new();
+                d.feed(l.replace('\n', "\r\n").as_bytes());
+                let too_long = d.errors.iter().any(|e| e.kind == Kind::TooLong);
+                assert_eq!(too_long, damaged, "{body} {len} CRLF");
+            }
         }
     }
 }
