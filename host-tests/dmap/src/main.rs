@@ -39,6 +39,8 @@ enum Command {
     Twin(dmap::twin::TwinArgs),
     /// Maps scored per second by each implementation (f64 brute/SAT/embedding, fixed point, EMD), one thread
     Bench(dmap::bench::BenchArgs),
+    /// Write (or --check) the line protocol's conformance vectors: streams and their expected decode
+    Vectors(dmap::vectors::VectorsArgs),
 }
 
 fn main() {
@@ -81,6 +83,7 @@ fn main() {
         Command::Emulate(args) => dmap::emulate::run(&args),
         Command::Twin(args) => dmap::twin::run(&args),
         Command::Bench(args) => dmap::bench::run(&args),
+        Command::Vectors(args) => dmap::vectors::run(&args),
     };
     if let Err(e) = result {
         // A reader that closed the pipe (`dmap ... | head`) got what it
