@@ -17,7 +17,7 @@
 #   fw-app    fw-app/src/sequence.rs and queue.rs, against fw-app-tests
 #   acquire   fw-app/src/acquire.rs and driver.rs (frame acquisition,
 #             the scan driver), against fw-app-tests
-#   stream    cvm-core/src/stream.rs (gradient, border rule, flags,
+#   stream    cvm-core/src/stream/ (gradient, border rule, flags,
 #             decisions, row summaries), against core-tests and
 #             fw-app-tests
 #   embed     the paper kernels' per-map passes in cvm-core/src/scorer/
@@ -147,7 +147,7 @@ for pass in "${passes[@]}"; do
         --file fw-app/src/sequence.rs --file fw-app/src/queue.rs) ;;
     acquire) args=(--timeout "${MUTANTS_TIMEOUT:-30}" --package cvm-fw-app --test-package cvm-fw-app-tests
         --file fw-app/src/acquire.rs --file fw-app/src/driver.rs) ;;
-    stream) args=(--package cvm-core "${core_tests[@]}" --file cvm-core/src/stream.rs) ;;
+    stream) args=(--package cvm-core "${core_tests[@]}" --file "cvm-core/src/stream/*.rs") ;;
     embed) args=(--package cvm-core "${core_tests[@]}" "${paper_files[@]}"
         --re "$(fn_re "$embed_fns")") ;;
     scorer) args=(--package cvm-core "${core_tests[@]}" "${paper_files[@]}"
@@ -166,7 +166,7 @@ for pass in "${passes[@]}"; do
     emufile) args=(--package cvm-fw-app --test-package cvm-fw-app-tests --test-package dmap
         --file fw-app/src/emufile.rs) ;;
     rest) args=(--package cvm-core --package cvm-fw-app --test-workspace=true
-        --exclude 'fw-app/src/[a-z]*.rs' --exclude cvm-core/src/stream.rs
+        --exclude 'fw-app/src/[a-z]*.rs' --exclude "cvm-core/src/stream/*.rs"
         --exclude cvm-core/src/pipeline.rs --exclude cvm-core/src/power.rs
         --exclude cvm-core/src/objects.rs --exclude cvm-core/src/tables.rs
         --exclude cvm-core/src/config.rs --exclude cvm-core/src/flags.rs

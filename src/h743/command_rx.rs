@@ -21,9 +21,10 @@ use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::signal::Signal;
 
-/// Received bytes the ring holds: several request lines, so that a
-/// burst of requests waits here while the command task is busy.
-const RING: usize = 1024;
+/// Received bytes the ring holds: dozens of request lines, so that a
+/// burst of requests waits here while the replies to earlier ones are
+/// being sent.
+pub const RING: usize = 2048;
 
 /// One received item: a byte with the errors it arrived with, or an
 /// overrun (bytes lost before the next one).
@@ -37,7 +38,8 @@ struct Ring {
     buf: [Rx; RING],
     head: usize,
     len: usize,
-    /// Items lost because the ring was full; reported as one overrun.
+    /// The ring filled up: its last slot holds an overrun, and what
+    /// arrives is dropped until there is room again.
     full: bool,
 }
 
@@ -52,10 +54,21 @@ impl Ring {
     }
 
     fn push(&mut self, x: Rx) {
-        if self.len == RING {
-            self.full = true;
+        // The last slot is kept for the overrun, so that it comes in
+        // order: after the bytes kept, before the first byte that follows
+        // the loss (the line it damages is then refused `overrun`).
+        if self.len + 1 >= RING {
+            if !self.full {
+                self.full = true;
+                self.put(Rx::Overrun);
+            }
             return;
         }
+        self.full = false;
+        self.put(x);
+    }
+
+    fn put(&mut self, x: Rx) {
         if let Some(slot) = self.buf.get_mut((self.head + self.len) % RING) {
             *slot = x;
             self.len += 1;
@@ -63,14 +76,6 @@ impl Ring {
     }
 
     fn pop(&mut self) -> Option<Rx> {
-        if self.full {
-            // What the full ring dropped comes after what it holds; an
-            // overrun now damages the line those items belonged to.
-            if self.len == 0 {
-                self.full = false;
-                return Some(Rx::Overrun);
-            }
-        }
         if self.len == 0 {
             return None;
         }

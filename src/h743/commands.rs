@@ -31,11 +31,13 @@ use crate::sink::{QueueSink, SharedQueue};
 /// Bytes of the reply queue: a `status` reply (16 lines, about 600
 /// bytes) twice over, and then some.
 pub const REPLY_BYTES: usize = 2048;
-/// Room a request may need for its replies (`status`, the longest).
-const REPLY_ROOM: usize = 768;
+/// Room a request may need for its replies (`status`, the longest):
+/// the reply queue's reserve, which `main` sets (a static built with it
+/// would be an initial value in flash).
+pub const REPLY_ROOM: usize = 768;
 
 pub static REPLIES: SharedQueue<REPLY_BYTES> =
-    Mutex::new(RefCell::new(LineQueue::<REPLY_BYTES>::new(REPLY_ROOM)));
+    Mutex::new(RefCell::new(LineQueue::<REPLY_BYTES>::new(0)));
 
 /// Command side -> scoring task: the control has settings or a
 /// calibration for the scan driver.

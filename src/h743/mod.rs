@@ -109,7 +109,7 @@ fn main() -> ! {
     // outputs start with the settings in effect.
     let (store, record) = embassy_futures::block_on(settings_store::load());
     let compiled = scoring::compiled_settings(cause, boots);
-    let control = Control::new(compiled, CAPACITY, (J1 as u8, J2 as u8), store, record);
+    let control = Control::new(compiled, CAPACITY, (J1, J2), store, record);
     let settings = *control.settings();
     info!("settings record: {}", store);
     let control: &'static RefCell<Control> = CONTROL.init(RefCell::new(control));
@@ -118,6 +118,7 @@ fn main() -> ! {
     let mut wdg = IndependentWatchdog::new(pins.iwdg, WATCHDOG_US);
     wdg.unleash();
     QUEUE.lock(|q| q.borrow_mut().set_reserve(KEEP_RESERVE));
+    commands::REPLIES.lock(|q| q.borrow_mut().set_reserve(commands::REPLY_ROOM));
     drdy::enable(pins.drdy, pins.drdy_exti, pins.line_sync);
 
     let executor = EXECUTOR.init(Executor::new());

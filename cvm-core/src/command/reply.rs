@@ -5,7 +5,7 @@
 use super::key::Key;
 use super::refusal::Refusal;
 use super::status::Status;
-use super::wire::{FrameError, REPLY, checked_body, key_value_source, kv, parse_u32};
+use super::wire::{FrameError, REPLY, checked_body, kv, parse_u32, split_once};
 use crate::protocol::{LineBuf, LineSink, ParseError, Priority};
 use crate::settings::Source;
 
@@ -191,4 +191,14 @@ fn parse_refusal<'s, I: Iterator<Item = &'s [u8]>>(f: &mut I) -> Result<Refusal,
         .into_iter()
         .find(|r| r.word().as_bytes() == word)
         .ok_or(ParseError::Format)
+}
+
+/// `key=value:source`, the form of a setting in replies.
+fn key_value_source(s: &[u8]) -> Option<(Key, u32, Source)> {
+    let (name, rest) = split_once(s, b'=')?;
+    let key = Key::from_name(name)?;
+    let colon = rest.iter().rposition(|&b| b == b':')?;
+    let (v, src) = (rest.get(..colon)?, rest.get(colon + 1..)?);
+    let [c] = src else { return None };
+    Some((key, key.decode(v)?, Source::from_char(*c)?))
 }

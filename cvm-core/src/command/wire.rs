@@ -82,13 +82,3 @@ pub(super) fn split_once(s: &[u8], sep: u8) -> Option<(&[u8], &[u8])> {
     let i = s.iter().position(|&b| b == sep)?;
     Some((s.get(..i)?, s.get(i + 1..)?))
 }
-
-/// `key=value:source`, the form of a setting in replies.
-pub(super) fn key_value_source(s: &[u8]) -> Option<(super::Key, u32, crate::settings::Source)> {
-    let (name, rest) = split_once(s, b'=')?;
-    let key = super::Key::from_name(name)?;
-    let colon = rest.iter().rposition(|&b| b == b':')?;
-    let (v, src) = (rest.get(..colon)?, rest.get(colon + 1..)?);
-    let [c] = src else { return None };
-    Some((key, key.decode(v)?, crate::settings::Source::from_char(*c)?))
-}

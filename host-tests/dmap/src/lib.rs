@@ -18,6 +18,7 @@ pub mod options;
 pub mod out;
 pub mod render;
 pub mod score;
+pub mod sensor;
 pub mod settings;
 pub mod simulate;
 pub mod stream;

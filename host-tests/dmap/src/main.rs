@@ -37,6 +37,8 @@ enum Command {
     Emulate(dmap::emulate::EmulateArgs),
     /// Run the H743 release firmware on the chip model (STM32H743 on Unicorn) over a scan, with injectable faults
     Twin(dmap::twin::TwinArgs),
+    /// Talk to the sensor over its serial port: status, get, set, calibrate, save, defaults, reset
+    Sensor(dmap::sensor::SensorArgs),
     /// Maps scored per second by each implementation (f64 brute/SAT/embedding, fixed point, EMD), one thread
     Bench(dmap::bench::BenchArgs),
     /// Write (or --check) the line protocol's conformance vectors: streams and their expected decode
@@ -83,6 +85,7 @@ fn main() {
         Command::Emulate(args) => dmap::emulate::run(&args),
         Command::Twin(args) => dmap::twin::run(&args),
         Command::Bench(args) => dmap::bench::run(&args),
+        Command::Sensor(args) => dmap::sensor::run(&args),
         Command::Vectors(args) => dmap::vectors::run(&args),
     };
     if let Err(e) = result {
@@ -93,6 +96,7 @@ fn main() {
         }
         // One line, no backtrace: users read this in a terminal or a CI log.
         let _ = writeln!(std::io::stderr(), "dmap: error: {e:#}");
-        std::process::exit(1);
+        // `dmap sensor` tells refusals, timeouts and link errors apart.
+        std::process::exit(dmap::sensor::exit_code(&e).unwrap_or(1));
     }
 }

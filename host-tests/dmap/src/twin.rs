@@ -95,6 +95,12 @@ pub struct TwinArgs {
     /// A debugger is attached (the DBGMCU freeze bits apply while the core is halted)
     #[arg(long)]
     pub debugger: bool,
+    /// The scan holds K parts, scanned one after the other without a
+    /// pause: the firmware is built for rows/K rows (each part is one of
+    /// its scans), and the run waits for K end lines
+    #[arg(long, value_name = "K", default_value_t = 1,
+          value_parser = clap::value_parser!(u32).range(1..=1000))]
+    pub parts: u32,
     #[command(flatten)]
     pub link: crate::twin_requests::TwinRequestArgs,
     #[command(flatten)]
@@ -412,6 +418,7 @@ pub fn run_model(
         .args(["--beam-us", &args.beam_us.to_string()])
         .args(["--settle-ms", &args.settle_ms.to_string()])
         .args(["--start-ms", &args.start_ms.to_string()])
+        .args(["--scans", &args.parts.to_string()])
         .env("PYTHONPATH", pythonpath);
     for f in &args.faults {
         cmd.args(["--fault", f]);
@@ -502,7 +509,20 @@ pub fn run(args: &TwinArgs) -> Result<()> {
         beams,
         [args.start_ms, args.beam_us, faults_ms, args.settle_ms],
     )?;
-    let config = h743_config(&header)? + &args.pins.build_keys()?;
+    if header.rows % args.parts != 0 {
+        bail!(
+            "--parts {}: the scan's {} rows do not split into {} parts of equal rows",
+            args.parts,
+            header.rows,
+            args.parts
+        );
+    }
+    // Each part is one scan of the firmware.
+    let part = ScanHeader {
+        rows: header.rows / args.parts,
+        ..header
+    };
+    let config = h743_config(&part)? + &args.pins.build_keys()?;
     let file = twin_file(&header, &emufile)?;
     drop(emufile);
     for w in &warnings {
@@ -522,12 +542,20 @@ pub fn run(args: &TwinArgs) -> Result<()> {
     let scan_path = dir.path().join("scan.twin");
     std::fs::write(&scan_path, &file)
         .with_context(|| format!("writing {}", scan_path.display()))?;
+    let planned = args.link.planned(beams)?;
+    let with_commands = TwinArgs {
+        link: args.link.with_commands(&planned, dir.path())?,
+        ..args.clone()
+    };
     let mut uart = Vec::new();
-    let (stats, line) = run_model(&elf, &scan_path, dir, args, &mut |bytes| {
+    let (stats, line) = run_model(&elf, &scan_path, dir, &with_commands, &mut |bytes| {
         uart.extend_from_slice(bytes);
         crate::out::stdout(bytes)
     })?;
     crate::twin_pins::report(&args.pins, &stats, &uart)?;
+    for l in crate::sensor::twin::summary(&planned, &uart) {
+        let _ = writeln!(std::io::stderr(), "dmap: {l}");
+    }
     // The counters stay the last line the model prints, before dmap's
     // own verdict.
     let _ = writeln!(std::io::stderr(), "{line}");

@@ -3,8 +3,10 @@
 //! the flash kept between runs (a second run is a reboot of the same
 //! image with its flash), and a power cut at a chosen flash operation.
 //! The chip model's side is `host-tests/twin/h743twin/usart_rx.py` and
-//! `flash.py`; this file only carries the options through.
+//! `flash.py`; this file only carries the options through, and writes the
+//! `--command` requests (`crate::sensor::twin`) into a requests file.
 
+use crate::sensor::twin::{Planned, bursts, plan};
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use std::io::Write;
@@ -20,6 +22,14 @@ pub struct TwinRequestArgs {
     /// parity error (pe); `#` starts a comment
     #[arg(long, value_name = "FILE")]
     pub requests: Option<PathBuf>,
+    /// Send REQUEST, in the words of `dmap sensor`'s actions, from beam
+    /// BEAM's DRDY on (repeatable; e.g. 0:status, 5:"set thr=100",
+    /// 9:"calibrate --scans 2"): ids 1, 2, 3, ... in the order given, one
+    /// per request (a set of two keys takes two); sent after the
+    /// --requests file's bursts at the same beam. The replies are
+    /// summarised on stderr, one line per request
+    #[arg(long = "command", value_name = "BEAM:REQUEST")]
+    pub commands: Vec<String>,
     /// Bank 2 of the chip's flash: read from FILE when it exists (else
     /// erased), written back when the run ends, so that the next run with
     /// the same FILE boots with what this one left there
@@ -46,9 +56,43 @@ impl TwinRequestArgs {
         }
     }
 
+    /// The `--command` requests, checked (their beams against the scan's).
+    pub fn planned(&self, beams: u64) -> Result<Vec<Planned>> {
+        plan(&self.commands, beams)
+    }
+
+    /// With `--command`: these arguments with the commands written into a
+    /// requests file in `dir` (after the `--requests` file's bursts), which
+    /// the model reads instead.
+    pub fn with_commands(&self, planned: &[Planned], dir: &Path) -> Result<TwinRequestArgs> {
+        if planned.is_empty() {
+            return Ok(self.clone());
+        }
+        let path = dir.join("requests.txt");
+        let mut text = match &self.requests {
+            Some(p) => std::fs::read_to_string(p)
+                .with_context(|| format!("reading the requests file {}", p.display()))?,
+            None => String::new(),
+        };
+        if !text.is_empty() && !text.ends_with('\n') {
+            text.push('\n');
+        }
+        for (beam, bytes) in bursts(planned) {
+            let hex: String = bytes.iter().map(|b| format!("{b:02x}")).collect();
+            text += &format!("{beam} {hex}\n");
+        }
+        std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))?;
+        Ok(TwinRequestArgs {
+            requests: Some(path),
+            commands: Vec::new(),
+            ..self.clone()
+        })
+    }
+
     /// Refuses a requests file whose bursts start at no beam of the scan,
     /// before the firmware is built.
     pub fn check(&self, beams: u64) -> Result<()> {
+        self.planned(beams)?;
         let Some(path) = &self.requests else {
             return Ok(());
         };
@@ -100,6 +144,7 @@ mod tests {
             requests: Some(req.clone()),
             flash: Some(dir.path().join("bank2.bin")),
             power_cut: Some(3),
+            commands: Vec::new(),
         };
         assert!(args.check(8).is_ok());
         assert!(args.check(7).is_err(), "beam 7 of a 7-beam scan");

@@ -623,12 +623,12 @@ fn bandwidth_figures_of_the_protocol_document() {
         },
         &mut sink,
     );
-    assert_eq!(sink.0.len(), 186);
+    assert_eq!(sink.0.len(), 236);
     // The score line of a row numbered 2^32 - 1 from a 10-digit col0.
     let s_max = "S,".len() + 10 + 1 + 10 + 1 + 24 * protocol::SCORE_CHARS + "*XXXX\n".len();
     assert_eq!(s_max, 246);
     assert!(
-        [107, 60, 154, 253, 186, 246]
+        [107, 60, 154, 253, 236, 246]
             .iter()
             .all(|&n| n <= protocol::MAX_LINE)
     );
@@ -958,12 +958,12 @@ fn full_scale_reaches_the_header_and_the_scoring() {
     let s = &dec.scans[0];
     assert_eq!(
         (s.version, s.full_scale, s.max_defect_lines, s.boots),
-        (5, 4095, 3, 1)
+        (6, 4095, 3, 1)
     );
     assert_eq!(s.reset_cause, Some(cvm_core::protocol::ResetCause::PowerOn));
     assert_eq!(s.end.unwrap().totals.saturated as usize, saturated);
     let text = String::from_utf8_lossy(&out.stdout);
-    assert!(text.starts_with("H,v=5,"), "{text}");
+    assert!(text.starts_with("H,v=6,"), "{text}");
     assert!(text.lines().next().unwrap().contains(",fs=4095,"), "{text}");
     let listen = std::process::Command::new(exe)
         .args(["listen", "--input", "-"])
@@ -981,7 +981,7 @@ fn full_scale_reaches_the_header_and_the_scoring() {
     let summary = String::from_utf8_lossy(&listen.stdout);
     assert!(
         summary.contains(
-            "protocol v5, full scale 4095, at most 3 defect line(s) per row, reset cause por, start 1 since power-on"
+            "protocol v6, full scale 4095, at most 3 defect line(s) per row, reset cause por, start 1 since power-on"
         ),
         "{summary}"
     );

@@ -1,0 +1,252 @@
+//! The sensor's serial link as the client sees it: requests out, and the
+//! board's output read as lines, in which the replies to the request under
+//! way are picked out from the result lines around them. Result lines are
+//! counted (and copied to a file if asked); a reply line with a bad
+//! checksum, or one that answers another id, is reported on stderr and
+//! skipped.
+
+use super::failure::Failure;
+use super::words::Ask;
+use cvm_core::command::{Calibration, Key, LastScan, Reply, encode_request, parse_reply};
+use cvm_core::protocol::{LineSink, MAX_LINE, Priority, ResetCause};
+use cvm_core::settings::{Source, Store};
+use std::collections::VecDeque;
+use std::io::{Read, Write};
+use std::time::Instant;
+
+/// Longest line kept: a result line (`protocol::MAX_LINE` with its `\n`)
+/// and a `\r`; longer ones are dropped as they come (and counted).
+const LONGEST: usize = MAX_LINE + 1;
+
+/// The `status` reply, owned.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct StatusInfo {
+    pub firmware: String,
+    pub j1: u8,
+    pub j2: u8,
+    pub max_cols: u16,
+    pub max_rows: u16,
+    pub store: Store,
+    pub reset_cause: ResetCause,
+    pub boots: u32,
+    pub last: LastScan,
+}
+
+/// An `ok` reply to the request under way.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Answer {
+    Status(StatusInfo),
+    Value {
+        key: Key,
+        value: u32,
+        source: Source,
+    },
+    Calibrating(u16),
+    Calibrated(Calibration),
+    Saved,
+    Defaults,
+    Resetting,
+}
+
+struct Collect(Vec<u8>);
+
+impl LineSink for Collect {
+    fn line(&mut self, line: &[u8], _: Priority) {
+        self.0.extend_from_slice(line);
+    }
+}
+
+/// A line for a message: printable, without its line end.
+pub fn printable(line: &[u8]) -> String {
+    String::from_utf8_lossy(line)
+        .trim_end_matches(['\n', '\r'])
+        .escape_debug()
+        .to_string()
+}
+
+pub struct Link<P> {
+    port: P,
+    /// The port, for messages.
+    name: String,
+    /// What to check when nothing comes back.
+    pub hint: String,
+    partial: Vec<u8>,
+    overlong: bool,
+    lines: VecDeque<Vec<u8>>,
+    pass: Option<Box<dyn Write>>,
+    /// Lines that were not replies (result lines), ignored.
+    pub result_lines: u64,
+    /// Reply lines skipped: damaged, or answering another id.
+    pub skipped: u64,
+}
+
+impl<P: Read + Write> Link<P> {
+    /// `name` and `baud` are for messages; `pass` receives every line that
+    /// is not a reply, as it came.
+    pub fn new(port: P, name: &str, baud: u32, pass: Option<Box<dyn Write>>) -> Self {
+        Link {
+            port,
+            name: name.to_string(),
+            hint: format!("is the sensor connected to {name}, at {baud} baud?"),
+            partial: Vec::new(),
+            overlong: false,
+            lines: VecDeque::new(),
+            pass,
+            result_lines: 0,
+            skipped: 0,
+        }
+    }
+
+    /// Sends `ask` with this id.
+    pub fn send(&mut self, id: u32, ask: &Ask) -> Result<(), Failure> {
+        let mut line = Collect(Vec::new());
+        encode_request(id, &ask.request, &mut line);
+        self.port
+            .write_all(&line.0)
+            .and_then(|()| self.port.flush())
+            .map_err(|e| Failure::link(format!("{}: writing to {}: {e}", ask.words, self.name)))
+    }
+
+    /// The next `ok` reply to request `id` (asked as `words`) that arrives
+    /// before `deadline`, `None` if none did. An `err` reply to it (or one
+    /// whose id the board could not read, which can only be this request's
+    /// while it is the only one under way) is the refusal.
+    pub fn reply(
+        &mut self,
+        id: u32,
+        words: &str,
+        deadline: Instant,
+    ) -> Result<Option<Answer>, Failure> {
+        while let Some(line) = self.next_line(words, deadline)? {
+            if !line.starts_with(b"A,") {
+                self.result_lines += 1;
+                if let Some(w) = self.pass.as_mut() {
+                    w.write_all(&line).map_err(|e| {
+                        Failure::other(format!("writing the --pass-through file: {e}"))
+                    })?;
+                }
+                continue;
+            }
+            let (got, reply) = match parse_reply(&line) {
+                Ok(r) => r,
+                Err(e) => {
+                    self.skip(format!(
+                        "skipped a damaged reply line ({e}): {}",
+                        printable(&line)
+                    ));
+                    continue;
+                }
+            };
+            match (got, reply) {
+                (Some(g), _) if g != id => self.skip(format!(
+                    "skipped a reply to request {g} (waiting for {id}): {}",
+                    printable(&line)
+                )),
+                (None, Reply::Refused(why)) => {
+                    return Err(Failure::refused(format!(
+                        "{words} refused: {why} (the sensor could not read the request's id)"
+                    )));
+                }
+                (_, Reply::Refused(why)) => {
+                    return Err(Failure::refused(format!("{words} refused: {why}")));
+                }
+                (_, r) => return Ok(answer(r)),
+            }
+        }
+        Ok(None)
+    }
+
+    fn skip(&mut self, what: String) {
+        self.skipped += 1;
+        crate::out::warn(&what);
+    }
+
+    /// Flushes the pass-through file.
+    pub fn finish(&mut self) -> Result<(), Failure> {
+        match self.pass.as_mut() {
+            Some(w) => w
+                .flush()
+                .map_err(|e| Failure::other(format!("writing the --pass-through file: {e}"))),
+            None => Ok(()),
+        }
+    }
+
+    fn next_line(&mut self, words: &str, deadline: Instant) -> Result<Option<Vec<u8>>, Failure> {
+        let mut buf = [0u8; 1024];
+        loop {
+            if let Some(l) = self.lines.pop_front() {
+                return Ok(Some(l));
+            }
+            if Instant::now() >= deadline {
+                return Ok(None);
+            }
+            match self.port.read(&mut buf) {
+                Ok(0) => {
+                    return Err(Failure::link(format!(
+                        "{words}: {} closed while waiting for the reply",
+                        self.name
+                    )));
+                }
+                Ok(n) => self.take(&buf[..n]),
+                Err(e)
+                    if matches!(
+                        e.kind(),
+                        std::io::ErrorKind::TimedOut
+                            | std::io::ErrorKind::Interrupted
+                            | std::io::ErrorKind::WouldBlock
+                    ) => {}
+                Err(e) => {
+                    return Err(Failure::link(format!(
+                        "{words}: reading {}: {e}",
+                        self.name
+                    )));
+                }
+            }
+        }
+    }
+
+    fn take(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            if b == b'\n' {
+                if self.overlong {
+                    self.result_lines += 1;
+                } else if !self.partial.is_empty() {
+                    let mut line = std::mem::take(&mut self.partial);
+                    line.push(b'\n');
+                    self.lines.push_back(line);
+                }
+                self.partial.clear();
+                self.overlong = false;
+            } else if self.partial.len() + 1 >= LONGEST {
+                self.overlong = true;
+                self.partial.clear();
+            } else if !self.overlong {
+                self.partial.push(b);
+            }
+        }
+    }
+}
+
+/// The owned form of an `ok` reply (`None` for a refusal).
+fn answer(r: Reply<'_>) -> Option<Answer> {
+    Some(match r {
+        Reply::Status(s) => Answer::Status(StatusInfo {
+            firmware: s.firmware.to_string(),
+            j1: s.j1,
+            j2: s.j2,
+            max_cols: s.max_cols,
+            max_rows: s.max_rows,
+            store: s.store,
+            reset_cause: s.reset_cause,
+            boots: s.boots,
+            last: s.last,
+        }),
+        Reply::Value { key, value, source } => Answer::Value { key, value, source },
+        Reply::Calibrating(n) => Answer::Calibrating(n),
+        Reply::Calibrated(c) => Answer::Calibrated(c),
+        Reply::Saved => Answer::Saved,
+        Reply::Defaults => Answer::Defaults,
+        Reply::Resetting => Answer::Resetting,
+        Reply::Refused(_) => return None,
+    })
+}
