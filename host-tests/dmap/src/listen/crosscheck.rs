@@ -101,7 +101,9 @@ fn totals_against_rows(s: &ScanResult, e: &EndInfo, line: usize) -> Vec<(usize, 
 
 /// The scan's scores when every position of its `rows` rows has one.
 fn complete_scores(s: &ScanResult, rows: u32) -> Option<&BTreeMap<u32, BTreeMap<u32, ScoreValue>>> {
-    ((0..rows).all(|r| row_complete(s, r))).then_some(&s.scores)
+    // At most as many rows as arrived are looked at.
+    (s.scores.len() as u64 >= u64::from(rows) && (0..rows).all(|r| row_complete(s, r)))
+        .then_some(&s.scores)
 }
 
 fn row_complete(s: &ScanResult, row: u32) -> bool {
@@ -230,7 +232,10 @@ fn defects_against_scores(s: &ScanResult) -> Vec<(usize, String)> {
 fn known_positions(s: &ScanResult, rows: u32) -> (BTreeMap<(u32, u32), Position>, BTreeSet<u32>) {
     let mut known = BTreeMap::new();
     let mut whole = BTreeSet::new();
-    for row in 0..rows {
+    // The rows lines arrived for, never `0..rows`: an end line may claim
+    // billions of rows.
+    let seen: BTreeSet<u32> = s.scores.keys().chain(s.rows.keys()).copied().collect();
+    for row in seen.into_iter().filter(|&r| r < rows) {
         if row_complete(s, row) {
             whole.insert(row);
             for (&c, v) in &s.scores[&row] {

@@ -175,7 +175,8 @@ pub(super) fn scores_fault(s: &ScanResult, row: u32, col0: u32, chars: &[u8]) ->
 /// The end line's totals against one another and the header: every
 /// position has a frame or is missing, marked maps and defects are among
 /// the frames, clipped scores among the defects, each object holds at
-/// least one defect, and the rows are the header's.
+/// least one defect, a bad frame's position is missing, and the rows are
+/// the header's.
 pub(super) fn end_fault(s: &ScanResult, e: &EndInfo) -> Vec<String> {
     let t = &e.totals;
     let n = |v: u32| u64::from(v);
@@ -196,6 +197,7 @@ pub(super) fn end_fault(s: &ScanResult, e: &EndInfo) -> Vec<String> {
         ),
         ("defects", n(t.defects), "frames", n(t.frames)),
         ("misplaced", n(t.misplaced), "frames", n(t.frames)),
+        ("bad", n(t.bad), "missing", n(t.missing)),
         ("clipped", n(t.clipped), "defects", n(t.defects)),
         (
             "obj + unobj",
