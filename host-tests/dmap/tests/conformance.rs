@@ -64,6 +64,48 @@ fn listen_decodes_every_vector_as_expected() {
     }
 }
 
+/// The command channel's vectors: every request the board accepts is
+/// written again as the vectors say, every refusal a line alone can cause
+/// (not `busy`, `storage` or the link's errors, which depend on the board)
+/// occurs, and every reply decodes as they say.
+#[test]
+fn the_command_vectors_decode_as_stated_and_cover_the_refusals() {
+    use cvm_core::command::{parse_reply, parse_request};
+    let doc: Value =
+        serde_json::from_slice(&std::fs::read(dir().join("commands.json")).unwrap()).unwrap();
+    let cap = dmap::vectors::COMMAND_CAPACITY;
+    let mut refusals = BTreeSet::new();
+    for e in doc["requests"].as_array().unwrap() {
+        let line = e["line"].as_str().unwrap().as_bytes();
+        let d = &e["decode"];
+        match parse_request(line, &cap) {
+            Ok(_) => assert!(d["accepted"].is_string(), "{e}"),
+            Err((_, why)) => {
+                let reply = d["refused"].as_str().unwrap();
+                assert!(reply.contains(&format!(",err,{}", why.word())), "{e}");
+                refusals.insert(why.word());
+            }
+        }
+    }
+    assert_eq!(
+        refusals,
+        BTreeSet::from([
+            "checksum",
+            "malformed",
+            "too-long",
+            "unknown-command",
+            "unknown-key",
+            "type",
+            "range"
+        ])
+    );
+    for e in doc["replies"].as_array().unwrap() {
+        let line = e["line"].as_str().unwrap().as_bytes();
+        let ok = parse_reply(line).is_ok();
+        assert_eq!(ok, e["decode"]["accepted"].is_string(), "{e}");
+    }
+}
+
 /// Every line type occurs in a whole stream; every flag bit in a score
 /// line; every verdict; every kind of damage but the two that only
 /// `dmap listen`'s own limits raise (`--max-scans`, its memory).

@@ -81,6 +81,15 @@ fn framing(g: &Lines, default: &[u8]) -> Vec<Vector> {
         },
     ));
     out.push(damaged(
+        "crc-reply",
+        "A command reply with one byte changed among the result lines: a line error; the scan is whole",
+        g,
+        |l| {
+            l.insert(4, sealed("A,2,ok,save"));
+            l.corrupt(4);
+        },
+    ));
+    out.push(damaged(
         "unknown-type",
         "A line of type X with a valid CRC: unknown type",
         g,

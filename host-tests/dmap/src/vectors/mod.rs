@@ -2,11 +2,14 @@
 //! (docs/protocol.md, "Conformance vectors"). Each vector is a stream of
 //! result lines, whole or deliberately damaged, made from synthetic scans
 //! by the firmware's own pipeline (`scenes`, `good`, `damaged`), and the
-//! decode `dmap listen --json` makes of it. `dmap vectors DIR` writes them
-//! (`NAME.txt`, `NAME.json`, and `index.json`); `dmap vectors --check DIR`
+//! decode `dmap listen --json` makes of it; and the command channel's
+//! request and reply lines with their decodes (`commands`). `dmap vectors
+//! DIR` writes them (`NAME.txt`, `NAME.json`, `index.json`,
+//! `commands.json`); `dmap vectors --check DIR`
 //! makes them again and compares, byte for byte, so that a change of the
 //! encoder or the decoder that the vectors do not reflect fails.
 
+mod commands;
 mod damaged;
 mod edit;
 mod good;
@@ -15,6 +18,7 @@ mod scenes;
 use crate::listen::{decode_with, summary_json};
 use anyhow::{Context, Result, bail};
 use clap::Args;
+pub use commands::CAP as COMMAND_CAPACITY;
 use std::path::{Path, PathBuf};
 
 #[derive(Args, Clone, Debug)]
@@ -70,6 +74,7 @@ pub fn files() -> Result<Vec<(String, Vec<u8>)>> {
         "index.json".to_string(),
         pretty(&serde_json::Value::Array(index))?,
     ));
+    out.push(("commands.json".to_string(), pretty(&commands::document())?));
     // Git must keep every byte (`\r\n`, a missing last newline).
     out.push((".gitattributes".to_string(), b"* -text\n".to_vec()));
     Ok(out)
