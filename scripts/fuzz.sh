@@ -16,7 +16,7 @@ secs="${1:-30}"
 shift || true
 targets=("$@")
 if [ ${#targets[@]} -eq 0 ]; then
-    targets=(line_decoder npy_reader engine acquisition command)
+    targets=(line_decoder npy_reader engine acquisition command record)
 fi
 
 if ! rustup toolchain list | grep -q '^nightly'; then

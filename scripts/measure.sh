@@ -10,6 +10,8 @@ usage: scripts/measure.sh WHAT [ARGS]
                                square 15; TOP=n functions, default 20) (emulation.md)
   twin-profile                 instructions per beam by stage, H743 release ELF on the chip
                                model, 9x9 and 15x15 (KERNELS=square, TOP=n) (twin.md)
+  store-boot                   start-up cost of the settings store, H743 release ELF (default
+                               configuration) on the chip model, per bank-2 content (firmware.md)
   twin-cost [ARGS]             estimated cycles per beam on the H743 (the chip model's bus and
                                D-cache cost model; KERNELS, COLS, ROWS; ARGS go to
                                h743twin.cost, e.g. --dtcm ROW_A) (performance.md)
@@ -17,6 +19,9 @@ usage: scripts/measure.sh WHAT [ARGS]
                                P the scan pitch in um (default 334) (experiments.md)
   experiments [OUT_DIR]        the paper's experiments rerun, about 45 minutes (REUSE=1 keeps
                                scans and EMD scores already in OUT_DIR) (experiments.md)
+  calibration-rule [OUT_DIR]   the streaming calibration rule against the one before it:
+                               thresholds and the firmware's objects; simulates the scans
+                               OUT_DIR lacks (experiments.md)
   emd-vs-pot [--pairs N]       exact EMD against POT's ot.emd2 (needs numpy, pot) (performance.md)
   soak [WORKDIR]               a full paper-sim scan on the emulated firmware against the host,
                                byte for byte, every position accounted for (reliability.md)
@@ -175,6 +180,23 @@ twin_profile() {
             --start-ms "$(twin_start_ms)")
         echo
     done
+}
+
+# The settings store at start-up: the default release ELF booted on the
+# chip model until it takes beams, with an erased bank 2 and with the
+# images `store_images` writes (one record; a full first page, the longest
+# load; a full page whose next save was cut while erasing, which the load
+# repairs with one erase).
+store_boot() {
+    bash "$root/scripts/setup.sh"
+    (cd "$root" && cargo build --release -q)
+    local work
+    scratch
+    work=${scratch_dirs[-1]}
+    (cd "$root/host-tests" && cargo run -q --release -p cvm-fw-app-tests --example store_images -- "$work")
+    (cd "$root/host-tests/twin" && python3 -m h743twin.bootcost \
+        "$root/target/thumbv7em-none-eabihf/release/cvm-fw" \
+        "$work/erased.bin" "$work/one.bin" "$work/full.bin" "$work/erase-cut.bin")
 }
 
 # The scan is as wide as the default configuration's (300 columns; COLS and
@@ -522,6 +544,32 @@ experiments() {
         [ "$v" = proto ] && s=11,12,13,14,15
         background "$v" "$s" 21,22,23,24,25,26,27,28,29,30 cvm
     done
+    calibration_rule "$out"
+}
+
+# The streaming calibration rule (dmap calibrate, the board's) against the
+# rule before it, exact medians over every magnitude (experiments.md,
+# "Calibration"): the references, defective parts and unseen parts of
+# `experiments`, simulated here when OUT_DIR lacks them.
+calibration_rule() { # [OUT_DIR]
+    local out=${1:-$root/host-tests/target/experiments} v s opts
+    mkdir -p "$out"
+    out=$(cd "$out" && pwd)
+    [ -n "$dmap_bin" ] || build_dmap
+    for v in proto simblur sim; do
+        case $v in
+            proto) opts=(--preset prototype) ;;
+            simblur) opts=(--preset paper-sim --spot-um 300) ;;
+            *) opts=(--preset paper-sim) ;;
+        esac
+        for s in 1 11 12 13 14 15 21 22 23 24 25 26 27 28 29 30; do
+            local o="$out/${v}_free_s$s.npy" more=(--defect-free --seed "$s")
+            [ "$s" = 1 ] && o="$out/$v.npy" more=()
+            [ "$v" != proto ] && { [ "$s" = 14 ] || [ "$s" = 15 ]; } && continue
+            [ -f "$o" ] || nice -n 10 "$dmap_bin" simulate --threads 2 "${opts[@]}" "${more[@]}" -o "$o" 2>&1 | sed -n 1p >&2
+        done
+    done
+    python3 "$root/scripts/calibration_rule.py" "$dmap_bin" "$out"
 }
 
 # Background models against the plain calibration rule (experiments.md,
@@ -529,7 +577,8 @@ experiments() {
 # defect-free parts), PREFIX_DIST.npy and PREFIX.truth.npy. For the plain
 # magnitude, the magnitude less a per-column background (median of each
 # column over the calibration parts) and less a per-position background
-# (mean over them), applies the rule max + 3 * 1.4826 * MAD on the
+# (mean over them), applies the rule max + 3 * 1.4826 * MAD (f64, exact
+# medians: the rule before the streaming one) on the
 # calibration parts and counts positions at or above it on the unseen parts
 # and on the defective part.
 background() { # PREFIX CAL_SEEDS TEST_SEEDS DIST
@@ -592,9 +641,11 @@ case $what in
     icount) icount ;;
     profile) profile "$@" ;;
     twin-profile) twin_profile ;;
+    store-boot) store_boot ;;
     twin-cost) twin_cost "$@" ;;
     objects) objects "$@" ;;
     experiments) experiments "$@" ;;
+    calibration-rule) calibration_rule "$@" ;;
     emd-vs-pot) emd_vs_pot "$@" ;;
     soak) soak "$@" ;;
     *) usage ;;

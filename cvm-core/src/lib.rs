@@ -4,6 +4,7 @@
 /// Version of the scoring code, carried in every header line (`fw=`).
 pub const VERSION: &str = env!("CARGO_PKG_VERSION");
 
+pub mod calibration;
 pub mod command;
 pub mod config;
 pub mod flags;
@@ -11,12 +12,14 @@ pub mod objects;
 pub mod pipeline;
 pub mod power;
 pub mod protocol;
+pub mod record;
 pub mod scorer;
 pub mod settings;
 pub mod stream;
 pub mod tables;
 pub mod verdict;
 
+pub use calibration::Calibrator;
 pub use config::{Config, ConfigError, Geometry, Kernels, MAX_CELLS, MAX_J, Weights};
 pub use objects::{Object, Objects};
 pub use pipeline::Pipeline;

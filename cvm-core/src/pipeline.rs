@@ -3,6 +3,7 @@
 //! `dmap stream` and both firmware boards drive exactly this type, which is
 //! what makes their output byte-identical.
 
+use crate::calibration::Calibrator;
 use crate::objects::{Object, Objects};
 use crate::protocol::{HeaderInfo, LineSink, encode_end, encode_header, encode_object, encode_row};
 use crate::scorer::Scorer;
@@ -34,6 +35,9 @@ pub struct Pipeline<'a, const MAX_COLS: usize> {
     settings: Settings,
     closures: Closures,
     verdict: Option<Verdict>,
+    /// Takes every finished row while a calibration runs (see
+    /// [`Pipeline::attach_calibrator`]).
+    calibrator: Option<&'a mut Calibrator>,
 }
 
 impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
@@ -64,7 +68,31 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
             settings,
             closures: Closures::default(),
             verdict: None,
+            calibrator: None,
         })
+    }
+
+    /// Hands the pipeline a calibrator's storage (about 18 KB: a board
+    /// places it in the RAM bank it chooses). From then on every scan's
+    /// begin, finished rows and end go to it, and it takes them while
+    /// armed ([`Calibrator::arm`]): from the begin of the next scan,
+    /// for as many scans as armed. Not armed, it costs one test per row.
+    /// A scan forgotten before its end ([`Pipeline::configure`] in the
+    /// middle of one) would leave its rows taken but the scan not counted:
+    /// settings change between scans.
+    pub fn attach_calibrator(&mut self, calibrator: &'a mut Calibrator) {
+        self.calibrator = Some(calibrator);
+    }
+
+    /// The attached calibrator: its [`Calibrator::progress`] after each
+    /// scan, its [`Calibrator::finish`] once done.
+    pub fn calibrator(&self) -> Option<&Calibrator> {
+        self.calibrator.as_deref()
+    }
+
+    /// The attached calibrator, to arm or disarm it.
+    pub fn calibrator_mut(&mut self) -> Option<&mut Calibrator> {
+        self.calibrator.as_deref_mut()
     }
 
     /// The verdict's rules (and the board's outputs) from now on.
@@ -105,6 +133,9 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
     /// Starts a scan: the header line.
     pub fn begin(&mut self, sink: &mut impl LineSink) {
         self.closures = Closures::default();
+        if let Some(c) = self.calibrator.as_deref_mut() {
+            c.scan_begins();
+        }
         let h = HeaderInfo::new(self.engine.scorer(), &self.settings);
         encode_header(&h, sink);
     }
@@ -115,11 +146,13 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
             objects,
             settings,
             closures,
+            calibrator,
             ..
         } = self;
         let mut lines = Emit {
             settings,
             closures,
+            calibrator: calibrator.as_deref_mut(),
             sink,
         };
         engine.push(pos, frame, &mut |row| lines.row(row, objects))
@@ -132,11 +165,13 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
             objects,
             settings,
             closures,
+            calibrator,
             ..
         } = self;
         let mut lines = Emit {
             settings,
             closures,
+            calibrator: calibrator.as_deref_mut(),
             sink,
         };
         engine.mark_missing(pos, &mut |row| lines.row(row, objects))
@@ -158,13 +193,18 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
             settings,
             closures,
             verdict,
+            calibrator,
         } = self;
         let mut lines = Emit {
             settings,
             closures,
+            calibrator: calibrator.as_deref_mut(),
             sink,
         };
         let mut totals = engine.finish(&mut |row| lines.row(row, objects));
+        if let Some(c) = lines.calibrator.as_deref_mut() {
+            c.scan_ends();
+        }
         objects.finish_with(&mut |o| lines.object(o), &mut totals);
         let v = Verdict::of(&totals, closures.counted, &settings.outputs);
         *verdict = Some(v);
@@ -181,6 +221,7 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
 struct Emit<'p, S> {
     settings: &'p Settings,
     closures: &'p mut Closures,
+    calibrator: Option<&'p mut Calibrator>,
     sink: &'p mut S,
 }
 
@@ -191,6 +232,9 @@ impl<S: LineSink> Emit<'_, S> {
     /// target).
     #[inline(never)]
     fn row(&mut self, row: &RowView, objects: &mut Objects) {
+        if let Some(c) = self.calibrator.as_deref_mut() {
+            c.scan_row(row.scores);
+        }
         encode_row(
             row,
             self.settings.max_defect_lines_per_row,

@@ -295,6 +295,14 @@ impl Control {
         encode_reply(Some(run.id), &Reply::Calibrated(*c), sink);
     }
 
+    /// The calibration ended without a result (`why`): refused with the
+    /// `calibrate` request's id; the thresholds stay.
+    pub fn calibration_failed(&mut self, why: Refusal, sink: &mut impl LineSink) {
+        if let Some(run) = self.calibration.take() {
+            self.refuse(Some(run.id), why, sink);
+        }
+    }
+
     fn status(&self) -> Status<'static> {
         Status {
             firmware: self.compiled.firmware_version,

@@ -6,6 +6,7 @@
 //! so that the board can check the output queue's room between beams, even
 //! inside a long run of lost beams.
 
+use cvm_core::calibration::Calibrator;
 use cvm_core::pipeline::{Pipeline, Settings};
 use cvm_core::protocol::{LineSink, Priority};
 use cvm_core::stream::Totals;
@@ -76,6 +77,16 @@ impl<'a, const MAX_COLS: usize> ScanDriver<'a, MAX_COLS> {
     /// outputs follow [`ScanDriver::settings`] from then on.
     pub fn take_applied(&mut self) -> bool {
         core::mem::take(&mut self.applied)
+    }
+
+    /// The pipeline's calibrator, if one is attached.
+    pub fn calibrator(&self) -> Option<&Calibrator> {
+        self.pipeline.calibrator()
+    }
+
+    /// The pipeline's calibrator, to arm it.
+    pub fn calibrator_mut(&mut self) -> Option<&mut Calibrator> {
+        self.pipeline.calibrator_mut()
     }
 
     /// The settings the last (or open) scan uses.

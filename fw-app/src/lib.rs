@@ -2,8 +2,9 @@
 //! Board-independent firmware logic, shared by the NUCLEO-H743ZI2 and the
 //! emulated (QEMU) boards and tested on the host: numbering beams into
 //! scan positions, DRDY overrun accounting, the prioritised output queue,
-//! the READY and REJECT outputs' logic, the command channel's logic and
-//! the emulated board's scan file. No HAL, no math (that is
+//! the READY and REJECT outputs' logic, the command channel's logic, the
+//! settings kept in flash and the emulated board's scan file. No HAL, no
+//! math (that is
 //! `cvm-core`). Both boards' frames arrive as native `u16` samples, so
 //! there is nothing to decode.
 
@@ -11,6 +12,8 @@ pub mod acquire;
 pub mod control;
 pub mod driver;
 pub mod emufile;
+pub mod flash_words;
 pub mod outputs;
 pub mod queue;
 pub mod sequence;
+pub mod settings_store;

@@ -4,7 +4,8 @@
 //! from the optimiser behind `black_box`: a frame buffer's samples →
 //! `Pipeline::push` (normalise → embed → window → gradient → decision →
 //! encode) or `mark_missing`, `begin` and `finish`, for paper and square
-//! kernels, normalised or raw; and around it the scoring side's own
+//! kernels, normalised or raw, with a calibrator attached or not (armed,
+//! taking rows, and its result); and around it the scoring side's own
 //! bookkeeping: DRDY/buffer accounting, LINE_SYNC sequencing, the output
 //! queue. The panic handler calls `cvm_panic_path_reachable`, which no
 //! object defines: after LTO and dead-code removal the link succeeds only
@@ -16,6 +17,7 @@ use core::hint::black_box;
 use core::panic::PanicInfo;
 
 use cvm_core::Scorer;
+use cvm_core::calibration::{Calibrator, Rule};
 use cvm_core::config::{Config, Geometry, Kernels, MAX_J, Weights};
 use cvm_core::pipeline::{Pipeline, Settings};
 use cvm_core::protocol::{LineSink, MAX_LINE, Priority};
@@ -75,6 +77,7 @@ static mut NEAR: [i32; 3 * CELLS] = [0; 3 * CELLS];
 static mut FACTORS: [i32; MAX_FACTOR_WORDS] = [0; MAX_FACTOR_WORDS];
 static mut QUEUE: LineQueue<8192> = LineQueue::new(4096);
 static mut BUS: [[u16; CELLS]; 2] = [[0; CELLS]; 2];
+static mut CALIBRATOR: Calibrator = Calibrator::new();
 
 /// The output queue as the line sink, as on the boards.
 struct Sink<'q>(&'q mut LineQueue<8192>);
@@ -133,13 +136,14 @@ pub extern "C" fn _start() -> ! {
         store: cvm_core::settings::Store::Empty,
     };
     // SAFETY: `_start` runs once and is the only user of these statics.
-    let (row_a, row_b, near, queue, bus) = unsafe {
+    let (row_a, row_b, near, queue, bus, calibrator) = unsafe {
         (
             &mut *core::ptr::addr_of_mut!(ROW_A),
             &mut *core::ptr::addr_of_mut!(ROW_B),
             &mut *core::ptr::addr_of_mut!(NEAR),
             &mut *core::ptr::addr_of_mut!(QUEUE),
             &mut *core::ptr::addr_of_mut!(BUS),
+            &mut *core::ptr::addr_of_mut!(CALIBRATOR),
         )
     };
     let near = near.get_mut(..black_box(0)).unwrap_or_default();
@@ -149,6 +153,9 @@ pub extern "C" fn _start() -> ! {
             black_box(());
         }
     };
+    if black_box(true) {
+        pipeline.attach_calibrator(calibrator);
+    }
     let mut sink = Sink(queue);
     let mut line = [0u8; MAX_LINE];
 
@@ -173,6 +180,21 @@ pub extern "C" fn _start() -> ! {
                 black_box(pipeline.finish(black_box(0), &mut sink));
             }
             3 => break,
+            4 => {
+                if let Some(c) = pipeline.calibrator_mut() {
+                    c.arm(black_box(5));
+                }
+            }
+            5 => {
+                let rule = Rule {
+                    quantile_ppm: black_box(1_000_000),
+                    k_milli: black_box(3000),
+                };
+                if let Some(c) = pipeline.calibrator() {
+                    black_box(c.progress());
+                    black_box(c.finish(&rule).ok());
+                }
+            }
             _ => {
                 black_box(sink.0.pop_into(&mut line));
             }

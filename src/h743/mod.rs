@@ -29,6 +29,7 @@ mod clocks;
 mod command_rx;
 mod commands;
 mod drdy;
+mod flash_bank2;
 mod frame_reader;
 mod memory;
 mod outputs;
@@ -107,6 +108,7 @@ fn main() -> ! {
     command_rx::enable(pins.uart_rx);
     // The settings record before the first scan: the scans and the
     // outputs start with the settings in effect.
+    settings_store::open(pins.flash, pins.flash_dma);
     let (store, record) = embassy_futures::block_on(settings_store::load());
     let compiled = scoring::compiled_settings(cause, boots);
     let control = Control::new(compiled, CAPACITY, (J1, J2), store, record);

@@ -5,8 +5,8 @@
 use embassy_stm32::Peri;
 use embassy_stm32::Peripherals;
 use embassy_stm32::peripherals::{
-    DMA1_CH2, EXTI9, IWDG1, PA5, PA6, PB0, PB14, PD8, PD9, PD14, PE9, PE11, PE13, PE14, SPI1,
-    USART3,
+    DMA1_CH2, DMA1_CH7, EXTI9, FLASH, IWDG1, PA5, PA6, PB0, PB14, PD8, PD9, PD14, PE9, PE11, PE13,
+    PE14, SPI1, USART3,
 };
 
 /// READY and REJECT (`outputs`) and the user LEDs that mirror them.
@@ -32,6 +32,10 @@ pub struct Pins {
     pub uart_rx: Peri<'static, PD9>,
     pub iwdg: Peri<'static, IWDG1>,
     pub outputs: OutputPins,
+    /// The settings store: bank 2's flash interface, and DMA1 stream 7 to
+    /// read bank 2 (`flash_bank2`).
+    pub flash: Peri<'static, FLASH>,
+    pub flash_dma: Peri<'static, DMA1_CH7>,
 }
 
 pub fn take(p: Peripherals) -> Pins {
@@ -54,5 +58,7 @@ pub fn take(p: Peripherals) -> Pins {
             ready_led: p.PB0,   // LD1, green
             reject_led: p.PB14, // LD3, red
         },
+        flash: p.FLASH,
+        flash_dma: p.DMA1_CH7,
     }
 }

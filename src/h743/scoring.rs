@@ -7,6 +7,7 @@
 use core::sync::atomic::{AtomicBool, Ordering};
 
 use cvm_core::Scorer;
+use cvm_core::calibration::Calibrator;
 use cvm_core::pipeline::{Pipeline, Settings};
 use cvm_core::protocol::ResetCause;
 use cvm_core::settings::{KEYS, Source, Store};
@@ -82,6 +83,10 @@ static NEAR: Noload<[i32; NEAR_WORDS]> = Noload::new();
 #[unsafe(link_section = ".dtcm")]
 static DRIVER: Noload<ScanDriver<'static, MAX_COLS>> = Noload::new();
 
+/// The command channel's calibrator (18 KB of histograms), in AXI SRAM:
+/// it takes each finished row only while a calibration runs.
+static CALIBRATOR: ConstStaticCell<Calibrator> = ConstStaticCell::new(Calibrator::new());
+
 /// The statics above are handed out by [`scan_driver`] only, once.
 static TAKEN: AtomicBool = AtomicBool::new(false);
 
@@ -125,9 +130,10 @@ pub fn scan_driver(settings: Settings) -> &'static mut ScanDriver<'static, MAX_C
     let (row_a, rest) = axi.split_at_mut(ROW_WORDS);
     let row_b = if ROWS_IN_AXI { rest } else { sram123 };
     let near = unsafe { NEAR.take_zeroed() };
-    let pipeline = match Pipeline::<MAX_COLS>::with_near(scorer, settings, row_a, row_b, near) {
+    let mut pipeline = match Pipeline::<MAX_COLS>::with_near(scorer, settings, row_a, row_b, near) {
         Ok(p) => p,
         Err(e) => defmt::panic!("pipeline refused its buffers: {}", e),
     };
+    pipeline.attach_calibrator(CALIBRATOR.take());
     unsafe { DRIVER.take() }.write(ScanDriver::new(pipeline, settings.cols, settings.rows))
 }

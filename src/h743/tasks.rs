@@ -4,6 +4,8 @@
 use core::cell::RefCell;
 use core::sync::atomic::Ordering;
 
+use cvm_core::calibration::{Progress, Rule};
+use cvm_core::command::Refusal;
 use cvm_core::protocol::MAX_LINE;
 use cvm_fw_app::control::Control;
 use cvm_fw_app::driver::ScanDriver;
@@ -159,14 +161,34 @@ fn take_control(driver: &mut ScanDriver<'static, MAX_COLS>, control: &RefCell<Co
     if let Some(s) = c.take_changed() {
         driver.request(s);
     }
+    if let Some(n) = c.calibration_to_arm()
+        && let Some(cal) = driver.calibrator_mut()
+    {
+        cal.arm(n);
+    }
 }
 
-fn scan_ended(driver: &ScanDriver<'static, MAX_COLS>, control: &RefCell<Control>) {
+/// A scan ended: the command channel's last-scan report, and the end
+/// of a calibration whose last scan it was (its reply goes out, its
+/// thresholds reach the driver with the next step).
+fn scan_ended(driver: &mut ScanDriver<'static, MAX_COLS>, control: &RefCell<Control>) {
+    let mut c = control.borrow_mut();
     if let Some((t, _)) = driver.last_scan() {
-        control
-            .borrow_mut()
-            .scan_ended(&t, driver.progress().verdict);
+        c.scan_ended(&t, driver.progress().verdict);
     }
+    if let Some(cal) = driver.calibrator_mut()
+        && let Progress::Done { .. } = cal.progress()
+    {
+        let mut replies = QueueSink(&REPLIES);
+        match cal.finish(&Rule::DEFAULT) {
+            Ok(result) => c.calibrated(&result, &mut replies),
+            Err(_) => c.calibration_failed(Refusal::NoResult, &mut replies),
+        }
+        cal.disarm();
+        CHANGED.store(true, Ordering::Release);
+        KICK.signal(());
+    }
+    drop(c);
     report_scan(driver);
 }
 

@@ -33,6 +33,9 @@ pub enum Refusal {
     /// The value would leave the settings unable to work together, e.g.
     /// row mode without a pulse width (`conflict`).
     Conflict,
+    /// A calibration ended without a result: its scans had no position
+    /// with data, or more positions than its counts hold (`no-result`).
+    NoResult,
 }
 
 impl Refusal {
@@ -52,11 +55,12 @@ impl Refusal {
             Refusal::Noise => "noise",
             Refusal::Storage => "storage",
             Refusal::Conflict => "conflict",
+            Refusal::NoResult => "no-result",
         }
     }
 
     /// Every reason without a value, in the order of the protocol document.
-    pub const SIMPLE: [Refusal; 12] = [
+    pub const SIMPLE: [Refusal; 13] = [
         Refusal::Checksum,
         Refusal::Malformed,
         Refusal::TooLong,
@@ -69,6 +73,7 @@ impl Refusal {
         Refusal::Noise,
         Refusal::Storage,
         Refusal::Conflict,
+        Refusal::NoResult,
     ];
 }
 
@@ -87,6 +92,9 @@ impl core::fmt::Display for Refusal {
             Refusal::Framing => f.write_str("framing error on the link"),
             Refusal::Noise => f.write_str("noise on the link"),
             Refusal::Storage => f.write_str("the settings could not be written to flash"),
+            Refusal::NoResult => {
+                f.write_str("the calibration has no result (no position with data, or too many)")
+            }
             Refusal::Conflict => {
                 f.write_str("conflicts with another setting (row mode needs a pulse width)")
             }

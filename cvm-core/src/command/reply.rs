@@ -11,19 +11,26 @@ use crate::settings::Source;
 
 /// What a finished calibration found: both thresholds and the statistics
 /// behind them, in the units of the header's `thr` (magnitudes) and
-/// `pthr` (power magnitudes).
+/// `pthr` (power magnitudes). [`crate::calibration::Calibrator::finish`]
+/// makes it, on the board and in `dmap calibrate` alike.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Calibration {
     /// Scans it took.
     pub scans: u16,
     /// Positions with data it took them from.
     pub positions: u32,
+    /// `thr = max + ceil(3 * 1.4826 * mad) + 1` (saturating).
     pub threshold: u32,
+    /// The same on the power magnitudes, or `POWER_OFF` when above every
+    /// power magnitude.
     pub power_threshold: u32,
-    /// Median and median absolute deviation of the magnitudes.
+    /// Median and median absolute deviation of the magnitudes, each the
+    /// lower median of the magnitudes' histogram bins (exact below 256,
+    /// else the middle of a bin under 0.8 % wide; see
+    /// [`crate::calibration`]).
     pub median: u32,
     pub mad: u32,
-    /// Median and median absolute deviation of the power magnitudes.
+    /// The same of the power magnitudes.
     pub power_median: u32,
     pub power_mad: u32,
 }

@@ -211,6 +211,7 @@ fn every_refusal_has_its_word_and_round_trips() {
         "noise",
         "storage",
         "conflict",
+        "no-result",
     ];
     for (r, w) in Refusal::SIMPLE.into_iter().zip(words) {
         let line = reply_line(Some(77), &Reply::Refused(r));

@@ -121,27 +121,31 @@ fn streamed_power(scan: &Path) -> Vec<f64> {
     v
 }
 
-/// Median of sorted values.
-fn med(v: &[f64]) -> f64 {
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        (v[n / 2 - 1] + v[n / 2]) / 2.0
-    }
-}
-
-/// The documented rule on integer magnitudes `m`, with p = 1: (max,
-/// median, MAD, thr).
-fn rule(m: &[f64], k: f64) -> (f64, f64, f64, f64) {
-    let mut m = m.to_vec();
-    m.sort_by(f64::total_cmp);
-    let median = med(&m);
-    let mut dev: Vec<f64> = m.iter().map(|x| (x - median).abs()).collect();
-    dev.sort_by(f64::total_cmp);
-    let mad = med(&dev);
-    let max = *m.last().unwrap();
-    (max, median, mad, max + (k * 1.4826 * mad).ceil() + 1.0)
+/// The documented rule (docs/experiments.md, "Calibration") on integer
+/// magnitudes `m`, with p = 1 and `k = k_milli / 1000`, from its text:
+/// each magnitude taken as its bin's representative (itself below 2^8;
+/// else bins of width `w = 2^(floor(log2 v) - 7)` starting at multiples
+/// of `w`, represented by `lo + w / 2`), lower medians by rank
+/// `ceil(n / 2)`, the margin `ceil(k * 1.4826 * MAD)` as an exact
+/// rational: (max, median, MAD, thr).
+fn rule(m: &[f64], k_milli: u128) -> (f64, f64, f64, f64) {
+    let rep = |v: u64| {
+        if v < 256 {
+            return v;
+        }
+        let w = 1u64 << (v.ilog2() - 7);
+        v / w * w + w / 2
+    };
+    let mut r: Vec<u64> = m.iter().map(|&x| rep(x as u64)).collect();
+    r.sort_unstable();
+    let mid = r.len().div_ceil(2) - 1;
+    let median = r[mid];
+    let mut dev: Vec<u64> = r.iter().map(|&x| x.abs_diff(median)).collect();
+    dev.sort_unstable();
+    let mad = dev[mid];
+    let max = m.iter().copied().fold(0.0, f64::max);
+    let margin = (k_milli * 14826 * mad as u128).div_ceil(10_000_000);
+    (max, median as f64, mad as f64, max + margin as f64 + 1.0)
 }
 
 /// The header line of `dmap stream` output.
@@ -194,7 +198,14 @@ fn threshold_follows_the_documented_rule() {
     let unit = 2f64.powi(-q);
     // In integer scores (exact in f64 at these sizes), then in units.
     let ints: Vec<f64> = m.iter().map(|x| x / unit).collect();
-    let (max, median, mad, want_thr) = rule(&ints, 2.5);
+    let (max, median, mad, want_thr) = rule(&ints, 2500);
+    for (k, want) in [("max", max), ("median", median), ("mad", mad)] {
+        assert_eq!(
+            v["channels"]["cvm"]["integers"][k].as_f64(),
+            Some(want),
+            "{k}"
+        );
+    }
     let (max, median, mad) = (max * unit, median * unit, mad * unit);
     let ch = &v["channels"]["cvm"];
     assert_eq!(ch["thr"].as_f64().unwrap(), want_thr);
@@ -219,7 +230,7 @@ fn threshold_follows_the_documented_rule() {
     let pm2 = power_magnitudes(&d2, 6, 9, 25);
     assert_eq!(pm2, streamed_power(&r2));
     pm.extend(pm2);
-    let (pmax, pmedian, pmad, want_pthr) = rule(&pm, 2.5);
+    let (pmax, pmedian, pmad, want_pthr) = rule(&pm, 2500);
     // A real spread and a threshold a magnitude can reach.
     assert!(
         pmad >= 1.0 && want_pthr > pmax && want_pthr < 46340.0,
@@ -241,7 +252,7 @@ fn threshold_follows_the_documented_rule() {
         .enumerate()
     {
         assert_eq!(own.len() + others.len(), n1 + n2);
-        let t = rule(others, 2.5).3;
+        let t = rule(others, 2500).3;
         let r = &v["references"][i]["power"];
         assert_eq!(r["others_threshold"].as_f64().unwrap(), t / 32768.0);
         assert_eq!(
@@ -249,7 +260,8 @@ fn threshold_follows_the_documented_rule() {
             own.iter().filter(|&&x| x >= t).count()
         );
     }
-    assert_eq!(v["version"], 2);
+    assert_eq!(v["version"], 3);
+    assert_eq!(v["scans"], 2);
     assert_eq!(v["references"].as_array().unwrap().len(), 2);
     assert_eq!(
         v["config"],

@@ -114,8 +114,21 @@ fn a_defective_reference_and_channels_turned_off_are_warned_about() {
     let v: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&cal).unwrap()).unwrap();
     assert!(v["references"][2]["at_or_above_others_threshold"].as_u64() >= Some(1));
-    // A margin that turns both channels off.
-    let out = dmap(&["calibrate", s(&r1), s(&r2), "--k", "1e300", "-o", s(&cal)]);
+    // A margin that turns both channels off: the largest k the board's
+    // integers hold (thousandths in a u32); a larger one is refused.
+    one_line_error(
+        &dmap(&["calibrate", s(&r1), s(&r2), "--k", "1e300", "-o", s(&cal)]),
+        "--k must be a multiple of 0.001 and at most 4294967.295",
+    );
+    let out = dmap(&[
+        "calibrate",
+        s(&r1),
+        s(&r2),
+        "--k",
+        "4294967.295",
+        "-o",
+        s(&cal),
+    ]);
     ok(&out);
     let w = warnings(&out);
     assert!(

@@ -2,14 +2,16 @@
 //! over several simulated parts scanned one after the other (`dmap twin
 //! --parts`): settings changed on the command channel take effect when
 //! the next scan starts, never in the middle of one, and the header says
-//! where each value came from. Every part is checked against `dmap
-//! stream` of that part alone, with the settings the part was scanned
-//! with.
+//! where each value came from; `calibrate 5` on five defect-free parts
+//! gives the very thresholds `dmap calibrate` gives on those scans, and
+//! the next part is scored with them. Every part is checked against
+//! `dmap stream` of that part alone, with the settings the part was
+//! scanned with.
 
 mod common;
 
 use common::dmap_ok as dmap;
-use cvm_core::command::Key;
+use cvm_core::command::{Calibration, Key, Reply, parse_reply};
 use cvm_core::protocol::{self, Line};
 use cvm_core::settings::Source;
 use dmap::npy::{read_scan, write_scan_u16};
@@ -190,4 +192,250 @@ fn a_changed_setting_takes_effect_when_the_next_scan_starts() {
             > got[0].iter().filter(|l| l.starts_with("D,")).count(),
         "the lower threshold and the defect lines show"
     );
+}
+
+/// What `dmap calibrate` wrote, in the reply's terms.
+fn from_the_file(v: &serde_json::Value) -> Calibration {
+    let int = |ch: &str, k: &str| v["channels"][ch]["integers"][k].as_u64().unwrap() as u32;
+    let thr = |ch: &str| v["channels"][ch]["thr"].as_u64().unwrap() as u32;
+    Calibration {
+        scans: v["scans"].as_u64().unwrap() as u16,
+        positions: v["channels"]["cvm"]["positions"].as_u64().unwrap() as u32,
+        threshold: thr("cvm"),
+        power_threshold: thr("power"),
+        median: int("cvm", "median"),
+        mad: int("cvm", "mad"),
+        power_median: int("power", "median"),
+        power_mad: int("power", "mad"),
+    }
+}
+
+#[test]
+fn calibrate_5_on_the_board_equals_dmap_calibrate_and_scores_the_next_part_with_it() {
+    let dir = tempfile::tempdir().unwrap();
+    // A part scanning while the request arrives, five defect-free
+    // references (seeds the rule never saw elsewhere), then a defective
+    // part.
+    let mut parts = vec![part(dir.path(), 40, false)];
+    parts.extend((41..46).map(|s| part(dir.path(), s, false)));
+    parts.push(part(dir.path(), 1, true));
+    let scan = dir.path().join("seven.npy");
+    concat(&parts, &scan);
+    let req = dir.path().join("req.txt");
+    write_requests(&req, &[(5, &framed("C,7,calibrate,5"))]).unwrap();
+    let out = dmap(
+        &[
+            &["twin", scan.to_str().unwrap()][..],
+            &OPTS,
+            &["--parts", "7", "--requests", req.to_str().unwrap()],
+        ]
+        .concat(),
+    );
+    let (replies, got) = scans(&out.stdout);
+    assert_eq!(got.len(), 7);
+    let decoded: Vec<_> = replies
+        .iter()
+        .map(|l| {
+            let l: &'static str = Box::leak(format!("{l}\n").into_boxed_str());
+            parse_reply(l.as_bytes()).unwrap()
+        })
+        .collect();
+    assert_eq!(decoded.len(), 2, "{replies:?}");
+    assert_eq!(decoded[0], (Some(7), Reply::Calibrating(5)));
+    let (Some(7), Reply::Calibrated(board)) = decoded[1] else {
+        panic!("{:?}", decoded[1])
+    };
+    // `dmap calibrate` on the five references, with the same options.
+    let cal = dir.path().join("cal.json");
+    let refs: Vec<&str> = parts[1..6].iter().map(|p| p.to_str().unwrap()).collect();
+    dmap(
+        &[
+            &["calibrate"][..],
+            &refs,
+            &OPTS,
+            &["-o", cal.to_str().unwrap()],
+        ]
+        .concat(),
+    );
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&cal).unwrap()).unwrap();
+    assert_eq!(board, from_the_file(&v));
+    assert_eq!(board.positions, (5 * ROWS * COLS) as u32);
+    // The parts before the calibration ended: compiled thresholds.
+    for (k, p) in parts[..6].iter().enumerate() {
+        assert_eq!(got[k], stream(p, &[]), "part {k}");
+    }
+    // The defective part: the calibrated thresholds, sourced `c`, and
+    // `dmap stream --calibration`'s lines.
+    let want = stream(&parts[6], &["--calibration", cal.to_str().unwrap()]);
+    let h = header(&got[6]);
+    assert_eq!(
+        (h.threshold, h.power_threshold),
+        (board.threshold, board.power_threshold)
+    );
+    let origin = h.origin.expect("a version 6 header");
+    for k in Key::ALL {
+        let calibrated = matches!(k, Key::Threshold | Key::PowerThreshold);
+        let want_src = if calibrated {
+            Source::Changed
+        } else {
+            Source::Default
+        };
+        assert_eq!(origin.sources[k.index()], want_src, "{}", k.name());
+    }
+    assert_eq!(got[6][1..], want[1..]);
+    assert!(
+        got[6].iter().any(|l| l.starts_with("O,")),
+        "the defective part's object: {:?}",
+        got[6]
+    );
+}
+
+/// Replies as decoded: the id they echo and the reply.
+type Replies = Vec<(Option<u32>, Reply<'static>)>;
+
+/// The twin's run with these requests (`(beam, body)`, framed here) on
+/// bank 2 kept in `flash`: its replies and its scans.
+fn run_with_flash(
+    scan: &Path,
+    parts: u32,
+    flash: &Path,
+    requests: &[(u64, &str)],
+) -> (Replies, Vec<Vec<String>>, serde_json::Value) {
+    let dir = scan.parent().unwrap();
+    let req = dir.join("req.txt");
+    let bursts: Vec<(u64, Vec<u8>)> = requests.iter().map(|(b, r)| (*b, framed(r))).collect();
+    let refs: Vec<(u64, &[u8])> = bursts.iter().map(|(b, v)| (*b, &v[..])).collect();
+    write_requests(&req, &refs).unwrap();
+    let parts_s = parts.to_string();
+    let out = dmap(
+        &[
+            &["twin", scan.to_str().unwrap()][..],
+            &OPTS,
+            &["--parts", &parts_s, "--requests", req.to_str().unwrap()],
+            &["--flash", flash.to_str().unwrap()],
+        ]
+        .concat(),
+    );
+    let (replies, got) = scans(&out.stdout);
+    let decoded = replies
+        .iter()
+        .map(|l| {
+            let l: &'static str = Box::leak(format!("{l}\n").into_boxed_str());
+            parse_reply(l.as_bytes()).unwrap_or_else(|e| panic!("{e:?}: {l}"))
+        })
+        .collect();
+    let err = String::from_utf8_lossy(&out.stderr);
+    let last = err.lines().rfind(|l| l.starts_with('{')).unwrap();
+    (decoded, got, serde_json::from_str(last).unwrap())
+}
+
+/// The value replies that follow a status reply, as (key, value, source).
+fn status_values(replies: &Replies, id: u32) -> Vec<(Key, u32, Source)> {
+    let at = replies
+        .iter()
+        .position(|r| matches!(r, (Some(i), Reply::Status(_)) if *i == id))
+        .expect("a status reply");
+    replies[at + 1..at + 1 + Key::ALL.len()]
+        .iter()
+        .map(|r| match *r {
+            (Some(i), Reply::Value { key, value, source }) if i == id => (key, value, source),
+            ref other => panic!("{other:?}"),
+        })
+        .collect()
+}
+
+#[test]
+fn set_save_and_reset_keep_the_settings_and_defaults_save_brings_the_compiled_ones_back() {
+    let dir = tempfile::tempdir().unwrap();
+    let parts = [part(dir.path(), 31, true), part(dir.path(), 32, true)];
+    let one = dir.path().join("one.npy");
+    concat(&parts[..1], &one);
+    let two = dir.path().join("two.npy");
+    concat(&parts, &two);
+    let flash = dir.path().join("bank2.bin");
+    let compiled = header(&stream(&parts[0], &[]));
+    let half = compiled.threshold / 2;
+
+    // Set, save, then status: every value now in flash.
+    let set = format!("C,1,set,thr={half}");
+    let (r, _, c) = run_with_flash(
+        &one,
+        1,
+        &flash,
+        &[
+            (2, &set),
+            (3, "C,2,set,area=3"),
+            (4, "C,3,save"),
+            (60, "C,4,status"),
+        ],
+    );
+    assert_eq!(c["status"], "done", "{c}");
+    assert_eq!(
+        r[0],
+        (
+            Some(1),
+            Reply::Value {
+                key: Key::Threshold,
+                value: half,
+                source: Source::Changed
+            }
+        )
+    );
+    assert_eq!(r[2], (Some(3), Reply::Saved));
+    let values = status_values(&r, 4);
+    assert!(values.iter().all(|v| v.2 == Source::Flash), "{values:?}");
+    assert_eq!(values[Key::Threshold.index()].1, half);
+    assert_eq!(values[Key::MinArea.index()].1, 3);
+
+    // A power cycle: the saved values, from flash; then defaults, save
+    // and a reset in the middle of the first scan.
+    let (r, got, c) = run_with_flash(
+        &two,
+        2,
+        &flash,
+        &[
+            (0, "C,5,status"),
+            (10, "C,6,defaults"),
+            (11, "C,7,save"),
+            (40, "C,8,reset"),
+        ],
+    );
+    let Some((_, Reply::Status(st))) = r.first() else {
+        panic!("{r:?}")
+    };
+    assert_eq!(st.store, cvm_core::command::Store::Loaded);
+    let values = status_values(&r, 5);
+    assert_eq!(
+        values[Key::Threshold.index()],
+        (Key::Threshold, half, Source::Flash)
+    );
+    assert_eq!(
+        values[Key::MinArea.index()],
+        (Key::MinArea, 3, Source::Flash)
+    );
+    let h = header(&got[0]);
+    assert_eq!((h.threshold, h.boots), (half, 1));
+    let o = h.origin.unwrap();
+    assert!(o.sources.iter().all(|&s| s == Source::Flash));
+    assert_eq!(o.store, cvm_core::command::Store::Loaded);
+    let tail: Vec<_> = r[1 + Key::ALL.len()..].to_vec();
+    assert_eq!(
+        tail,
+        [
+            (Some(6), Reply::Defaults),
+            (Some(7), Reply::Saved),
+            (Some(8), Reply::Resetting)
+        ]
+    );
+    assert_eq!(c["resets"].as_array().map(Vec::len), Some(1), "{c}");
+    // After the reset: a software reset, the second start, and the record
+    // now holds the compiled values.
+    let after = header(got.last().unwrap());
+    assert_eq!(after.reset_cause, cvm_core::protocol::ResetCause::Software);
+    assert_eq!(after.boots, 2);
+    assert_eq!(after.threshold, compiled.threshold);
+    let o = after.origin.unwrap();
+    assert!(o.sources.iter().all(|&s| s == Source::Flash));
+    assert_eq!(o.store, cvm_core::command::Store::Loaded);
 }

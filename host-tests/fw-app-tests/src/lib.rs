@@ -2,7 +2,10 @@
 //! scan generator, the reference output (the core pipeline fed directly),
 //! and a simulated board (DRDY edges, SPI completions, a UART that can
 //! stall) driving `Acquisition`, `ScanDriver` and `LineQueue` exactly as the
-//! boards do.
+//! boards do; and bank 2 of the H743's flash (`bank`), for the settings
+//! store.
+
+pub mod bank;
 
 use cvm_core::pipeline::{Pipeline, Settings};
 use cvm_core::protocol::{LineSink, Priority};

@@ -10,9 +10,22 @@ the chip. Flash is readable (RM0433 Fig. 1: DMA1 reaches the AXI bus
 matrix, and flash sits on it). A stream disabled by software in the
 middle of a transfer stops after the current item and sets TCIF (RM0433
 §15.3, DMA transfer suspension); NDTR keeps what was left.
+
+Memory-to-memory (DIR = 10, RM0433 §15.3, "memory-to-memory mode"; DMA1
+does it as DMA2 does, both of its ports being on the bus matrix): the
+stream needs no request and starts when EN is set; SxPAR is the source
+and SxM0AR the destination, both in memory. Direct mode is not allowed:
+the hardware sets FCR.DMDIS when EN is set; circular mode is not allowed
+either (it stops the run here). The model moves the whole block
+`M2M_CYCLES_PER_ITEM` cycles per item after EN, then clears EN and sets
+TCIF (and HTIF). A bus error on either side is a transfer error: the
+stream stops at that item (NDTR keeps what was left, the items before it
+are written), EN is cleared and TEIF set. Reading a flash word whose ECC
+reports a double error is such a bus error (flash.py, `EccError`).
 """
 
 from .core import Stop
+from .flash import BusError
 
 STREAM_IRQS = (11, 12, 13, 14, 15, 16, 17, 47)
 FLAG_SHIFT = (0, 6, 16, 22)
@@ -22,6 +35,12 @@ REQ_SPI1_TX = 38
 REQ_USART3_TX = 46
 
 TCIF, HTIF, TEIF, DMEIF, FEIF = 0x20, 0x10, 0x08, 0x04, 0x01
+M2M = 2               # SxCR.DIR: memory to memory
+DMDIS = 1 << 2        # SxFCR: direct mode disabled (FIFO mode)
+CIRC = 1 << 8
+# The model's own time for one item of a memory-to-memory block (a read
+# and a write on the AXI matrix); nothing about the firmware may rest on it.
+M2M_CYCLES_PER_ITEM = 8
 
 
 FLASH = (0x0800_0000, 0x0820_0000)
@@ -95,7 +114,7 @@ class Dma:
 
     def _serve(self, req):
         for n, s in enumerate(self.streams):
-            if s.cr & 1 and (self.mux[n] & 0xFF) == req and n not in self.stalled:
+            if s.cr & 1 and (s.cr >> 6) & 3 != M2M and (self.mux[n] & 0xFF) == req and n not in self.stalled:
                 active = self.sources.get(req)
                 while s.cr & 1 and active and active():
                     self._move(n, s)
@@ -134,6 +153,60 @@ class Dma:
             else:
                 s.cr &= ~1
             self._flag(n, TCIF)
+
+    # --- memory to memory
+    def _start_m2m(self, n, s):
+        if s.cr & CIRC:
+            raise Stop(f"DMA1 stream {n}: circular mode in memory-to-memory is not allowed (RM0433 §15.3)")
+        size, msize = 1 << ((s.cr >> 11) & 3), 1 << ((s.cr >> 13) & 3)
+        if size != msize:
+            raise Stop(f"DMA1 stream {n}: packing (PSIZE {size} != MSIZE {msize}) is not modelled")
+        s.fcr |= DMDIS
+        cr, total = s.cr, s.ndtr
+        self.bus.at(self.bus.core.cycles + M2M_CYCLES_PER_ITEM * max(total, 1),
+                    lambda: self._m2m(n, s, cr))
+
+    def _m2m(self, n, s, cr):
+        """The block of the stream started with `cr`, if it is still running."""
+        if not s.cr & 1 or s.cr != cr:
+            return
+        size = 1 << ((s.cr >> 11) & 3)
+        while s.ndtr:
+            src = s.par + (s.moved * size if s.cr >> 9 & 1 else 0)
+            dst = s.m0ar + (s.moved * size if s.cr >> 10 & 1 else 0)
+            try:
+                value = self._mem_read(src, size)
+                self._mem_write(dst, size, value)
+            except BusError:
+                self._error(n, s)
+                return
+            s.moved += 1
+            s.ndtr -= 1
+            self.transfers += 1
+            if s.ndtr == s.total // 2:
+                self._flag(n, HTIF)
+        s.cr &= ~1
+        self._flag(n, TCIF)
+
+    def _mem_read(self, addr, size):
+        """An item read by the stream's source port: a model on the bus
+        (bank 2's window, a peripheral) or plain memory."""
+        base, model = self.bus._find(addr)
+        if model is not None:
+            read = getattr(model, "dma_read", model.read)
+            return read(addr - base, size) & ((1 << (8 * size)) - 1)
+        if not dma_reachable(addr, size, write=False, rcc=self.bus.rcc):
+            raise BusError(f"DMA1 read of {addr:#010x}: not reachable")
+        return int.from_bytes(bytes(self.bus.core.uc.mem_read(addr, size)), "little")
+
+    def _mem_write(self, addr, size, value):
+        base, model = self.bus._find(addr)
+        if model is not None:
+            model.write(addr - base, size, value)
+        elif dma_reachable(addr, size, write=True, rcc=self.bus.rcc):
+            self.bus.core.uc.mem_write(addr, value.to_bytes(size, "little"))
+        else:
+            raise BusError(f"DMA1 write of {addr:#010x}: not reachable")
 
     def _per_read(self, addr, size):
         base, model = self.bus._find(addr)
@@ -204,7 +277,10 @@ class Dma:
                 s.total = s.ndtr
                 s.moved = 0
                 self._update(n)
-                self.poll(self.mux[n] & 0xFF)
+                if (value >> 6) & 3 == M2M:
+                    self._start_m2m(n, s)
+                else:
+                    self.poll(self.mux[n] & 0xFF)
             self._update(n)
         elif s.cr & 1:
             raise Stop(f"DMA1 stream {n}: register {reg * 4:#x} written while enabled")

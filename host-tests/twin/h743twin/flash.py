@@ -2,8 +2,9 @@
 settings in bank 2: unlocking through FLASH_KEYR2, sector erase
 (CR2.SER/SNB/START), programming by 256-bit flash words through the
 bank's write buffer (CR2.PG, FW), the status flags (SR2.BSY, WBNE, QW,
-EOP and the error flags) and their clearing through FLASH_CCR2, and the
-flash interrupt (EOPIE and the error interrupt enables).
+EOP and the error flags) and their clearing through FLASH_CCR2, the
+failing word of a double ECC error (FLASH_ECC_FA2R), and the flash
+interrupt (EOPIE and the error interrupt enables).
 
 Bank 2 (0x0810_0000, eight sectors of 128 KiB) is a byte array that
 outlives resets (`Bank2`), so a reboot sees what was written, and that can
@@ -23,8 +24,13 @@ What silicon does and the model follows:
   0; EOP when it is done;
 * a flash word carries ECC over its 256 bits, so it can be programmed once
   per erase: programming it again leaves cells and ECC that do not agree,
-  and reading that word is a double ECC error (SR2.DBECCERR and a bus
-  error). The model records such words and stops the run when one is read.
+  and reading that word is a double ECC error: SR2.DBECCERR is set,
+  FLASH_ECC_FA2R holds the word's index in the bank, and the read is
+  answered with a bus error. The model records such words. A CPU read of
+  one stops the run (a bus fault); a DMA read ends in the stream's
+  transfer error (`EccError`, which dma.py turns into TEIF), and the run
+  goes on: that is how a firmware can read a flash that a power cut may
+  have left with such a word.
 
 The model's operation times are its own (PROGRAM_US, ERASE_US), an
 erase far shorter than the datasheet's sector erase time, so that runs
@@ -64,6 +70,16 @@ class PowerCut(Stop):
     """The run ends here: power was cut during a flash operation."""
 
 
+class BusError(Exception):
+    """A bus error answered to a DMA master (dma.py: the stream's transfer
+    error)."""
+
+
+class EccError(BusError):
+    """A DMA read of a flash word with a double ECC error: the bus error
+    the flash answers the DMA master with."""
+
+
 class Bank2:
     """The cells of bank 2: they survive resets, and runs through a file."""
 
@@ -74,6 +90,8 @@ class Bank2:
         self.ops = 0             # erases and programs, across resets
         self.cut_at = None
         self.double_programs = 0
+        self.ecc_errors = 0      # reads (CPU or DMA) of words whose ECC is wrong
+        self.dma_reads = 0       # DMA reads (items) of bank 2
 
     @staticmethod
     def load(path):
@@ -151,6 +169,7 @@ class FlashInterface:
         self.busy = False       # BSY: it is running
         self.erasing = False
         self.ops = 0
+        self.far = 0            # FLASH_ECC_FA2R: the last double-ECC word's index
 
     # --- registers
     def sr(self):
@@ -172,6 +191,8 @@ class FlashInterface:
             return self.sr()
         if off in (0x104, 0x114):
             return 0  # write-only
+        if off == 0x160:
+            return self.far
         raise KeyError
 
     def write(self, off, size, value):
@@ -223,12 +244,19 @@ class FlashInterface:
         self.update()
 
     # --- the bank 2 window
-    def mem_read(self, off, size):
+    def mem_read(self, off, size, dma=False):
         word = off // WORD
+        if dma:
+            self.bank.dma_reads += 1
         if word in self.bank.bad_ecc:
             self.flags |= DBECCERR
+            self.far = word & 0x7FFF
+            self.bank.ecc_errors += 1
             self.update()
-            raise Stop(f"bus fault: double ECC error reading flash word {BANK2_BASE + word * WORD:#010x} "
+            where = f"flash word {BANK2_BASE + word * WORD:#010x}"
+            if dma:
+                raise EccError(f"double ECC error reading {where}")
+            raise Stop(f"bus fault: double ECC error reading {where} "
                        "(programmed twice, or cut while programming, since its erase)")
         return int.from_bytes(self.bank.data[off:off + size], "little")
 
@@ -303,6 +331,9 @@ class Bank2Window:
 
     def read(self, off, size):
         return self.flash.mem_read(off, size)
+
+    def dma_read(self, off, size):
+        return self.flash.mem_read(off, size, dma=True)
 
     def write(self, off, size, value):
         self.flash.mem_write(off, size, value)

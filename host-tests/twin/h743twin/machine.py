@@ -341,6 +341,8 @@ def _stats(self):
         "uart_rx_lost_while_off": self.usart.rx.lost_off,
         "flash_operations": self.bank2.ops,
         "flash_double_programs": self.bank2.double_programs,
+        "flash_ecc_errors": self.bank2.ecc_errors,
+        "flash_dma_reads": self.bank2.dma_reads,
         # Interrupts unpended while a write to their peripheral may still
         # be in the write buffer (no read-back, no DSB): see bus.posted_write.
         "unordered_unpends": len(self.bus.unordered_unpends),

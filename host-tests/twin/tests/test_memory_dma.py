@@ -1,6 +1,8 @@
 """SRAM1-3 clock gating (RCC_AHB2ENR) for the CPU and DMA1, DMA1 reading
-flash, and TCIF on a stream disabled mid-transfer, against RM0433 §2.3,
-§8.7 and §15.3: `cd host-tests/twin && python3 -m unittest discover -s tests`."""
+flash, TCIF on a stream disabled mid-transfer, and DMA1's memory-to-memory
+mode reading bank 2 of the flash, whose double ECC errors are transfer
+errors, against RM0433 §2.3, §4, §8.7 and §15.3:
+`cd host-tests/twin && python3 -m unittest discover -s tests`."""
 
 import struct
 import unittest
@@ -8,8 +10,9 @@ import unittest
 from h743twin import system
 from h743twin.bus import Bus
 from h743twin.core import Core, Stop
-from h743twin.dma import REQ_SPI1_RX, REQ_USART3_TX, TCIF, TEIF, Dma
-from test_model import world
+from h743twin.dma import HTIF, M2M_CYCLES_PER_ITEM, REQ_SPI1_RX, REQ_USART3_TX, TCIF, TEIF, Dma
+from h743twin.flash import BANK2_BASE, BANK2_SIZE, Bank2, Bank2Window, FlashInterface
+from test_model import run_until, world
 
 SRAM1 = 0x3000_0000
 SRAM3 = 0x3004_0000
@@ -162,6 +165,90 @@ class StreamDisable(unittest.TestCase):
         self.dma.write(0x08, 4, 0x3D << 6)
         self.dma.write(STREAM1, 4, P2M_16 & ~1)
         self.assertEqual(self.flags(), 0)
+
+
+STREAM7 = 0x10 + 7 * 0x18
+HISR, HIFCR = 0x04, 0x0C
+# DIR = memory to memory, PSIZE = MSIZE = 32 bits, PINC, MINC, EN
+M2M_32 = (2 << 6) | (2 << 11) | (2 << 13) | (1 << 9) | (1 << 10) | 1
+AXI = 0x2400_0100
+
+
+class MemoryToMemory(unittest.TestCase):
+    """Stream 7 copies bank 2 of the flash into AXI SRAM, as the settings
+    store's flash driver does (src/h743/flash_bank2.rs)."""
+
+    def setUp(self):
+        self.bus, self.core = world()
+        self.bus.rcc = system.Rcc()
+        self.dma = Dma(self.bus, self.core.nvic)
+        self.bank = Bank2()
+        self.bank.data[0x40:0x80] = bytes(range(0x40))
+        self.flash = FlashInterface(self.bus, self.core.nvic, self.bank)
+        self.bus.periphs.append((BANK2_BASE, BANK2_SIZE, Bank2Window(self.flash)))
+        self.t = 0
+
+    def flags(self):
+        return self.dma.read(HISR, 4) >> 22 & 0x3D
+
+    def start(self, src, words, cr=M2M_32):
+        self.dma.write(STREAM7 + 0x04, 4, words)
+        self.dma.write(STREAM7 + 0x08, 4, src)
+        self.dma.write(STREAM7 + 0x0C, 4, AXI)
+        self.dma.write(STREAM7, 4, cr)
+
+    def wait(self, cycles):
+        self.t += cycles
+        run_until(self.bus, self.core, self.t)
+
+    def test_a_block_is_copied_after_its_time_without_a_request(self):
+        self.start(BANK2_BASE + 0x40, 16)
+        self.assertEqual(self.flags(), 0, "nothing moved at once")
+        self.assertEqual(self.dma.read(STREAM7 + 0x14, 4) & 0x04, 0x04, "FCR.DMDIS set by the hardware")
+        self.wait(16 * M2M_CYCLES_PER_ITEM)
+        self.assertEqual(self.flags(), TCIF | HTIF)
+        self.assertEqual(self.dma.read(STREAM7, 4) & 1, 0, "EN cleared at the end")
+        self.assertEqual(self.dma.read(STREAM7 + 0x04, 4), 0)
+        self.assertEqual(bytes(self.core.uc.mem_read(AXI, 0x40)), bytes(range(0x40)))
+        self.assertEqual(self.bank.dma_reads, 16)
+        self.assertFalse(self.core.nvic.line[47], "no interrupt enable: no interrupt")
+        self.dma.write(HIFCR, 4, 0x3D << 22)
+        self.assertEqual(self.flags(), 0)
+
+    def test_a_word_with_a_double_ecc_error_is_a_transfer_error(self):
+        self.bank.bad_ecc.add(3)   # bytes 0x60..0x7F
+        self.start(BANK2_BASE + 0x40, 16)
+        self.wait(16 * M2M_CYCLES_PER_ITEM)
+        self.assertEqual(self.flags(), TEIF | HTIF, "half the block went before the error")
+        self.assertEqual(self.dma.read(STREAM7, 4) & 1, 0, "EN cleared by the error")
+        self.assertEqual(self.dma.read(STREAM7 + 0x04, 4), 8, "stopped at the bad word's first item")
+        self.assertEqual(bytes(self.core.uc.mem_read(AXI, 0x20)), bytes(range(0x20)), "the good word before it")
+        self.assertTrue(self.flash.read(0x110, 4) & (1 << 26), "SR2.DBECCERR")
+        self.assertEqual(self.flash.read(0x160, 4), 3, "FLASH_ECC_FA2R: the word's index")
+        self.assertEqual(self.bank.ecc_errors, 1)
+        self.flash.write(0x114, 4, 1 << 26)
+        self.assertFalse(self.flash.read(0x110, 4) & (1 << 26), "cleared through CCR2")
+        with self.assertRaises(Stop):
+            self.flash.mem_read(0x60, 4)   # the CPU: a bus fault
+
+    def test_a_stream_disabled_before_its_end_moves_nothing_more(self):
+        self.start(BANK2_BASE + 0x40, 16)
+        self.dma.write(STREAM7, 4, M2M_32 & ~1)
+        self.wait(16 * M2M_CYCLES_PER_ITEM)
+        self.assertEqual(self.dma.read(STREAM7 + 0x04, 4), 16)
+        self.assertEqual(bytes(self.core.uc.mem_read(AXI, 4)), bytes(4))
+
+    def test_dtcm_is_no_destination(self):
+        self.dma.write(STREAM7 + 0x04, 4, 4)
+        self.dma.write(STREAM7 + 0x08, 4, BANK2_BASE)
+        self.dma.write(STREAM7 + 0x0C, 4, 0x2000_0000)
+        self.dma.write(STREAM7, 4, M2M_32)
+        self.wait(4 * M2M_CYCLES_PER_ITEM)
+        self.assertEqual(self.flags(), TEIF)
+
+    def test_circular_mode_is_not_allowed(self):
+        with self.assertRaises(Stop):
+            self.start(BANK2_BASE, 4, M2M_32 | (1 << 8))
 
 
 class PostedWrites(unittest.TestCase):

@@ -224,6 +224,16 @@ class Fields(unittest.TestCase):
         self.assertEqual(self.reg("DMAMUX1", "ccr[1]").field("dmareq_id"), (0, 8))
         self.assertEqual(self.reg("DMA1", "st[7].fcr").offset, 0x10 + 7 * 0x18 + 0x14)
 
+    def test_flash_bank2_ecc_fields(self):
+        # What the settings store's driver reads after a DMA transfer error.
+        sr, ccr, far = (self.reg("FLASH", f"bank[1].{r}") for r in ("sr", "ccr", "far"))
+        self.assertEqual(sr.mask("dbeccerr"), flashmod.DBECCERR)
+        self.assertEqual(ccr.mask("clr_dbeccerr"), flashmod.DBECCERR)
+        self.assertEqual((far.offset, far.field("fail_ecc_addr")), (0x160, (0, 15)))
+        m = bare_machine()
+        m.flash.far = 0x7FFF
+        self.assertEqual(m.flash.read(far.offset, 4), 0x7FFF)
+
     def test_clock_gates_are_the_rcc_enable_bits(self):
         m = bare_machine()
         models = instances(m)

@@ -14,9 +14,15 @@ use crate::fmt::fmt_num;
 
 /// Identifies a calibration file.
 pub const FORMAT: &str = "dmap-calibration";
-/// Version of the file layout; a reader refuses other versions. Version 2
-/// added the power channel (`channels.power`).
-pub const VERSION: u64 = 2;
+/// Version of the file layout. Version 2 added the power channel
+/// (`channels.power`); version 3 made the thresholds with the streaming
+/// rule the board runs (`cvm_core::calibration`: median and MAD from the
+/// histogram's bins, `channels.*.integers`). A reader takes versions 2
+/// and 3: a threshold is applied the same way whichever rule made it, only
+/// the statistics beside it differ.
+pub const VERSION: u64 = 3;
+/// The oldest version a reader takes.
+pub const OLDEST_VERSION: u64 = 2;
 
 /// The scoring configuration as recorded in a calibration file.
 pub fn config_json(c: &Config) -> Result<Value> {
@@ -118,9 +124,12 @@ impl Calibration {
                 "{p}: calibration file version 1 has no power-channel threshold (made before the power channel): run dmap calibrate again"
             );
         }
-        if v["version"] != VERSION {
+        if !v["version"]
+            .as_u64()
+            .is_some_and(|n| (OLDEST_VERSION..=VERSION).contains(&n))
+        {
             bail!(
-                "{p}: calibration file version {} (this dmap reads {VERSION})",
+                "{p}: calibration file version {} (this dmap reads {OLDEST_VERSION} to {VERSION})",
                 v["version"]
             );
         }

@@ -5,36 +5,52 @@
 //! and `dmap twin` apply with `--calibration` (docs/experiments.md,
 //! "Calibration").
 //!
-//! The rule, the same for each channel: with `m` the channel's magnitudes
-//! of every position of every reference (integers: the CVM gradient
-//! magnitudes in the scorer's `Q(q)` format, the power magnitudes in `Q15`,
-//! `cvm_core::power`),
+//! The rule is the board's own (`cvm_core::calibration`, which the board
+//! runs on live scans for `calibrate N`): each reference is scored, its
+//! positions with data go into a `Calibrator`, and the references'
+//! calibrators are merged, so the thresholds are those the board computes
+//! from the same scans. Per channel, over the magnitudes of every
+//! position with data of every reference (integers: the CVM gradient
+//! magnitudes in the scorer's `Q(q)` format, the power magnitudes in
+//! `Q15`, `cvm_core::power`), each taken as the representative of its
+//! histogram bin (itself below 256, else the middle of a bin under 0.8 %
+//! of the value wide),
 //!
 //! ```text
-//! thr = Q_p(m) + ceil(k * 1.4826 * MAD(m)) + 1
+//! thr = Q_p + ceil(k * 1.4826 * MAD) + 1
 //! ```
 //!
-//! `Q_p` the nearest-rank `p` quantile (default `p = 1`, the maximum),
-//! `MAD` the median absolute deviation from the median (1.4826 MAD is the
-//! standard deviation of a normal background), `k` the margin in those
-//! units (default 3). A position is defective when its magnitude reaches
-//! `thr`, so with `p = 1` no reference position is. The threshold in
-//! distance units is `thr * 2^-q`, which converts back to exactly `thr`;
-//! the power threshold as a contrast is `thr * 2^-15`, likewise exact. A
-//! power threshold above the largest magnitude ([`power::POWER_MAX`], a
-//! reference with a dark neighbour) is recorded as [`power::POWER_OFF`]:
-//! the channel is off.
+//! `Q_p` the top of the bin of the nearest-rank `p` quantile, capped at the
+//! exact maximum (default `p = 1`: the maximum itself), the median and
+//! `MAD` the lower medians (rank `ceil(n / 2)`) of the representatives and
+//! of their distances from the median (1.4826 MAD is the standard
+//! deviation of a normal background), `k` the margin in those units
+//! (default 3). `p` and `k` must be exact in millionths and thousandths:
+//! the integers the board computes with. A position is defective when its
+//! magnitude reaches `thr`, so with `p = 1` no reference position is. The
+//! threshold in distance units is `thr * 2^-q`, which converts back to
+//! exactly `thr`; the power threshold as a contrast is `thr * 2^-15`,
+//! likewise exact. A power threshold above the largest magnitude
+//! ([`power::POWER_MAX`], a reference with a dark neighbour) is recorded
+//! as [`power::POWER_OFF`]: the channel is off.
+//!
+//! `--scores` is another thing: a rule in f64 with exact medians on
+//! precomputed gradient images of any distance, for `dmap eval` only.
 //!
 //! The file records the scoring configuration (geometry, kernels, weights,
 //! normalisation, full scale); applying it to any other configuration is
 //! refused. Each channel has its entry in `"channels"` (`"cvm"`, `"power"`:
-//! `threshold`, `thr`, `q`). Version 1 files, made before the power
+//! `threshold`, `thr`, `q`, and the statistics, also as `integers`).
+//! Version 3 files come from this rule; version 2 files (the rule before
+//! it, exact medians over every magnitude) are still applied, their
+//! thresholds being the same kind of integer. Version 1 files, made before the power
 //! channel, have no power entry and are refused with a request to
 //! calibrate again: applying only half a calibration would leave the power
 //! channel at a default the references never checked.
 
 pub mod checks;
 pub mod file;
+pub mod report;
 pub mod rule;
 
 use std::io::Write;
@@ -42,15 +58,16 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, anyhow, bail};
 use clap::Args;
-use cvm_core::{Config, Scorer, flags, power};
-use serde_json::{Value, json};
+use cvm_core::calibration::{Calibrator, Rule as CoreRule, Statistics};
+use cvm_core::{Config, PositionScore, Scorer, flags, power};
+use serde_json::json;
 
 use crate::fmt::fmt_num;
 use crate::npy::ScanFile;
 use crate::options::ScoringArgs;
 use crate::settings;
-use file::{FORMAT, VERSION, config_json};
-use rule::{Rule, channel, power_thr, stats, threshold_f64};
+use file::{FORMAT, VERSION};
+use rule::{Rule, threshold_f64};
 
 // `dmap eval --calibration` reads calibration files too.
 pub use file::{Calibration, eval_threshold};
@@ -66,10 +83,12 @@ pub struct CalibrateArgs {
     #[arg(long, value_name = "N", default_value_t = u16::MAX,
           value_parser = clap::value_parser!(u16).range(1..))]
     pub full_scale: u16,
-    /// Quantile of the reference magnitudes the threshold starts from (1 = their maximum)
+    /// Quantile of the reference magnitudes the threshold starts from (1 = their maximum; a
+    /// multiple of 0.000001)
     #[arg(long, value_name = "P", default_value_t = 1.0)]
     pub quantile: f64,
-    /// Margin above the quantile, in robust standard deviations (1.4826 MAD) of the reference magnitudes
+    /// Margin above the quantile, in robust standard deviations (1.4826 MAD) of the reference
+    /// magnitudes (a multiple of 0.001)
     #[arg(long, value_name = "K", default_value_t = 3.0)]
     pub k: f64,
     /// The references are gradient images (`dmap score` output, any distance), not scans:
@@ -81,20 +100,40 @@ pub struct CalibrateArgs {
     pub out: PathBuf,
 }
 
-/// Both channels' magnitudes of the positions of a scan that have data.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct Magnitudes {
-    /// CVM gradient magnitudes, `Q(q)`.
-    pub cvm: Vec<u32>,
-    /// Power magnitudes, `Q15`.
-    pub power: Vec<u32>,
-    /// The lowest and highest sample of the scan.
+/// A reference's scores (both channels, every position, the firmware's
+/// arithmetic) and its lowest and highest sample.
+pub struct Scored {
+    pub scores: Vec<PositionScore>,
     pub samples: Option<checks::SampleRange>,
 }
 
-/// Both channels' magnitudes of every position of a scan with data, in the
-/// firmware's arithmetic.
-pub fn magnitudes(scorer: &Scorer, scan: &ScanFile) -> Result<Magnitudes> {
+impl Scored {
+    /// The CVM magnitudes (`Q(q)`) of the positions with data.
+    pub fn cvm(&self) -> Vec<u32> {
+        self.with_data().map(|s| s.mag).collect()
+    }
+
+    /// The power magnitudes (`Q15`) of the positions with data.
+    pub fn power(&self) -> Vec<u32> {
+        self.with_data().map(|s| u32::from(s.pmag)).collect()
+    }
+
+    fn with_data(&self) -> impl Iterator<Item = &PositionScore> {
+        self.scores.iter().filter(|s| s.flags & flags::NO_DATA == 0)
+    }
+
+    /// The reference as one scan of a calibration: the board's calibrator
+    /// fed its positions.
+    pub fn calibrator(&self) -> Calibrator {
+        let mut c = Calibrator::new();
+        c.add_row(&self.scores);
+        c.end_scan();
+        c
+    }
+}
+
+/// Every position's scores of a scan, in the firmware's arithmetic.
+pub fn score(scorer: &Scorer, scan: &ScanFile) -> Result<Scored> {
     let n = scan.geometry.cells();
     let mut data = vec![0u16; scan.maps() * n];
     let mut scratch = Vec::new();
@@ -102,21 +141,15 @@ pub fn magnitudes(scorer: &Scorer, scan: &ScanFile) -> Result<Magnitudes> {
     for (row, out) in data.chunks_mut(scan.cols * n).enumerate() {
         scan.maps_u16(row * scan.cols, out, &mut scratch)?;
     }
-    let mut m = Magnitudes {
-        samples: data
-            .iter()
-            .min()
-            .zip(data.iter().max())
-            .map(|(&lowest, &highest)| checks::SampleRange { lowest, highest }),
-        ..Magnitudes::default()
-    };
-    for s in crate::fixed::score_scan(scorer, scan.rows, scan.cols, &data) {
-        if s.flags & flags::NO_DATA == 0 {
-            m.cvm.push(s.mag);
-            m.power.push(u32::from(s.pmag));
-        }
-    }
-    Ok(m)
+    let samples = data
+        .iter()
+        .min()
+        .zip(data.iter().max())
+        .map(|(&lowest, &highest)| checks::SampleRange { lowest, highest });
+    Ok(Scored {
+        scores: crate::fixed::score_scan(scorer, scan.rows, scan.cols, &data),
+        samples,
+    })
 }
 
 /// `dmap calibrate --scores`: the rule on precomputed gradient images.
@@ -173,21 +206,36 @@ fn run_scores(a: &CalibrateArgs, rule: &Rule) -> Result<()> {
     Ok(())
 }
 
-pub fn run(a: &CalibrateArgs) -> Result<()> {
-    let rule = Rule {
-        quantile: a.quantile,
-        k: a.k,
-    };
-    rule.check()?;
-    if a.out.as_os_str() != "-" {
-        let inputs: Vec<&Path> = a.refs.iter().map(PathBuf::as_path).collect();
-        crate::out::refuse_inputs(&a.out, &inputs)?;
+/// One reference, scored, and calibrated on its own.
+struct Reference {
+    path: PathBuf,
+    rows: usize,
+    cols: usize,
+    cvm: Vec<u32>,
+    power: Vec<u32>,
+    cal: Calibrator,
+}
+
+/// The references' calibrators merged, `except` one.
+fn merged(refs: &[Reference], except: Option<usize>) -> Calibrator {
+    let mut all = Calibrator::new();
+    for (i, r) in refs.iter().enumerate() {
+        if Some(i) != except {
+            all.merge(&r.cal);
+        }
     }
-    if a.scores {
-        return run_scores(a, &rule);
-    }
-    let mut all = Vec::new();
-    let mut per_ref = Vec::new();
+    all
+}
+
+fn statistics(c: &Calibrator, rule: &CoreRule) -> Result<Statistics> {
+    c.statistics(rule)
+        .map_err(|e| anyhow!("the references cannot calibrate: {e}"))
+}
+
+/// Scores the references and calibrates each on its own; refuses any
+/// that cannot calibrate. Returns them with the scoring configuration.
+fn references(a: &CalibrateArgs) -> Result<(Vec<Reference>, Config, Scorer)> {
+    let mut refs = Vec::new();
     let mut setup: Option<(Config, Scorer, (usize, usize))> = None;
     for (i, path) in a.refs.iter().enumerate() {
         let earlier: Vec<&Path> = a.refs[..i].iter().map(PathBuf::as_path).collect();
@@ -214,40 +262,66 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
                 g0.1
             );
         }
-        let m = magnitudes(scorer, &scan)?;
-        if m.cvm.is_empty() {
+        let scored = score(scorer, &scan)?;
+        let cvm = scored.cvm();
+        if cvm.is_empty() {
             bail!("{} has no position with data", path.display());
         }
-        if let Some(range) = m.samples {
-            checks::refuse_unfit(path, (scan.rows, scan.cols), range, a.full_scale, &m.cvm)?;
+        if let Some(range) = scored.samples {
+            checks::refuse_unfit(path, (scan.rows, scan.cols), range, a.full_scale, &cvm)?;
         }
-        per_ref.push((
-            path.clone(),
-            scan.rows,
-            scan.cols,
-            stats(&m.cvm, &rule),
-            stats(&m.power, &rule),
-        ));
-        all.push(m);
+        refs.push(Reference {
+            path: path.clone(),
+            rows: scan.rows,
+            cols: scan.cols,
+            power: scored.power(),
+            cal: scored.calibrator(),
+            cvm,
+        });
     }
     let Some((config, scorer, _)) = setup else {
         bail!("no reference scan given")
     };
-    let (cvm_all, pow_all): (Vec<Vec<u32>>, Vec<Vec<u32>>) =
-        all.into_iter().map(|m| (m.cvm, m.power)).unzip();
-    let (st, thr, loo) = channel(&cvm_all, &rule, |t| t);
-    let (pst, pthr, ploo) = channel(&pow_all, &rule, power_thr);
-    let mut warnings = Vec::new();
-    for (i, (path, ..)) in per_ref.iter().enumerate() {
-        if let Some(&(t, n)) = loo.get(i) {
-            let others = fmt_num(scorer.score_to_units(t));
-            warnings.extend(checks::outlier_warning(path, "CVM", n, &others));
-        }
-        if let Some(&(t, n)) = ploo.get(i) {
-            let others = fmt_num(power::to_units(t));
-            warnings.extend(checks::outlier_warning(path, "power", n, &others));
+    Ok((refs, config, scorer))
+}
+
+pub fn run(a: &CalibrateArgs) -> Result<()> {
+    let rule = Rule {
+        quantile: a.quantile,
+        k: a.k,
+    };
+    rule.check()?;
+    if a.out.as_os_str() != "-" {
+        let inputs: Vec<&Path> = a.refs.iter().map(PathBuf::as_path).collect();
+        crate::out::refuse_inputs(&a.out, &inputs)?;
+    }
+    if a.scores {
+        return run_scores(a, &rule);
+    }
+    let exact = rule.exact()?;
+    let (refs, config, scorer) = references(a)?;
+    let st = statistics(&merged(&refs, None), &exact)?;
+    // Leave one out: per reference, both channels' thresholds of the
+    // others and how many of its own positions reach them.
+    let mut loo = Vec::new();
+    if refs.len() > 1 {
+        for (i, r) in refs.iter().enumerate() {
+            let o = statistics(&merged(&refs, Some(i)), &exact)?;
+            let reach = |m: &[u32], t: u32| m.iter().filter(|&&x| x >= t).count();
+            loo.push((
+                (o.cvm.threshold, reach(&r.cvm, o.cvm.threshold)),
+                (o.power.threshold, reach(&r.power, o.power.threshold)),
+            ));
         }
     }
+    let mut warnings = Vec::new();
+    for (r, &((t, n), (pt, pn))) in refs.iter().zip(&loo) {
+        let others = fmt_num(scorer.score_to_units(t));
+        warnings.extend(checks::outlier_warning(&r.path, "CVM", n, &others));
+        let others = fmt_num(power::to_units(pt));
+        warnings.extend(checks::outlier_warning(&r.path, "power", pn, &others));
+    }
+    let (thr, pthr) = (st.cvm.threshold, st.power.threshold);
     if thr == u32::MAX {
         warnings.push(format!(
             "the CVM channel is off: its threshold is past the largest score (--k {} is too large)",
@@ -259,73 +333,20 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
             "the power channel is off: its threshold is above every power magnitude (a reference with a dark neighbour, or --k too large)".into(),
         );
     }
-    let units = scorer.score_to_units(thr);
-    debug_assert_eq!(scorer.threshold_from_units(units), thr);
-    let punits = power::to_units(pthr);
-    debug_assert_eq!(power::threshold_from_units(punits), pthr);
-    let to_units = |v: f64| v * scorer.score_to_units(1);
-    let pto_units = |v: f64| v * power::to_units(1);
-    let refs: Vec<Value> = per_ref
+    let per_ref: Vec<report::Reference> = refs
         .iter()
         .enumerate()
-        .map(|(i, (path, rows, cols, s, ps))| {
-            let mut r = json!({
-                "file": path.display().to_string(),
-                "rows": rows,
-                "cols": cols,
-                "max": to_units(f64::from(s.max)),
-                "median": to_units(s.median),
-                "mad": to_units(s.mad),
-                "power": {
-                    "max": pto_units(f64::from(ps.max)),
-                    "median": pto_units(ps.median),
-                    "mad": pto_units(ps.mad),
-                },
-            });
-            if let Some((t, n)) = loo.get(i) {
-                r["others_threshold"] = json!(scorer.score_to_units(*t));
-                r["at_or_above_others_threshold"] = json!(n);
-            }
-            if let Some((t, n)) = ploo.get(i) {
-                r["power"]["others_threshold"] = json!(power::to_units(*t));
-                r["power"]["at_or_above_others_threshold"] = json!(n);
-            }
-            r
+        .map(|(i, r)| {
+            Ok(report::Reference {
+                path: &r.path,
+                rows: r.rows,
+                cols: r.cols,
+                stats: statistics(&r.cal, &exact)?,
+                others: loo.get(i).copied(),
+            })
         })
-        .collect();
-    let doc = json!({
-        "format": FORMAT,
-        "version": VERSION,
-        "config": config_json(&config)?,
-        "rule": {
-            "text": "per channel, thr = Q_p(m) + ceil(k * 1.4826 * MAD(m)) + 1 over the channel's magnitudes m of all reference positions (integers: cvm in Q(q), power in Q15; a power thr above 46340 is recorded as 4294967295, off); defective when a channel's magnitude >= its thr",
-            "quantile": rule.quantile,
-            "k": rule.k,
-        },
-        "channels": {
-            "cvm": {
-                "threshold": units,
-                "thr": thr,
-                "q": scorer.score_frac_bits(),
-                "positions": st.n,
-                "max": to_units(f64::from(st.max)),
-                "quantile_value": to_units(f64::from(st.quantile)),
-                "median": to_units(st.median),
-                "mad": to_units(st.mad),
-            },
-            "power": {
-                "threshold": punits,
-                "thr": pthr,
-                "q": power::POWER_FRAC,
-                "positions": pst.n,
-                "max": pto_units(f64::from(pst.max)),
-                "quantile_value": pto_units(f64::from(pst.quantile)),
-                "median": pto_units(pst.median),
-                "mad": pto_units(pst.mad),
-            }
-        },
-        "references": refs,
-    });
+        .collect::<Result<_>>()?;
+    let doc = report::document(&config, &scorer, &rule, &exact, &st, &per_ref)?;
     let text = format!(
         "{}\n",
         serde_json::to_string_pretty(&doc).context("encoding the calibration")?
@@ -336,23 +357,8 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
     })?;
     let _ = writeln!(
         std::io::stderr(),
-        "dmap calibrate: {} positions of {} reference(s): max {}, median {}, MAD {} -> threshold {} (integer {} in Q({})); power: max {}, median {}, MAD {} -> threshold {}",
-        st.n,
-        a.refs.len(),
-        fmt_num(to_units(f64::from(st.max))),
-        fmt_num(to_units(st.median)),
-        fmt_num(to_units(st.mad)),
-        fmt_num(units),
-        thr,
-        scorer.score_frac_bits(),
-        fmt_num(pto_units(f64::from(pst.max))),
-        fmt_num(pto_units(pst.median)),
-        fmt_num(pto_units(pst.mad)),
-        if pthr == power::POWER_OFF {
-            "off (above every power magnitude)".to_string()
-        } else {
-            format!("{} (integer {pthr} in Q15)", fmt_num(punits))
-        }
+        "{}",
+        report::summary(&scorer, &st, refs.len())
     );
     for w in &warnings {
         crate::out::warn(w);

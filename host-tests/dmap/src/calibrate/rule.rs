@@ -1,9 +1,9 @@
-//! The calibration rule and its robust statistics: per channel, over the
-//! magnitudes `m` of every defect-free reference position,
-//! `thr = Q_p(m) + ceil(k * 1.4826 * MAD(m)) + 1` (integers, the firmware's
-//! formats), and its f64 twin for precomputed scores.
+//! The options of the calibration rule and their exact integer form
+//! (`cvm_core::calibration::Rule`, the rule itself), the power channel's
+//! off rule, and the f64 rule `--scores` applies to precomputed scores.
 
 use anyhow::{Result, bail};
+use cvm_core::calibration::rule::{K_DEN, P_DEN};
 use cvm_core::power;
 
 use crate::fmt::fmt_num;
@@ -11,11 +11,20 @@ use crate::fmt::fmt_num;
 /// MAD to the standard deviation of a normal distribution.
 pub const MAD_TO_SIGMA: f64 = 1.4826;
 
-/// The rule's parameters.
+/// The rule's parameters as given.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Rule {
     pub quantile: f64,
     pub k: f64,
+}
+
+/// `v * den` when it is a whole number (to within the decimal's rounding
+/// in f64) that fits a `u32`.
+fn exact_units(v: f64, den: u64) -> Option<u32> {
+    let scaled = v * den as f64;
+    let whole = scaled.round();
+    ((scaled - whole).abs() <= 1e-9 * whole.max(1.0) && (0.0..=u32::MAX as f64).contains(&whole))
+        .then_some(whole as u32)
 }
 
 impl Rule {
@@ -31,17 +40,30 @@ impl Rule {
         }
         Ok(())
     }
-}
 
-/// Robust statistics of integer magnitudes.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Stats {
-    pub n: usize,
-    pub max: u32,
-    pub median: f64,
-    pub mad: f64,
-    /// The rule's quantile.
-    pub quantile: u32,
+    /// The rule in the core's integers: `p` in millionths and `k` in
+    /// thousandths, refused when not exactly that (the board computes with
+    /// them, so a file must say exactly what it applied).
+    pub fn exact(&self) -> Result<cvm_core::calibration::Rule> {
+        self.check()?;
+        let Some(quantile_ppm) = exact_units(self.quantile, P_DEN) else {
+            bail!(
+                "--quantile must be a multiple of 0.000001, got {}",
+                fmt_num(self.quantile)
+            );
+        };
+        let Some(k_milli) = exact_units(self.k, K_DEN) else {
+            bail!(
+                "--k must be a multiple of 0.001 and at most {}, got {}",
+                u32::MAX as f64 / K_DEN as f64,
+                fmt_num(self.k)
+            );
+        };
+        Ok(cvm_core::calibration::Rule {
+            quantile_ppm,
+            k_milli,
+        })
+    }
 }
 
 /// Median of sorted values (mean of the middle two for an even count).
@@ -51,37 +73,6 @@ fn median_sorted(v: &[f64]) -> f64 {
         v[n / 2]
     } else {
         (v[n / 2 - 1] + v[n / 2]) / 2.0
-    }
-}
-
-/// Statistics of `m` (not empty) for `rule`.
-pub fn stats(m: &[u32], rule: &Rule) -> Stats {
-    let mut s: Vec<u32> = m.to_vec();
-    s.sort_unstable();
-    let f: Vec<f64> = s.iter().map(|&x| f64::from(x)).collect();
-    let median = median_sorted(&f);
-    let mut dev: Vec<f64> = f.iter().map(|x| (x - median).abs()).collect();
-    dev.sort_unstable_by(f64::total_cmp);
-    let mad = median_sorted(&dev);
-    // Nearest rank: the smallest value with at least p n values at or below it.
-    let rank = ((rule.quantile * s.len() as f64).ceil() as usize).clamp(1, s.len());
-    Stats {
-        n: s.len(),
-        max: s[s.len() - 1],
-        median,
-        mad,
-        quantile: s[rank - 1],
-    }
-}
-
-/// The rule's integer threshold from the statistics (saturating).
-pub fn threshold(st: &Stats, rule: &Rule) -> u32 {
-    let margin = (rule.k * MAD_TO_SIGMA * st.mad).ceil();
-    let t = f64::from(st.quantile) + margin + 1.0;
-    if t >= f64::from(u32::MAX) {
-        u32::MAX
-    } else {
-        t as u32
     }
 }
 
@@ -96,36 +87,10 @@ pub fn power_thr(thr: u32) -> u32 {
     }
 }
 
-/// One channel's calibration over references' magnitudes `all` (one list
-/// per reference): the pooled statistics, the threshold (after `fix`) and,
-/// with more than one reference, per reference the threshold of the
-/// others and how many of its positions reach that.
-pub fn channel(
-    all: &[Vec<u32>],
-    rule: &Rule,
-    fix: fn(u32) -> u32,
-) -> (Stats, u32, Vec<(u32, usize)>) {
-    let pooled: Vec<u32> = all.iter().flatten().copied().collect();
-    let st = stats(&pooled, rule);
-    let thr = fix(threshold(&st, rule));
-    let mut loo = Vec::new();
-    if all.len() > 1 {
-        for i in 0..all.len() {
-            let others: Vec<u32> = all
-                .iter()
-                .enumerate()
-                .filter(|&(j, _)| j != i)
-                .flat_map(|(_, m)| m.iter().copied())
-                .collect();
-            let t = fix(threshold(&stats(&others, rule), rule));
-            loo.push((t, all[i].iter().filter(|&&x| x >= t).count()));
-        }
-    }
-    (st, thr, loo)
-}
-
-/// The rule in f64 on magnitudes `m` (not empty): the quantile plus
-/// `k * 1.4826 * MAD`, and at least the next number above the quantile.
+/// `--scores`: a rule in f64 on precomputed magnitudes `m` (not empty),
+/// for `dmap eval` only and not the board's: the nearest-rank quantile plus
+/// `k * 1.4826 * MAD` with exact medians (mean of the middle two), and at
+/// least the next number above the quantile.
 pub fn threshold_f64(m: &[f64], rule: &Rule) -> (f64, f64, f64, f64) {
     let mut s: Vec<f64> = m.to_vec();
     s.sort_unstable_by(f64::total_cmp);
@@ -152,23 +117,28 @@ mod tests {
     use super::*;
 
     #[test]
-    fn rule_on_hand_made_magnitudes() {
-        // 1..=9 and 100: median 5.5, deviations 4.5 3.5 2.5 1.5 .5 .5 1.5 2.5 3.5 94.5,
-        // MAD 2.5; k = 2: margin ceil(2 * 1.4826 * 2.5) = 8.
-        let m = [1, 2, 3, 4, 5, 6, 7, 8, 9, 100];
-        let r = Rule {
-            quantile: 1.0,
-            k: 2.0,
-        };
-        let s = stats(&m, &r);
-        assert_eq!((s.max, s.median, s.mad, s.quantile), (100, 5.5, 2.5, 100));
-        assert_eq!(threshold(&s, &r), 109);
-        let r9 = Rule {
-            quantile: 0.9,
-            k: 0.0,
-        };
-        assert_eq!(threshold(&stats(&m, &r9), &r9), 10);
-        assert_eq!(threshold(&stats(&[u32::MAX], &r), &r), u32::MAX);
+    fn options_become_exact_rationals_or_are_refused() {
+        let r = |quantile, k| Rule { quantile, k }.exact();
+        let d = r(1.0, 3.0).unwrap();
+        assert_eq!((d.quantile_ppm, d.k_milli), (1_000_000, 3000));
+        assert_eq!(d, cvm_core::calibration::Rule::DEFAULT);
+        let d = r(0.999, 2.5).unwrap();
+        assert_eq!((d.quantile_ppm, d.k_milli), (999_000, 2500));
+        let d = r(0.000001, 0.001).unwrap();
+        assert_eq!((d.quantile_ppm, d.k_milli), (1, 1));
+        assert_eq!(r(0.5, 0.0).unwrap().k_milli, 0);
+        assert_eq!(r(1.0, 4294967.295).unwrap().k_milli, u32::MAX);
+        for (q, k, needle) in [
+            (0.9999995, 3.0, "--quantile must be a multiple"),
+            (1.0, 0.0005, "--k must be a multiple"),
+            (1.0, 4294967.296, "--k must be a multiple"),
+            (1.0, 1e300, "--k must be a multiple"),
+            (0.0, 3.0, "--quantile must be in (0, 1]"),
+            (1.0, -1.0, "--k must be a finite number"),
+        ] {
+            let e = r(q, k).unwrap_err().to_string();
+            assert!(e.contains(needle), "{q} {k}: {e}");
+        }
     }
 
     #[test]

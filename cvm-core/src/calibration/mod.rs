@@ -1,0 +1,280 @@
+//! Calibration on defect-free reference scans, in bounded memory and
+//! integers only: the very code the board runs on live scans (`calibrate
+//! N`, through the pipeline's hook, [`crate::Pipeline::attach_calibrator`])
+//! and `dmap calibrate` runs on scan files, so both give the same
+//! thresholds from the same scans.
+//!
+//! # The rule
+//!
+//! Per channel, over the magnitudes of every position with data of every
+//! reference scan (the CVM gradient magnitudes `mag` in the scorer's
+//! `Q(q)` format, and the power magnitudes `pmag` in `Q15`,
+//! [`crate::power`]; dark, saturated, clipped and border positions
+//! included, positions without a frame left out):
+//!
+//! ```text
+//! thr = Q_p + ceil(k * 1.4826 * MAD) + 1        defaults p = 1, k = 3
+//! ```
+//!
+//! where, with each magnitude replaced by the representative of its
+//! histogram bin ([`histogram`]: itself below 256, else the middle of a
+//! bin under 0.8 % of the value wide):
+//!
+//! - `Q_p` is the top of the bin holding the nearest-rank `p` quantile
+//!   (rank `ceil(p n)`), capped at the exact maximum: for `p = 1` the
+//!   maximum itself, so no reference position reaches `thr`;
+//! - the median is the lower median of the representatives (rank
+//!   `ceil(n / 2)`), the MAD the lower median of their absolute deviations
+//!   from it;
+//! - `k = K / 1000`, `p = P / 10^6` and 1.4826 `= 14826 / 10^4` are exact
+//!   rationals ([`rule`]), the sum saturates at `u32::MAX`, and a power
+//!   threshold above [`power::POWER_MAX`] (reachable only next to a dark
+//!   map) becomes [`power::POWER_OFF`]: the channel is off.
+//!
+//! A position is defective when a channel's magnitude reaches its `thr`.
+//! This replaces the rule of exact medians over all magnitudes, which
+//! needs every magnitude kept and sorted; the maximum, which sets the
+//! threshold, stays exact (docs/experiments.md, "Calibration", compares
+//! the two).
+//!
+//! # Memory and cost
+//!
+//! A [`Calibrator`] is [`CALIBRATOR_BYTES`] bytes (13 312 for the CVM
+//! channel's 3 328 bins, 5 120 for the power channel's 1 280, and a few
+//! words), whatever the scan size or the number of scans; a position costs
+//! two bin lookups (a count-leading-zeros and shifts) and increments, and
+//! [`Calibrator::finish`] one pass over the bins.
+
+pub mod histogram;
+pub mod rule;
+
+use crate::command::Calibration;
+use crate::flags;
+use crate::power;
+use crate::stream::PositionScore;
+use histogram::{Histogram, bins};
+pub use rule::{Channel, Rule};
+
+/// Bins of the CVM channel: 32-bit magnitudes.
+pub const CVM_BINS: usize = bins(32);
+/// Bins of the power channel: magnitudes below `2^16` (at most
+/// [`power::POWER_MAX`]).
+pub const POWER_BINS: usize = bins(16);
+/// Size of a [`Calibrator`].
+pub const CALIBRATOR_BYTES: usize = core::mem::size_of::<Calibrator>();
+
+/// Why a calibration has no result.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum CalibrationError {
+    /// No position with data was taken (every beam of the scans lost).
+    NoPositions,
+    /// More than `u32::MAX` positions: the counts would wrap.
+    TooManyPositions,
+}
+
+impl core::fmt::Display for CalibrationError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(match self {
+            CalibrationError::NoPositions => "no position with data",
+            CalibrationError::TooManyPositions => "more positions than a calibration counts",
+        })
+    }
+}
+
+/// Both channels' statistics and thresholds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Statistics {
+    /// Scans taken.
+    pub scans: u16,
+    pub cvm: Channel,
+    /// The power channel; its `threshold` is already [`power::POWER_OFF`]
+    /// when above [`power::POWER_MAX`].
+    pub power: Channel,
+}
+
+impl From<Statistics> for Calibration {
+    fn from(s: Statistics) -> Self {
+        Calibration {
+            scans: s.scans,
+            positions: s.cvm.positions,
+            threshold: s.cvm.threshold,
+            power_threshold: s.power.threshold,
+            median: s.cvm.median,
+            mad: s.cvm.mad,
+            power_median: s.power.median,
+            power_mad: s.power.mad,
+        }
+    }
+}
+
+/// Where a calibration on live scans stands.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Progress {
+    /// Not calibrating.
+    Idle,
+    /// Starts at the next scan's begin.
+    Armed { target: u16 },
+    /// `taken` of `target` scans have ended.
+    Running { taken: u16, target: u16 },
+    /// The `target` scans have ended: [`Calibrator::finish`] has the
+    /// result, and later scans are not taken.
+    Done { taken: u16 },
+}
+
+/// The histograms of both channels, and the state of a calibration on
+/// live scans.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Calibrator {
+    cvm: Histogram<CVM_BINS>,
+    power: Histogram<POWER_BINS>,
+    scans: u16,
+    progress: Progress,
+}
+
+impl Default for Calibrator {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Calibrator {
+    pub const fn new() -> Self {
+        Calibrator {
+            cvm: Histogram::new(),
+            power: Histogram::new(),
+            scans: 0,
+            progress: Progress::Idle,
+        }
+    }
+
+    /// Forgets every position and scan taken (the progress stays).
+    pub fn clear(&mut self) {
+        self.cvm.clear();
+        self.power.clear();
+        self.scans = 0;
+    }
+
+    /// Takes one position's magnitudes.
+    #[inline]
+    pub fn add(&mut self, mag: u32, pmag: u16) {
+        self.cvm.add(mag);
+        self.power.add(pmag as u32);
+    }
+
+    /// Takes every position of `scores` that has data.
+    pub fn add_row(&mut self, scores: &[PositionScore]) {
+        for s in scores {
+            if s.flags & flags::NO_DATA == 0 {
+                self.add(s.mag, s.pmag);
+            }
+        }
+    }
+
+    /// Counts one more scan taken (saturating).
+    pub fn end_scan(&mut self) {
+        self.scans = self.scans.saturating_add(1);
+    }
+
+    /// Takes `other`'s positions and scans as well.
+    pub fn merge(&mut self, other: &Calibrator) {
+        self.cvm.merge(&other.cvm);
+        self.power.merge(&other.power);
+        self.scans = self.scans.saturating_add(other.scans);
+    }
+
+    /// Scans taken.
+    pub fn scans(&self) -> u16 {
+        self.scans
+    }
+
+    /// Positions taken.
+    pub fn positions(&self) -> u32 {
+        self.cvm.len()
+    }
+
+    /// The CVM channel's histogram.
+    pub fn cvm(&self) -> &Histogram<CVM_BINS> {
+        &self.cvm
+    }
+
+    /// The power channel's histogram.
+    pub fn power(&self) -> &Histogram<POWER_BINS> {
+        &self.power
+    }
+
+    /// Both channels' statistics and thresholds under `rule`.
+    pub fn statistics(&self, rule: &Rule) -> Result<Statistics, CalibrationError> {
+        if self.cvm.lost() || self.power.lost() {
+            return Err(CalibrationError::TooManyPositions);
+        }
+        let (Some(cvm), Some(mut power)) = (
+            rule::channel(&self.cvm, rule),
+            rule::channel(&self.power, rule),
+        ) else {
+            return Err(CalibrationError::NoPositions);
+        };
+        if power.threshold > power::POWER_MAX {
+            power.threshold = power::POWER_OFF;
+        }
+        Ok(Statistics {
+            scans: self.scans,
+            cvm,
+            power,
+        })
+    }
+
+    /// The result as the board reports it (`calibrated` reply).
+    pub fn finish(&self, rule: &Rule) -> Result<Calibration, CalibrationError> {
+        self.statistics(rule).map(Calibration::from)
+    }
+
+    /// Calibrates on the `scans` scans that begin next (0: stops
+    /// calibrating). Arming again restarts.
+    pub fn arm(&mut self, scans: u16) {
+        self.progress = match scans {
+            0 => Progress::Idle,
+            target => Progress::Armed { target },
+        };
+    }
+
+    /// Stops calibrating; what was taken stays until the next one starts.
+    pub fn disarm(&mut self) {
+        self.progress = Progress::Idle;
+    }
+
+    pub fn progress(&self) -> Progress {
+        self.progress
+    }
+
+    /// The pipeline's hook at a scan's begin: an armed calibration starts
+    /// from nothing.
+    pub fn scan_begins(&mut self) {
+        if let Progress::Armed { target } = self.progress {
+            self.clear();
+            self.progress = Progress::Running { taken: 0, target };
+        }
+    }
+
+    /// The pipeline's hook for every finished row.
+    #[inline]
+    pub fn scan_row(&mut self, scores: &[PositionScore]) {
+        if let Progress::Running { .. } = self.progress {
+            self.add_row(scores);
+        }
+    }
+
+    /// The pipeline's hook at a scan's end (after its last row).
+    pub fn scan_ends(&mut self) {
+        if let Progress::Running { target, .. } = self.progress {
+            self.end_scan();
+            let taken = self.scans;
+            self.progress = if taken >= target {
+                Progress::Done { taken }
+            } else {
+                Progress::Running { taken, target }
+            };
+        }
+    }
+}

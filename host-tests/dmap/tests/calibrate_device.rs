@@ -1,0 +1,158 @@
+//! The board's calibration and `dmap calibrate` give the same result: N
+//! simulated defect-free scans streamed through one pipeline with a
+//! calibrator attached and armed for N scans (what the board does on
+//! `calibrate N`), against `dmap calibrate` of the same N scan files.
+
+use std::path::PathBuf;
+
+use cvm_core::calibration::{Calibrator, Progress, Rule};
+use cvm_core::command::Calibration;
+use cvm_core::pipeline::{Pipeline, Settings};
+use cvm_core::protocol::{LineSink, Priority, ResetCause};
+use cvm_core::{Position, Scorer};
+
+mod common;
+use common::{dmap_ok, s};
+
+fn tmp(name: &str) -> PathBuf {
+    common::tmp_in("caldev", name)
+}
+
+#[derive(Default)]
+struct Discard;
+
+impl LineSink for Discard {
+    fn line(&mut self, _line: &[u8], _priority: Priority) {}
+}
+
+/// A defect-free simulated part (`dmap simulate`), its samples and shape.
+fn part(preset: &[&str], seed: u32) -> (PathBuf, Vec<u16>, usize, usize, usize) {
+    let path = tmp(&format!("{}-s{seed}.npy", preset.join("-")));
+    let mut args = vec!["simulate"];
+    args.extend(preset);
+    let seed = seed.to_string();
+    args.extend(["--defect-free", "--seed", &seed, "-o", s(&path)]);
+    dmap_ok(&args);
+    let scan = dmap::npy::read_scan(&path).unwrap();
+    let (rows, cols, j) = (scan.rows, scan.cols, scan.geometry.j1());
+    (path, scan.to_u16().unwrap(), rows, cols, j)
+}
+
+/// The scans through one pipeline armed for all of them: the result the
+/// board reports, checked to take exactly those scans.
+fn on_the_board(scorer: &Scorer, rows: usize, cols: usize, scans: &[Vec<u16>]) -> Calibration {
+    let settings = Settings {
+        cols: cols as u32,
+        threshold: scorer.threshold_from_units(0.1),
+        power_threshold: 3277,
+        scores: true,
+        max_defect_lines_per_row: 4,
+        firmware_version: "calibrate-device-test",
+        reset_cause: ResetCause::PowerOn,
+        boots: 1,
+        rows: rows as u32,
+        outputs: cvm_core::settings::Outputs::DEFAULT,
+        sources: [cvm_core::settings::Source::Default; cvm_core::settings::KEYS],
+        store: cvm_core::settings::Store::Empty,
+    };
+    let words = cvm_core::stream::row_words_for(cols, scorer.config());
+    let (mut a, mut b) = (vec![0i32; words], vec![0i32; words]);
+    let mut cal = Box::new(Calibrator::new());
+    let mut p = Box::new(
+        Pipeline::<{ dmap::settings::MAX_COLS }>::new(scorer, settings, &mut a, &mut b).unwrap(),
+    );
+    p.attach_calibrator(&mut cal);
+    let n = scans.len() as u16;
+    p.calibrator_mut().unwrap().arm(n);
+    let mut sink = Discard;
+    for (i, data) in scans.iter().enumerate() {
+        p.begin(&mut sink);
+        for (k, frame) in data.chunks_exact(scorer.cells()).enumerate() {
+            let pos = Position {
+                row: (k / cols) as u32,
+                col: (k % cols) as u32,
+            };
+            p.push(pos, frame, &mut sink);
+        }
+        p.finish(0, &mut sink);
+        let taken = i as u16 + 1;
+        let want = if taken == n {
+            Progress::Done { taken }
+        } else {
+            Progress::Running { taken, target: n }
+        };
+        assert_eq!(p.calibrator().unwrap().progress(), want);
+    }
+    p.calibrator().unwrap().finish(&Rule::DEFAULT).unwrap()
+}
+
+/// What `dmap calibrate` wrote, as the board's reply carries it.
+fn from_the_file(v: &serde_json::Value) -> Calibration {
+    let int = |ch: &str, k: &str| v["channels"][ch]["integers"][k].as_u64().unwrap() as u32;
+    let thr = |ch: &str| v["channels"][ch]["thr"].as_u64().unwrap() as u32;
+    Calibration {
+        scans: v["scans"].as_u64().unwrap() as u16,
+        positions: v["channels"]["cvm"]["positions"].as_u64().unwrap() as u32,
+        threshold: thr("cvm"),
+        power_threshold: thr("power"),
+        median: int("cvm", "median"),
+        mad: int("cvm", "mad"),
+        power_median: int("power", "median"),
+        power_mad: int("power", "mad"),
+    }
+}
+
+#[test]
+fn n_scans_on_the_board_and_dmap_calibrate_agree() {
+    for (preset, n) in [
+        (&["--preset", "prototype"][..], 5u32),
+        (
+            &[
+                "--preset",
+                "paper-sim",
+                "--rows",
+                "40",
+                "--cols",
+                "60",
+                "--spot-um",
+                "300",
+            ][..],
+            3,
+        ),
+    ] {
+        let parts: Vec<_> = (0..n).map(|i| part(preset, 11 + i)).collect();
+        let (_, _, rows, cols, j) = parts[0];
+        let scorer = dmap::options::ScoringArgs::default().scorer(j, j).unwrap();
+        let scans: Vec<Vec<u16>> = parts.iter().map(|p| p.1.clone()).collect();
+        let board = on_the_board(&scorer, rows, cols, &scans);
+        let cal = tmp(&format!("{}.json", preset.join("-")));
+        let mut args = vec!["calibrate"];
+        args.extend(parts.iter().map(|p| s(&p.0)));
+        args.extend(["-o", s(&cal)]);
+        dmap_ok(&args);
+        let v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&cal).unwrap()).unwrap();
+        assert_eq!(from_the_file(&v), board, "{preset:?}");
+        assert_eq!(board.scans, n as u16);
+        assert_eq!(board.positions, n * (rows * cols) as u32);
+        // Real thresholds: a power channel that is on, a CVM margin above
+        // the references' maximum.
+        assert!(board.power_threshold < cvm_core::power::POWER_MAX);
+        assert!(board.mad > 0 && board.power_mad > 0, "{board:?}");
+        let max = v["channels"]["cvm"]["integers"]["max"].as_u64().unwrap();
+        assert!(u64::from(board.threshold) > max);
+        // The file applied by dmap stream puts the board's integers in the
+        // header.
+        let out = dmap_ok(&["stream", s(&parts[0].0), "--calibration", s(&cal)]);
+        let header = String::from_utf8_lossy(&out.stdout)
+            .lines()
+            .next()
+            .unwrap()
+            .to_string();
+        assert!(
+            header.contains(&format!(",thr={},", board.threshold))
+                && header.contains(&format!(",pthr={},", board.power_threshold)),
+            "{header}"
+        );
+    }
+}
