@@ -9,9 +9,11 @@ use super::frame::checked_body;
 use super::header::parse_header;
 use super::line::Line;
 use super::object::parse_object;
+use super::ranges;
 use super::row::{parse_defect, parse_row, parse_scores};
 
-/// Parses one line (with or without its trailing `\r\n`/`\n`).
+/// Parses one line (with or without its trailing `\r\n`/`\n`): its CRC,
+/// its fields, and each field's range.
 pub fn parse(line: &[u8]) -> Result<Line<'_>, ParseError> {
     let body = checked_body(line)?;
     let mut it = body.split(|&b| b == b',');
@@ -27,5 +29,6 @@ pub fn parse(line: &[u8]) -> Result<Line<'_>, ParseError> {
         _ => return Err(ParseError::Type),
     };
     f.end()?;
+    ranges::check(&line)?;
     Ok(line)
 }

@@ -10,18 +10,22 @@ pub enum ParseError {
     Checksum,
     /// Right checksum, but fields that do not parse.
     Format,
+    /// Right checksum and syntax, but a field outside the range
+    /// docs/protocol.md gives it (named here).
+    Range(&'static str),
     /// Unknown line type.
     Type,
 }
 
 impl core::fmt::Display for ParseError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        f.write_str(match self {
-            ParseError::NoChecksum => "no checksum (truncated or garbled line)",
-            ParseError::Checksum => "checksum mismatch (corrupted line)",
-            ParseError::Format => "malformed fields",
-            ParseError::Type => "unknown line type",
-        })
+        match self {
+            ParseError::NoChecksum => f.write_str("no checksum (truncated or garbled line)"),
+            ParseError::Checksum => f.write_str("checksum mismatch (corrupted line)"),
+            ParseError::Format => f.write_str("malformed fields"),
+            ParseError::Range(field) => write!(f, "field outside its range: {field}"),
+            ParseError::Type => f.write_str("unknown line type"),
+        }
     }
 }
 
@@ -80,6 +84,15 @@ impl<'s, I: Iterator<Item = &'s [u8]>> Fields<'s, I> {
 
     pub(super) fn key_u8(&mut self, key: &str) -> Result<u8, ParseError> {
         u8::try_from(self.key_u32(key)?).map_err(|_| ParseError::Format)
+    }
+
+    /// A `0`/`1` field; any other value is out of range (`range` names it).
+    pub(super) fn key_flag(&mut self, key: &str, range: &'static str) -> Result<bool, ParseError> {
+        match self.key(key)? {
+            b"0" => Ok(false),
+            b"1" => Ok(true),
+            _ => Err(ParseError::Range(range)),
+        }
     }
 
     pub(super) fn key_str(&mut self, key: &str) -> Result<&'s str, ParseError> {

@@ -163,12 +163,12 @@ pub(super) fn parse_header<'s>(
     };
     let kernel_size = f.key_u8("b")?;
     let weights = f.key_str("w")?;
-    let normalise = f.key_u32("norm")? != 0;
+    let normalise = f.key_flag("norm", "norm: 0 or 1")?;
     let full_scale = u16::try_from(f.key_u32("fs")?).map_err(|_| e)?;
     let threshold = f.key_u32("thr")?;
     let power_threshold = f.key_u32("pthr")?;
     let q = parse_i32(f.key("q")?).ok_or(e)?;
-    let scores = f.key_u32("scores")? != 0;
+    let scores = f.key_flag("scores", "scores: 0 or 1")?;
     let max_defect_lines = u16::try_from(f.key_u32("dcap")?).map_err(|_| e)?;
     let reset_cause = ResetCause::parse(f.key("rst")?).ok_or(e)?;
     let boots = f.key_u32("boots")?;

@@ -22,6 +22,7 @@ mod frame;
 mod header;
 mod line;
 mod object;
+mod ranges;
 mod row;
 mod score;
 
@@ -33,5 +34,6 @@ pub use frame::{LineBuf, LineSink, MAX_LINE, MAX_ROW_LINE, Priority, crc16};
 pub use header::{HeaderInfo, MAX_FW, Origin, VERSION, encode_header};
 pub use line::Line;
 pub use object::encode_object;
+pub use ranges::{Q_MAX, Q_MIN};
 pub use row::encode_row;
 pub use score::{SCORE_CHARS, SCORES_PER_LINE, ScoreValue, decode_score, encode_score};

@@ -115,23 +115,49 @@ fn header_round_trip() {
     }
 }
 
+/// A position as the engine can score it (docs/protocol.md, the `S`
+/// line's rules): without data nothing else; with data a power magnitude
+/// of at most 46340, not both DARK and SATURATED, CLIPPED (and then a
+/// distance defect) exactly at the top magnitude, a defect's strength at
+/// least 65536. Values outside are refused (`protocol_ranges.rs`).
 fn arb_score() -> impl Strategy<Value = PositionScore> {
+    use cvm_core::flags::{CLIPPED, CVM_DEFECT, DARK, DEFECT, NO_DATA, SATURATED};
     (
         any::<u32>(),
         any::<u32>(),
+        prop_oneof![any::<u32>(), Just(u32::MAX)],
         any::<u32>(),
-        any::<u32>(),
-        any::<u16>(),
+        0u16..=46340,
         0u8..64,
     )
-        .prop_map(|(g0, g1, mag, strength, pmag, flags)| PositionScore {
-            g0,
-            g1,
-            mag,
-            strength,
-            pmag,
-            flags,
-            ..Default::default()
+        .prop_map(|(g0, g1, mag, strength, pmag, mut flags)| {
+            if flags & NO_DATA != 0 {
+                return PositionScore {
+                    flags: NO_DATA,
+                    ..Default::default()
+                };
+            }
+            if flags & (DARK | SATURATED) == DARK | SATURATED {
+                flags &= !SATURATED;
+            }
+            flags &= !CLIPPED;
+            if mag == u32::MAX {
+                flags |= CLIPPED | CVM_DEFECT;
+            }
+            let strength = if flags & DEFECT != 0 {
+                strength.max(1 << 16)
+            } else {
+                0
+            };
+            PositionScore {
+                g0,
+                g1,
+                mag,
+                strength,
+                pmag,
+                flags,
+                ..Default::default()
+            }
         })
 }
 
@@ -202,15 +228,15 @@ proptest! {
     /// channel among the decision bits) decodes to itself; the parser sits
     /// beside the encoder, so the two cannot drift apart unnoticed.
     #[test]
-    fn object_line_round_trips(v in prop::collection::vec(any::<u32>(), 10), power in any::<u16>(), cr in any::<u64>(), cc in any::<u64>(), channels in 0u8..4) {
+    fn object_line_round_trips(v in prop::collection::vec(any::<u32>(), 10), power in 0u16..=46340, cr in any::<u64>(), cc in any::<u64>(), channels in 1u8..4) {
         let o = cvm_core::Object {
             id: v[0],
             row0: v[1].min(v[2]),
             row1: v[1].max(v[2]),
             col0: v[3].min(v[4]),
             col1: v[3].max(v[4]),
-            area: v[5],
-            peak: v[6],
+            area: v[5].max(1),
+            peak: v[6].max(1 << 16),
             peak_row: v[7],
             peak_col: v[8],
             peak_mag: v[9],
@@ -304,8 +330,9 @@ fn worst_case_lines_fit() {
             strength: u32::MAX,
             p0: u16::MAX,
             p1: u16::MAX,
-            pmag: u16::MAX,
-            flags: 63
+            // The widest values in range: five digits, two-digit flags.
+            pmag: 46340,
+            flags: 60
         };
         64
     ];
@@ -313,7 +340,7 @@ fn worst_case_lines_fit() {
         row: u32::MAX,
         max: u32::MAX,
         argmax: Some(u32::MAX),
-        pmax: u32::MAX,
+        pmax: 46340,
         pargmax: Some(u32::MAX),
         defects: u32::MAX,
         no_data: u32::MAX,
@@ -364,7 +391,7 @@ fn worst_case_lines_fit() {
         peak_row: u32::MAX,
         peak_col: u32::MAX,
         peak_mag: u32::MAX,
-        peak_power: u16::MAX,
+        peak_power: 46340,
         channels: 0x30,
         centroid_row_q8: u64::from(u32::MAX) << 8,
         centroid_col_q8: u64::from(u32::MAX) << 8,
@@ -407,7 +434,8 @@ fn cap_lists_the_strongest_defects_with_ties_by_column() {
         .iter()
         .enumerate()
         .map(|(c, &strength)| PositionScore {
-            strength,
+            // At least 65536, a defect's least strength.
+            strength: strength << 16,
             // Alternate channels: the order does not depend on which fired.
             flags: if c % 2 == 0 {
                 cvm_core::flags::CVM_DEFECT

@@ -26,3 +26,4 @@ pub mod twin;
 pub mod twin_checks;
 pub mod twin_pins;
 pub mod twin_requests;
+pub mod vectors;

@@ -41,6 +41,8 @@ enum Command {
     Sensor(dmap::sensor::SensorArgs),
     /// Maps scored per second by each implementation (f64 brute/SAT/embedding, fixed point, EMD), one thread
     Bench(dmap::bench::BenchArgs),
+    /// Write (or --check) the line protocol's conformance vectors: streams and their expected decode
+    Vectors(dmap::vectors::VectorsArgs),
 }
 
 fn main() {
@@ -84,6 +86,7 @@ fn main() {
         Command::Twin(args) => dmap::twin::run(&args),
         Command::Bench(args) => dmap::bench::run(&args),
         Command::Sensor(args) => dmap::sensor::run(&args),
+        Command::Vectors(args) => dmap::vectors::run(&args),
     };
     if let Err(e) = result {
         // A reader that closed the pipe (`dmap ... | head`) got what it

@@ -659,7 +659,9 @@ fn listen_fails_on_damage_and_json_carries_it() {
     let out = dmap(&["listen", "--input", s(&dir.join("garbage.txt")), "--json"]);
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(v["firmware"], serde_json::Value::Null);
-    assert_eq!(v["line_error_count"], 2);
+    // Two damaged lines, and no scan at all.
+    assert_eq!(v["line_error_count"], 3);
+    assert_eq!(v["line_errors"][2]["kind"], "no-scan");
     let out = dmap(&[
         "listen",
         "--input",
@@ -668,7 +670,7 @@ fn listen_fails_on_damage_and_json_carries_it() {
         s(&dir.join("x.npy")),
     ]);
     assert_one_line_error(&out, "no scan in the stream");
-    assert!(stderr(&out).contains("2 line error(s)"));
+    assert!(stderr(&out).contains("3 line error(s)"));
 }
 
 // ---------------------------------------------------------------- item 9

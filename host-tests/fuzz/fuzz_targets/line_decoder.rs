@@ -4,16 +4,19 @@
 //!    host's stream `Decoder`: neither may panic. Random bytes almost never
 //!    carry a valid CRC, so every line is also tried with its checksum
 //!    repaired, which takes the fuzzer into the field parsers.
-//! 2. Records built from the same bytes go through the encoder; every line
+//! 2. Records built from the same bytes, every field within its range
+//!    (docs/protocol.md, "Field ranges"), go through the encoder; every line
 //!    it writes must parse back to exactly what was encoded, and the decoder
-//!    must accept the whole stream without a single error.
+//!    must accept the whole stream without a single line error.
 #![no_main]
 
 use cvm_core::flags;
+use cvm_core::power::POWER_MAX;
 use cvm_core::protocol::{
-    self, EndInfo, HeaderInfo, Line, LineSink, MAX_FW, MAX_LINE, Priority, SCORE_CHARS,
+    self, EndInfo, HeaderInfo, Line, LineSink, MAX_FW, MAX_LINE, Origin, Priority, SCORE_CHARS,
     SCORES_PER_LINE,
 };
+use cvm_core::settings::{KEYS, Source, Store};
 use cvm_core::stream::{PositionScore, RowSummary, RowView, Totals};
 use dmap::listen::Decoder;
 use libfuzzer_sys::arbitrary::{Result, Unstructured};
@@ -77,30 +80,81 @@ fn totals(u: &mut Unstructured) -> Result<Totals> {
     })
 }
 
+/// A position as the engine can score it: without data nothing else; with
+/// data not both DARK and SATURATED, CLIPPED (with CVM_DEFECT) exactly at
+/// the top magnitude, a power magnitude of at most 46340, a defect's
+/// strength at least 65536.
+fn position(u: &mut Unstructured) -> Result<PositionScore> {
+    let mut flags: u8 = u.int_in_range(0..=63)?;
+    if flags & flags::NO_DATA != 0 {
+        return Ok(PositionScore {
+            flags: flags::NO_DATA,
+            ..PositionScore::default()
+        });
+    }
+    if flags & (flags::DARK | flags::SATURATED) == flags::DARK | flags::SATURATED {
+        flags &= !flags::SATURATED;
+    }
+    let mag: u32 = u.arbitrary()?;
+    flags &= !flags::CLIPPED;
+    if mag == u32::MAX {
+        flags |= flags::CLIPPED | flags::CVM_DEFECT;
+    }
+    let strength: u32 = u.arbitrary()?;
+    Ok(PositionScore {
+        mag,
+        pmag: u.int_in_range(0..=POWER_MAX as u16)?,
+        strength: if flags & flags::DEFECT != 0 {
+            strength.max(1 << 16)
+        } else {
+            0
+        },
+        flags,
+        ..PositionScore::default()
+    })
+}
+
 fn round_trip(u: &mut Unstructured) -> Result<()> {
     let cols = u.int_in_range(1..=3 * SCORES_PER_LINE as u32)?;
     let threshold: u32 = u.arbitrary()?;
     let fw_raw: Vec<u8> = u.arbitrary()?;
     let fw = String::from_utf8_lossy(&fw_raw).into_owned();
-    let weights = *u.choose(&["uniform", "unit", "separable"])?;
+    let kernels = *u.choose(b"PS")?;
+    let (weights, kernel_size) = if kernels == b'S' {
+        ("unit", u.int_in_range(0..=15)?)
+    } else {
+        (
+            *u.choose(&["uniform", "unit", "separable"])?,
+            u.arbitrary()?,
+        )
+    };
+    let mut sources = [Source::Default; KEYS];
+    for s in &mut sources {
+        *s = *u.choose(&Source::ALL)?;
+    }
     let h = HeaderInfo {
         version: protocol::VERSION,
         firmware: &fw,
         j1: u.int_in_range(1..=16)?,
         j2: u.int_in_range(1..=16)?,
         cols,
-        kernels: *u.choose(b"PS")?,
-        kernel_size: u.arbitrary()?,
+        kernels,
+        kernel_size,
         weights,
         normalise: u.arbitrary()?,
-        full_scale: u.arbitrary()?,
+        full_scale: u.int_in_range(1..=u16::MAX)?,
         threshold,
         power_threshold: u.arbitrary()?,
-        q: u.arbitrary()?,
+        q: u.int_in_range(protocol::Q_MIN..=protocol::Q_MAX)?,
         scores: true,
         max_defect_lines: u.arbitrary()?,
         reset_cause: *u.choose(&protocol::ResetCause::ALL)?,
-        boots: u.arbitrary()?,
+        boots: u.int_in_range(1..=u32::MAX)?,
+        origin: Some(Origin {
+            rows: u.arbitrary()?,
+            sources,
+            store: *u.choose(&Store::ALL)?,
+        }),
     };
     let mut out = Lines::default();
     protocol::encode_header(&h, &mut out);
@@ -109,22 +163,12 @@ fn round_trip(u: &mut Unstructured) -> Result<()> {
     let n_rows = u.int_in_range(0..=4u32)?;
     let mut rows = Vec::new();
     for row in 0..n_rows {
-        let scores: Vec<PositionScore> = (0..cols)
-            .map(|_| {
-                Ok(PositionScore {
-                    mag: u.arbitrary()?,
-                    pmag: u.arbitrary()?,
-                    strength: u.arbitrary()?,
-                    flags: u.arbitrary()?,
-                    ..PositionScore::default()
-                })
-            })
-            .collect::<Result<_>>()?;
+        let scores: Vec<PositionScore> = (0..cols).map(|_| position(u)).collect::<Result<_>>()?;
         let summary = RowSummary {
             row,
             max: u.arbitrary()?,
             argmax: u.arbitrary()?,
-            pmax: u.arbitrary()?,
+            pmax: u.int_in_range(0..=POWER_MAX)?,
             pargmax: u.arbitrary()?,
             defects: u.arbitrary()?,
             no_data: u.arbitrary()?,

@@ -1,18 +1,15 @@
 //! `dmap listen`'s command-line arguments.
 
 use super::decoder::{DEFAULT_MAX_SCANS, MAX_SCANS};
-use clap::Args;
+use clap::{ArgGroup, Args};
 use std::path::PathBuf;
 
 #[derive(Args, Clone, Debug)]
+// One source, and a missing one names both (--input alone was named).
+#[command(group(ArgGroup::new("source").args(["input", "port"]).required(true)))]
 pub struct ListenArgs {
     /// Read lines from FILE ("-" for standard input)
-    #[arg(
-        long,
-        value_name = "FILE",
-        conflicts_with = "port",
-        required_unless_present = "port"
-    )]
+    #[arg(long, value_name = "FILE")]
     pub input: Option<String>,
     /// Read lines from a serial port (e.g. /dev/ttyACM0, the ST-LINK virtual COM port)
     #[arg(long, value_name = "DEV")]
@@ -20,7 +17,9 @@ pub struct ListenArgs {
     /// Serial baud rate
     #[arg(long, default_value_t = 921600)]
     pub baud: u32,
-    /// With --port: stop after this many scans have ended (0 = run until interrupted)
+    /// With --port: stop after this many scans have ended (0 = run until interrupted: Ctrl-C
+    /// or SIGTERM ends the stream, the scans complete by then are reported and written, a
+    /// scan under way is reported cut; a second Ctrl-C ends dmap at once)
     #[arg(long, default_value_t = 1)]
     pub scans: usize,
     /// Write the score image of docs/method.md §2: float64, shape (rows, cols, 3), the

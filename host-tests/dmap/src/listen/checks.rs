@@ -2,9 +2,10 @@
 //! fits its box and the scan, and a finished scan whose lines agree with
 //! one another and with its end line.
 
-use super::scan::{LineError, ScanResult, q8};
+use super::crosscheck::cross_check;
+use super::scan::{Kind, LineError, ScanResult, q8};
 use cvm_core::objects::Object;
-use cvm_core::protocol::EndInfo;
+use cvm_core::protocol::{self, EndInfo, HeaderInfo};
 use cvm_core::{Fault, Verdict};
 
 /// Cross-checks a finished scan: every row has its row line, every
@@ -18,6 +19,7 @@ pub(super) fn check_complete(s: &mut ScanResult, line_no: usize) {
     if count > 0 {
         s.add_problem(LineError {
             line: line_no,
+            kind: Kind::Missing,
             what: format!("no row line for {count} row(s): {}", ranges(&missing)),
         });
     }
@@ -25,6 +27,7 @@ pub(super) fn check_complete(s: &mut ScanResult, line_no: usize) {
     if listed != s.defects.len() as u64 {
         s.add_problem(LineError {
             line: line_no,
+            kind: Kind::Missing,
             what: format!(
                 "row lines list {listed} defect line(s), {} arrived",
                 s.defects.len()
@@ -36,6 +39,7 @@ pub(super) fn check_complete(s: &mut ScanResult, line_no: usize) {
     {
         s.add_problem(LineError {
             line: line_no,
+            kind: Kind::Verdict,
             what,
         });
     }
@@ -44,6 +48,7 @@ pub(super) fn check_complete(s: &mut ScanResult, line_no: usize) {
         if claimed != arrived {
             s.add_problem(LineError {
                 line: line_no,
+                kind: Kind::Missing,
                 what: format!(
                     "end line counts {claimed} object(s), {arrived} object line(s) arrived"
                 ),
@@ -55,6 +60,7 @@ pub(super) fn check_complete(s: &mut ScanResult, line_no: usize) {
             if covered + left_out != u64::from(e.totals.defects) {
                 s.add_problem(LineError {
                     line: line_no,
+                    kind: Kind::CrossCheck,
                     what: format!(
                         "objects cover {covered} position(s) and {left_out} were left out of every object, but the end line counts {} defect(s)",
                         e.totals.defects
@@ -67,6 +73,7 @@ pub(super) fn check_complete(s: &mut ScanResult, line_no: usize) {
     if misplaced > 0 {
         s.add_problem(LineError {
             line: line_no,
+            kind: Kind::Misplaced,
             what: format!(
                 "{misplaced} map(s) were scored at a wrong position (a short row: beams without DRDY); \
                  scores next to the short row are unreliable"
@@ -74,25 +81,32 @@ pub(super) fn check_complete(s: &mut ScanResult, line_no: usize) {
         });
     }
     if s.scores_enabled {
-        let dropped = s.end.map_or(0, |e| e.dropped);
-        let expected = rows as usize * s.cols;
-        let (with, without) = s.coverage();
-        if with + without < expected {
+        // A score line the firmware dropped and counted is allowed; one
+        // lost otherwise (or one too many counted) is damage.
+        let dropped = s.end.map_or(0, |e| u64::from(e.dropped));
+        let expected = u64::from(rows) * s.cols.div_ceil(protocol::SCORES_PER_LINE) as u64;
+        let missing = expected.saturating_sub(s.score_lines);
+        if missing != dropped {
             s.add_problem(LineError {
                 line: line_no,
+                kind: Kind::Missing,
                 what: format!(
-                    "{} of {expected} positions have no score ({dropped} score line(s) reported dropped by the firmware)",
-                    expected - with - without
+                    "{missing} of {expected} score line(s) missing, but the end line counts {dropped} dropped"
                 ),
             });
+        }
+    }
+    if let Some(e) = s.end {
+        for p in cross_check(s, &e, line_no) {
+            s.add_problem(p);
         }
     }
 }
 
 /// What is impossible about an object of a scan of `cols` columns, if
-/// anything: a box past the last column, an area of 0 or beyond its box,
-/// a peak outside its box or below the threshold, no channel, a centroid
-/// outside its box.
+/// anything: a box past the last column, an area beyond its box, a peak
+/// or a centroid outside its box. (Each field's own range, an area of 0,
+/// a peak below the threshold, no channel, is the parser's.)
 pub(super) fn object_fault(o: &Object, cols: usize) -> Option<String> {
     let (h, w) = (
         u64::from(o.row1 - o.row0) + 1,
@@ -105,20 +119,13 @@ pub(super) fn object_fault(o: &Object, cols: usize) -> Option<String> {
             "columns {}-{} run past the scan's {cols} columns",
             o.col0, o.col1
         ))
-    } else if o.area == 0 || u64::from(o.area) > h * w {
+    } else if u64::from(o.area) > h * w {
         Some(format!("area {} does not fit its {h}x{w} box", o.area))
     } else if !inside(o.peak_row, o.peak_col) {
         Some(format!(
             "peak at row {} column {} outside its box",
             o.peak_row, o.peak_col
         ))
-    } else if o.peak < 1 << 16 {
-        Some(format!(
-            "peak strength {} below the threshold (65536)",
-            o.peak
-        ))
-    } else if o.channels == 0 {
-        Some("no channel fired".to_string())
     } else if !box_q8(o.centroid_row_q8, o.row0, o.row1)
         || !box_q8(o.centroid_col_q8, o.col0, o.col1)
     {
@@ -129,6 +136,52 @@ pub(super) fn object_fault(o: &Object, cols: usize) -> Option<String> {
         ))
     } else {
         None
+    }
+}
+
+/// What the header's fields contradict among themselves, if anything:
+/// with uniform or unit weights the header names the whole scoring
+/// configuration, so `q` is the one a scorer of it has (separable weights
+/// travel without their values: only `q`'s range is known).
+pub(super) fn header_fault(h: &HeaderInfo<'_>) -> Option<String> {
+    use cvm_core::{Config, Geometry, Kernels, Scorer, Weights};
+    let weights = match h.weights {
+        "uniform" => Weights::Uniform,
+        "unit" => Weights::Unit,
+        _ => return None,
+    };
+    let kernels = match h.kernels {
+        b'S' => Kernels::Square {
+            kmax: h.kernel_size,
+        },
+        _ => Kernels::Paper {
+            bmax: h.kernel_size,
+        },
+    };
+    let what = format!(
+        "j={}x{}, k={}, b={}, w={}, norm={}",
+        h.j1,
+        h.j2,
+        h.kernels as char,
+        h.kernel_size,
+        h.weights,
+        u8::from(h.normalise)
+    );
+    let cfg = Config {
+        geometry: Geometry::new(h.j1, h.j2).ok()?,
+        kernels,
+        weights,
+        normalise: h.normalise,
+        full_scale: h.full_scale,
+    };
+    match Scorer::new(&cfg) {
+        Ok(s) if s.score_frac_bits() == h.q => None,
+        Ok(s) => Some(format!(
+            "header: q={}, but a scorer of {what} has q={}",
+            h.q,
+            s.score_frac_bits()
+        )),
+        Err(e) => Some(format!("header: no scorer has {what} ({e})")),
     }
 }
 

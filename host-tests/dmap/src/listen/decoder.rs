@@ -1,14 +1,11 @@
-//! The stream decoder: one line at a time, each line type to its handler,
-//! every line checked against the scan it belongs to and the order of
-//! docs/protocol.md. A line's CRC and fields are checked by
+//! The stream decoder: one line at a time, each line type to its handler
+//! (`handlers`), a line that lost its start or end resynchronised on the
+//! next whole line in it. A line's CRC, fields and ranges are checked by
 //! `cvm_core::protocol::parse`, beside the encoder; what needs memory (the
 //! scans, their images, objects and problems) is kept here, within bounds.
 
-use super::checks::{check_complete, object_fault};
-use super::scan::{Defect, LineError, MAX_IMAGE_POSITIONS, Order, ScanResult};
-use cvm_core::RowSummary;
-use cvm_core::objects::Object;
-use cvm_core::protocol::{self, EndInfo, HeaderInfo, Line};
+use super::scan::{Kind, LineError, MAX_IMAGE_POSITIONS, ScanResult};
+use cvm_core::protocol::{self, Line};
 
 /// The oldest protocol version whose streams this decoder reads.
 pub const OLDEST_VERSION: u32 = 5;
@@ -33,8 +30,8 @@ pub const MAX_DEFECTS: usize = MAX_IMAGE_POSITIONS;
 /// most [`MAX_IMAGE_POSITIONS`] scores and [`MAX_DEFECTS`] defects, and
 /// [`MAX_ERRORS`] errors listed.
 pub struct Decoder {
-    line_no: usize,
-    current: Option<ScanResult>,
+    pub(super) line_no: usize,
+    pub(super) current: Option<ScanResult>,
     pub scans: Vec<ScanResult>,
     /// Damaged lines and lines outside any scan (the first [`MAX_ERRORS`]).
     pub errors: Vec<LineError>,
@@ -42,11 +39,15 @@ pub struct Decoder {
     pub errors_not_listed: usize,
     /// Scans beyond `max_scans`, whose lines were skipped.
     pub scans_skipped: usize,
-    skipping: bool,
-    max_scans: usize,
+    /// The signal that ended the stream (`dmap listen` interrupted), if one did.
+    pub interrupted: Option<&'static str>,
+    /// Command replies (`A` lines) passed over.
+    pub replies: usize,
+    pub(super) skipping: bool,
+    pub(super) max_scans: usize,
     /// Row lines, defects and scores held, over all scans, and at most.
-    kept: usize,
-    max_kept: usize,
+    pub(super) kept: usize,
+    pub(super) max_kept: usize,
 }
 
 impl Default for Decoder {
@@ -69,6 +70,8 @@ impl Decoder {
             errors: Vec::new(),
             errors_not_listed: 0,
             scans_skipped: 0,
+            interrupted: None,
+            replies: 0,
             skipping: false,
             max_scans: max_scans.max(1),
             kept: 0,
@@ -109,13 +112,40 @@ impl Decoder {
         out
     }
 
-    /// A line too long for the protocol, of which only the length is known.
-    pub fn feed_too_long(&mut self, len: usize) {
+    /// A line too long for the protocol, of `len` bytes, of which only
+    /// the last ones, `tail`, are known: when they end in a whole line
+    /// (a line cut mid-way and the next one joined to it), that line is
+    /// decoded.
+    pub fn feed_too_long(&mut self, len: usize, tail: &[u8]) {
         self.line_no += 1;
-        self.error(format!(
-            "line of {len} bytes is longer than the protocol's {} (garbage or a lost newline)",
-            protocol::MAX_LINE
-        ));
+        self.error(
+            Kind::TooLong,
+            format!(
+                "line of {len} bytes is longer than the protocol's {} (garbage or a lost newline)",
+                protocol::MAX_LINE
+            ),
+        );
+        let tail = tail.strip_suffix(b"\n").unwrap_or(tail);
+        let tail = tail.strip_suffix(b"\r").unwrap_or(tail);
+        if let Some(at) = resync(tail, 1) {
+            self.decode_resynced(tail, at);
+        }
+    }
+
+    /// The stream's last `len` bytes, a line without its newline, cut by
+    /// a signal.
+    pub fn feed_cut(&mut self, len: usize) {
+        self.line_no += 1;
+        let by = self.interrupted.unwrap_or("the interrupt");
+        self.error(
+            Kind::Cut,
+            format!("line cut by {by} after {len} byte(s); not decoded"),
+        );
+    }
+
+    /// The stream was ended by `signal` (before [`Decoder::finish`]).
+    pub fn interrupted(&mut self, signal: &'static str) {
+        self.interrupted = Some(signal);
     }
 
     /// Scans that have ended (an end line arrived).
@@ -123,10 +153,11 @@ impl Decoder {
         self.scans.iter().filter(|s| s.end.is_some()).count()
     }
 
-    fn error(&mut self, what: impl Into<String>) {
+    pub(super) fn error(&mut self, kind: Kind, what: impl Into<String>) {
         if self.errors.len() < MAX_ERRORS {
             self.errors.push(LineError {
                 line: self.line_no,
+                kind,
                 what: what.into(),
             });
         } else {
@@ -134,14 +165,15 @@ impl Decoder {
         }
     }
 
-    fn problem(&mut self, what: impl Into<String>) {
+    pub(super) fn problem(&mut self, kind: Kind, what: impl Into<String>) {
         let e = LineError {
             line: self.line_no,
+            kind,
             what: what.into(),
         };
         match &mut self.current {
             Some(s) => s.add_problem(e),
-            None => self.error(e.what),
+            None => self.error(e.kind, e.what),
         }
     }
 
@@ -160,22 +192,67 @@ impl Decoder {
             }
             return;
         }
-        // MAX_LINE counts the newline.
-        if trimmed.len() >= protocol::MAX_LINE {
-            self.error(format!(
-                "line of {} bytes is longer than the protocol's {} (garbage or a lost newline)",
-                trimmed.len() + 1,
-                protocol::MAX_LINE
-            ));
+        // Both limits count the newline, not a carriage return before it.
+        let limit = match trimmed.first() {
+            Some(b'H' | b'E') => protocol::MAX_LINE,
+            _ => protocol::MAX_ROW_LINE,
+        };
+        if trimmed.len() >= limit {
+            if let Some(at) = resync(trimmed, 1) {
+                return self.decode_resynced(trimmed, at);
+            }
+            self.error(
+                Kind::TooLong,
+                format!(
+                    "line of {} bytes is longer than the protocol's {limit} for its type (garbage or a lost newline)",
+                    trimmed.len() + 1,
+                ),
+            );
             return;
         }
-        let line = match protocol::parse(trimmed) {
-            Ok(l) => l,
-            Err(e) => {
-                self.error(e.to_string());
-                return;
+        if trimmed.starts_with(b"A,") {
+            return self.reply(trimmed);
+        }
+        match protocol::parse(trimmed) {
+            Ok(line) => self.line(line),
+            Err(e) => match resync(trimmed, 1) {
+                // A line cut mid-way, the next one joined to it.
+                Some(at) => self.decode_resynced(trimmed, at),
+                None => self.error(parse_kind(e), e.to_string()),
+            },
+        }
+    }
+
+    /// `line` failed, but from byte `at` on it holds a whole line: the
+    /// start is reported cut, the rest decoded.
+    fn decode_resynced(&mut self, line: &[u8], at: usize) {
+        self.error(
+            Kind::Cut,
+            format!(
+                "line cut after {at} byte(s): a new line starts in it without a newline before it (the stream was cut mid-line); decoding from there"
+            ),
+        );
+        if let Some(rest) = line.get(at..) {
+            if rest.starts_with(b"A,") {
+                return self.reply(rest);
             }
-        };
+            if let Ok(l) = protocol::parse(rest) {
+                self.line(l);
+            }
+        }
+    }
+
+    /// An `A` line: the command channel's reply, for another reader;
+    /// counted when whole.
+    fn reply(&mut self, line: &[u8]) {
+        match cvm_core::command::parse_reply(line) {
+            Ok(_) => self.replies += 1,
+            Err(e) => self.error(parse_kind(e), format!("command reply: {e}")),
+        }
+    }
+
+    /// A line that parsed, to its type's handler.
+    fn line(&mut self, line: Line<'_>) {
         match line {
             Line::Object(o) => self.object(o),
             Line::Header(h) => self.header(&h),
@@ -193,303 +270,56 @@ impl Decoder {
         }
     }
 
-    /// An `H` line: a new scan, unless the run holds as many as it may.
-    fn header(&mut self, h: &HeaderInfo<'_>) {
-        self.skipping = false;
-        if let Some(prev) = self.current.take() {
-            self.error("new scan header before the previous scan's end line");
-            self.scans.push(prev);
-        }
-        if self.scans.len() >= self.max_scans {
-            self.scans_skipped += 1;
-            self.skipping = true;
-            if self.scans_skipped == 1 {
-                self.error(format!(
-                    "more than {} scans in one run: this scan and later ones are skipped (--max-scans)",
-                    self.max_scans
-                ));
-            }
-            return;
-        }
-        let mut s = ScanResult {
-            version: h.version,
-            firmware: h.firmware.to_string(),
-            geometry: (h.j1, h.j2),
-            cols: h.cols as usize,
-            q: h.q,
-            scores_enabled: h.scores,
-            full_scale: h.full_scale,
-            max_defect_lines: h.max_defect_lines,
-            reset_cause: Some(h.reset_cause),
-            boots: h.boots,
-            kernels: h.kernels as char,
-            kernel_size: h.kernel_size,
-            weights: h.weights.to_string(),
-            normalise: h.normalise,
-            power_threshold: (h.power_threshold <= cvm_core::power::POWER_MAX)
-                .then(|| cvm_core::power::to_units(h.power_threshold)),
-            ..ScanResult::default()
-        };
-        s.threshold = s.units(h.threshold);
-        // Version 6 only added fields to the header: 5 reads the same.
-        if !(OLDEST_VERSION..=protocol::VERSION).contains(&h.version) {
-            s.problems.push(LineError {
-                line: self.line_no,
-                what: format!(
-                    "protocol version {} (this decoder reads {} to {})",
-                    h.version,
-                    OLDEST_VERSION,
-                    protocol::VERSION
-                ),
-            });
-        }
-        self.current = Some(s);
-    }
-
-    /// An `R` line: the row's summary, the end of the previous row's lines.
-    fn row(&mut self, summary: RowSummary, listed: u32) {
-        let Some(s) = self.current.as_mut() else {
-            return self.error("row line outside a scan (header lost?)");
-        };
-        if s.rows.contains_key(&summary.row) {
-            return self.problem(format!("row {} reported twice", summary.row));
-        }
-        let order = s.order;
-        s.order = Order {
-            row: Some((summary.row, listed, 0)),
-            ..Order::default()
-        };
-        if let Some((prev, ..)) = order.row
-            && summary.row < prev
-        {
-            self.problem(format!(
-                "row line of row {} after row {prev} (rows out of order)",
-                summary.row
-            ));
-        }
-        if let (Some((prev, ..)), Some((id, true))) = (order.row, order.last_object) {
-            self.problem(format!(
-                "object {id} ends in row {prev} but row {}'s line follows it: only the scan's end closes an object in the last row reported (out of order)",
-                summary.row
-            ));
-        }
-        self.check_defects_arrived(order);
-        let Some(s) = self.current.as_mut() else {
-            return;
-        };
-        if s.rows.len() >= MAX_IMAGE_POSITIONS || self.kept >= self.max_kept {
-            return self.problem("more row lines than an image can hold; the rest ignored");
-        }
-        s.unlisted_defects += (summary.defects - listed.min(summary.defects)) as u64;
-        s.rows.insert(summary.row, summary);
-        self.kept += 1;
-    }
-
-    /// A `D` line: one of the row's strongest defects, checked against its
-    /// row line and the previous `D` line.
-    fn defect(&mut self, row: u32, col: u32, mag: u32, pmag: u16, strength: u32, flags: u8) {
-        let Some(s) = self.current.as_mut() else {
-            return self.error("defect line outside a scan (header lost?)");
-        };
-        if s.defects.len() >= MAX_DEFECTS || self.kept >= self.max_kept {
-            return self.problem("more defect lines than an image can hold; the rest ignored");
-        }
-        self.kept += 1;
-        let score = s.units(mag);
-        s.defects.push(Defect {
-            row,
-            col,
-            score,
-            power: cvm_core::power::to_units(pmag as u32),
-            strength,
-            flags,
-        });
-        let order = &mut s.order;
-        let what = match order.row {
-            Some((r, ..)) if r != row => Some(format!(
-                "defect line of row {row} among the lines of row {r} (out of order)"
-            )),
-            None => Some(format!(
-                "defect line of row {row} before any row line (out of order)"
-            )),
-            Some(_) if order.last_scores.is_some() => Some(format!(
-                "defect line of row {row} after its score lines (out of order)"
-            )),
-            Some(_) if order.last_object.is_some() => Some(format!(
-                "defect line of row {row} after the object lines of its row (out of order)"
-            )),
-            Some((_, listed, arrived)) if arrived >= listed => Some(format!(
-                "row {row} lists {listed} defect line(s); more arrived"
-            )),
-            Some(_) => match order.last_defect {
-                Some((m, c)) if strength > m || (strength == m && col <= c) => Some(format!(
-                    "defect lines of row {row} not strongest first (column {col} after column {c})"
-                )),
-                _ => None,
-            },
-        };
-        if let Some((_, _, arrived)) = order.row.as_mut() {
-            *arrived += 1;
-        }
-        order.last_defect = Some((strength, col));
-        if let Some(what) = what {
-            self.problem(what);
-        }
-        if flags & cvm_core::flags::DEFECT == 0 || strength < 1 << 16 {
-            self.problem(format!(
-                "defect line of row {row} column {col} is no defect (flags {flags}, strength {strength})"
-            ));
-        }
-    }
-
-    /// An `S` line: scores of part of the row, each position once.
-    fn scores(&mut self, row: u32, col0: u32, chars: &[u8]) {
-        let Some(s) = self.current.as_mut() else {
-            return self.error("score line outside a scan (header lost?)");
-        };
-        let order = &mut s.order;
-        let misplaced = match (order.row, order.last_scores) {
-            (Some((r, ..)), _) if r != row => Some(format!(
-                "score line of row {row} among the lines of row {r} (out of order)"
-            )),
-            (None, _) => Some(format!(
-                "score line of row {row} before any row line (out of order)"
-            )),
-            (_, Some(c)) if col0 <= c => Some(format!(
-                "score line of row {row} from column {col0} after the one from column {c} (out of order)"
-            )),
-            _ if order.last_object.is_some() => Some(format!(
-                "score line of row {row} after the object lines of its row (out of order)"
-            )),
-            _ => None,
-        };
-        order.last_scores = Some(col0);
-        if let Some(what) = misplaced {
-            self.problem(what);
-        }
-        let Some(s) = self.current.as_mut() else {
-            return;
-        };
-        let cols = s.cols;
-        let n = chars.len() / protocol::SCORE_CHARS;
-        if col0 as usize + n > cols {
-            return self.problem(format!("score line for row {row} runs past column {cols}"));
-        }
-        if s.n_scores + n > MAX_IMAGE_POSITIONS || self.kept + n > self.max_kept {
-            return self.problem("more scores than an image can hold; the rest ignored");
-        }
-        let mut added = 0;
-        let line = s.scores.entry(row).or_default();
-        let mut dup = false;
-        for (k, c) in chars.chunks(protocol::SCORE_CHARS).enumerate() {
-            // In range: `col0 + n <= cols` was checked above.
-            if let Some(v) = protocol::decode_score(c) {
-                let again = line.insert(col0 + k as u32, v).is_some();
-                dup |= again;
-                added += usize::from(!again);
-            }
-        }
-        s.n_scores += added;
-        self.kept += added;
-        if dup {
-            self.problem(format!(
-                "scores of row {row} from column {col0} received twice"
-            ));
-        }
-    }
-
-    /// An `E` line: the scan's totals, and the scan cross-checked and filed.
-    fn end(&mut self, e: EndInfo) {
-        let Some(mut s) = self.current.take() else {
-            return self.error("end line outside a scan (header lost?)");
-        };
-        s.end = Some(e);
-        let order = s.order;
-        self.current = Some(s);
-        self.check_defects_arrived(order);
-        let Some(mut s) = self.current.take() else {
-            return;
-        };
-        check_complete(&mut s, self.line_no);
-        self.scans.push(s);
-    }
-
-    /// An `O` line: filed with its scan, its place in the line order and
-    /// its fields checked.
-    fn object(&mut self, o: Object) {
-        let Some(s) = self.current.as_mut() else {
-            return self.error("object line outside a scan (header lost?)");
-        };
-        s.objects_arrived += 1;
-        let id = o.id;
-        let mut what = Vec::new();
-        let order = &mut s.order;
-        let ends_here = match order.row {
-            None => {
-                what.push(format!("object {id} before any row line (out of order)"));
-                false
-            }
-            Some((r, ..)) if o.row1 > r => {
-                what.push(format!(
-                    "object {id} ends in row {}, after the last row reported ({r}): an object line follows the lines of the row that closes it (out of order)",
-                    o.row1
-                ));
-                false
-            }
-            Some((r, ..)) => {
-                let ends_here = o.row1 == r;
-                match order.last_object {
-                    Some((prev, true)) if !ends_here => what.push(format!(
-                        "object {id}, closed by row {r}, after object {prev}, which only the scan's end closes (out of order)"
-                    )),
-                    Some((prev, prev_ends)) if prev_ends == ends_here && id <= prev => {
-                        what.push(format!(
-                            "object lines after row {r} not in increasing id ({id} after {prev})"
-                        ))
-                    }
-                    _ => {}
-                }
-                ends_here
-            }
-        };
-        order.last_object = Some((id, ends_here));
-        if !s.object_ids.insert(id) {
-            what.push(format!("object {id} reported twice in the scan"));
-        }
-        if let Some(bad) = object_fault(&o, s.cols) {
-            what.push(format!("object {id}: {bad}"));
-        }
-        for w in what {
-            self.problem(w);
-        }
-        let Some(s) = self.current.as_mut() else {
-            return;
-        };
-        if s.objects.len() >= MAX_DEFECTS || self.kept >= self.max_kept {
-            return self.problem("more object lines than an image can hold; the rest ignored");
-        }
-        self.kept += 1;
-        s.objects.push(o);
-    }
-
-    /// After the last line of a row: as many `D` lines as its `R` line listed.
-    fn check_defects_arrived(&mut self, order: Order) {
-        if let Some((row, listed, arrived)) = order.row
-            && arrived < listed
-        {
-            self.problem(format!(
-                "row {row} lists {listed} defect line(s), {arrived} arrived"
-            ));
-        }
-    }
-
-    /// Ends the stream: a scan without its end line is kept and reported.
+    /// Ends the stream: a scan without its end line is kept and reported
+    /// cut; a stream without any scan is reported too.
     pub fn finish(&mut self) {
         if let Some(s) = self.current.take() {
-            self.error("stream ended before the scan's end line");
+            let what = match self.interrupted {
+                Some(sig) => {
+                    format!("interrupted by {sig} before the scan's end line (the scan is cut)")
+                }
+                None => "stream ended before the scan's end line".to_string(),
+            };
+            self.error(Kind::ScanCut, what);
             self.scans.push(s);
         }
+        if self.scans.is_empty() && self.scans_skipped == 0 {
+            let lines = self.line_no;
+            self.error(
+                Kind::NoScan,
+                format!("no scan in the stream: no header line decoded in {lines} line(s)"),
+            );
+        }
     }
+}
+
+/// The kind of damage a line that did not parse is.
+fn parse_kind(e: protocol::ParseError) -> Kind {
+    use protocol::ParseError as E;
+    match e {
+        E::NoChecksum => Kind::NoChecksum,
+        E::Checksum => Kind::Checksum,
+        E::Format => Kind::Malformed,
+        E::Range(_) => Kind::Range,
+        E::Type => Kind::UnknownType,
+    }
+}
+
+/// Where, from byte `from` on, a line that did not parse holds a whole
+/// line: the first `X,` (`X` a line type) whose rest has a valid CRC and
+/// parses. A stream cut mid-line (a reset of the board) joins the cut
+/// line's start to the next line; the CRC makes a false find as unlikely
+/// as a damaged line passing.
+pub(super) fn resync(line: &[u8], from: usize) -> Option<usize> {
+    (from..line.len().saturating_sub(1)).find(|&i| {
+        let rest = &line[i..];
+        rest.get(1) == Some(&b',')
+            && match rest[0] {
+                b'A' => cvm_core::command::parse_reply(rest).is_ok(),
+                b'H' | b'R' | b'D' | b'S' | b'O' | b'E' => protocol::parse(rest).is_ok(),
+                _ => false,
+            }
+    })
 }
 
 #[cfg(test)]
@@ -531,23 +361,35 @@ mod tests {
     }
 
     #[test]
-    fn a_line_of_max_line_bytes_is_whole_one_more_is_damage() {
-        // A valid frame padded with digits in a field to the exact length.
-        let line = |len: usize| {
-            let body = "R,0,0,-,0,0,0,0,";
+    fn a_line_of_its_limit_is_whole_one_byte_more_is_damage() {
+        // A frame padded with digits in a field to the exact length: the
+        // limit is the type's (newline included), whatever the fields.
+        let line = |body: &str, len: usize| {
             let mut b = body.to_string();
             while b.len() + 6 < len {
                 b.push('0');
             }
             format!("{b}*{:04X}\n", protocol::crc16(b.as_bytes()))
         };
-        for (len, damaged) in [(protocol::MAX_LINE, false), (protocol::MAX_LINE + 1, true)] {
-            let mut d = Decoder::new();
-            let l = line(len);
-            assert_eq!(l.len(), len);
-            d.feed(l.as_bytes());
-            let too_long = d.errors.iter().any(|e| e.what.contains("longer than"));
-            assert_eq!(too_long, damaged, "{len}");
+        for (body, limit) in [
+            ("R,0,0,-,0,0,0,0,", protocol::MAX_ROW_LINE),
+            ("O,1,", protocol::MAX_ROW_LINE),
+            ("E,rows=", protocol::MAX_LINE),
+            ("H,v=", protocol::MAX_LINE),
+        ] {
+            for (len, damaged) in [(limit, false), (limit + 1, true)] {
+                let mut d = Decoder::new();
+                let l = line(body, len);
+                assert_eq!(l.len(), len);
+                d.feed(l.as_bytes());
+                let too_long = d.errors.iter().any(|e| e.kind == Kind::TooLong);
+                assert_eq!(too_long, damaged, "{body} {len}");
+                // A carriage return before the newline does not count.
+                let mut d = Decoder::new();
+                d.feed(l.replace('\n', "\r\n").as_bytes());
+                let too_long = d.errors.iter().any(|e| e.kind == Kind::TooLong);
+                assert_eq!(too_long, damaged, "{body} {len} CRLF");
+            }
         }
     }
 }

@@ -51,7 +51,7 @@ pub fn object_json(o: &Object, s: &ScanResult, pitch_um: Option<f64>) -> serde_j
 
 fn problems_json(v: &[LineError]) -> Vec<serde_json::Value> {
     v.iter()
-        .map(|p| serde_json::json!({"line": p.line, "what": p.what}))
+        .map(|p| serde_json::json!({"line": p.line, "kind": p.kind.name(), "what": p.what}))
         .collect()
 }
 
@@ -104,11 +104,15 @@ pub fn summary_json(dec: &Decoder, pitch_um: Option<f64>) -> serde_json::Value {
     let mut problems = Vec::new();
     for (k, s) in dec.scans.iter().enumerate() {
         for p in &s.problems {
-            problems.push(serde_json::json!({"scan": k + 1, "line": p.line, "what": p.what}));
+            problems.push(
+                serde_json::json!({"scan": k + 1, "line": p.line, "kind": p.kind.name(), "what": p.what}),
+            );
         }
     }
     for p in &dec.errors {
-        problems.push(serde_json::json!({"scan": null, "line": p.line, "what": p.what}));
+        problems.push(
+            serde_json::json!({"scan": null, "line": p.line, "kind": p.kind.name(), "what": p.what}),
+        );
     }
     let problem_count =
         dec.error_count() + dec.scans.iter().map(|s| s.problem_count()).sum::<usize>();
@@ -122,6 +126,8 @@ pub fn summary_json(dec: &Decoder, pitch_um: Option<f64>) -> serde_json::Value {
         "line_errors": problems_json(&dec.errors),
         "line_error_count": dec.error_count(),
         "scans_skipped": dec.scans_skipped,
+        "interrupted": dec.interrupted,
+        "replies": dec.replies,
         "pitch_um": pitch_um,
         "scans": dec.scans.iter().map(|s| scan_json(s, pitch_um)).collect::<Vec<_>>(),
     })

@@ -5,14 +5,19 @@
 //!
 //! A line is decoded by `cvm_core::protocol::parse`, beside its encoder;
 //! this module holds what a stream of lines needs besides: the stream
-//! decoder (`decoder`, one handler per line type, and `checks`), what it
-//! rebuilds of a scan (`scan`), the line reader (`reader`), the two
-//! reports (`text`, `json`), and the command (`args`, `run`).
+//! decoder (`decoder`, its handler of each line type in `handlers`, and
+//! `checks`), what it rebuilds of a scan (`scan`), the line reader
+//! (`reader`) and what ends it on Ctrl-C (`interrupt`), the two reports
+//! (`text`, `json`), and the command (`args`, `run`).
 
 mod args;
 mod checks;
+mod crosscheck;
 mod decoder;
+mod handlers;
+mod interrupt;
 mod json;
+mod linechecks;
 mod reader;
 mod run;
 mod scan;
@@ -24,7 +29,7 @@ pub use json::{object_json, scan_json, summary_json, totals_json};
 pub use reader::{LINE_BUFFER, NextLine, decode, decode_with, next_line};
 pub use run::run;
 pub use scan::{
-    Defect, LineError, MAX_IMAGE_POSITIONS, MAX_PROBLEMS, ObjectSize, ScanResult, channel_names,
-    image_refusal, q8, strength_ratio,
+    Defect, Kind, LineError, MAX_IMAGE_POSITIONS, MAX_PROBLEMS, ObjectSize, ScanResult,
+    channel_names, image_refusal, q8, strength_ratio,
 };
 pub use text::{TEXT_OBJECTS, object_text, summary_text, summary_text_with};

@@ -2,8 +2,9 @@
 //! report, fail when the stream was damaged.
 
 use super::args::ListenArgs;
+use super::interrupt::Interruptible;
 use super::json::summary_json;
-use super::reader::decode_with;
+use super::reader::decode_interruptible;
 use super::scan::image_refusal;
 use super::text::summary_text_with;
 use crate::npy::write_gradient;
@@ -46,18 +47,22 @@ pub fn run(args: &ListenArgs) -> Result<()> {
             }
         }
     }
+    // SIGINT and SIGTERM end the stream where it is: what is complete by
+    // then is reported and written (`--port --scans 0` runs until then).
     let dec = match (&args.input, &args.port) {
-        (Some(p), _) if p == "-" => decode_with(std::io::stdin().lock(), 0, max_scans)?,
+        (Some(p), _) if p == "-" => {
+            decode_interruptible(Interruptible::new(std::io::stdin())?, 0, max_scans)?
+        }
         (Some(p), _) => {
             let f = std::fs::File::open(p).with_context(|| format!("cannot open {p}"))?;
-            decode_with(f, 0, max_scans)?
+            decode_interruptible(Interruptible::new(f)?, 0, max_scans)?
         }
         (None, Some(dev)) => {
             let port = serialport::new(dev, args.baud)
                 .timeout(std::time::Duration::from_secs(3600))
-                .open()
+                .open_native()
                 .with_context(|| format!("cannot open serial port {dev} at {} baud", args.baud))?;
-            decode_with(port, args.scans, max_scans)?
+            decode_interruptible(Interruptible::new(port)?, args.scans, max_scans)?
         }
         (None, None) => bail!("give --input FILE (or -) or --port DEV"),
     };
@@ -65,7 +70,16 @@ pub fn run(args: &ListenArgs) -> Result<()> {
     for (k, s) in dec.scans.iter().enumerate() {
         // The size comes from what the stream claims: refuse an image that
         // what arrived does not justify rather than exhaust memory and disk.
-        let refusal = image_refusal(s);
+        // A scan without its end line (cut) is not written at all: its
+        // image would be partial, and an existing file (a good image of an
+        // earlier run) is worth more.
+        let refusal = match s.end {
+            None => Some(
+                "has no end line (cut): its image would be partial; an existing file is left as it was"
+                    .to_string(),
+            ),
+            Some(_) => image_refusal(s),
+        };
         for &(name, out) in &outputs {
             let path = output_path(out, k);
             match &refusal {

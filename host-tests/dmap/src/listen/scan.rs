@@ -12,7 +12,82 @@ use std::collections::{BTreeMap, BTreeSet};
 pub struct LineError {
     /// 1-based line number in the stream.
     pub line: usize,
+    pub kind: Kind,
     pub what: String,
+}
+
+/// What kind of damage a [`LineError`] is: a stable name for machines
+/// (`dmap listen --json`'s `"kind"`, the conformance vectors), beside the
+/// sentence for people. docs/protocol.md lists them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Kind {
+    /// No `*XXXX` trailer.
+    NoChecksum,
+    /// The CRC does not match.
+    Checksum,
+    /// Right CRC, fields that do not parse.
+    Malformed,
+    /// Right CRC, a field outside its range.
+    Range,
+    /// Right CRC, an unknown line type.
+    UnknownType,
+    /// Longer than the protocol allows.
+    TooLong,
+    /// Cut: by a signal, or by the start of another line in it.
+    Cut,
+    /// A line outside any scan.
+    OutsideScan,
+    /// A scan without its end line (a new header, the stream's end, a signal).
+    ScanCut,
+    /// No scan in the whole stream.
+    NoScan,
+    /// A scan beyond `--max-scans`.
+    MaxScans,
+    /// A header of another protocol version.
+    Version,
+    /// A line out of the protocol's order.
+    Order,
+    /// A row, score or object reported twice.
+    Duplicate,
+    /// Fields of one line that contradict each other or the header.
+    Field,
+    /// Lines that should have arrived and did not, or counts that do not add up.
+    Missing,
+    /// A line that contradicts other lines of its scan (`O`, `D`, `S`, `R`, `E`).
+    CrossCheck,
+    /// An end line whose verdict its own totals contradict.
+    Verdict,
+    /// Maps the firmware scored at a wrong position.
+    Misplaced,
+    /// More lines than the decoder holds.
+    Capacity,
+}
+
+impl Kind {
+    pub fn name(self) -> &'static str {
+        match self {
+            Kind::NoChecksum => "no-checksum",
+            Kind::Checksum => "checksum",
+            Kind::Malformed => "malformed",
+            Kind::Range => "range",
+            Kind::UnknownType => "unknown-type",
+            Kind::TooLong => "too-long",
+            Kind::Cut => "cut",
+            Kind::OutsideScan => "outside-scan",
+            Kind::ScanCut => "scan-cut",
+            Kind::NoScan => "no-scan",
+            Kind::MaxScans => "max-scans",
+            Kind::Version => "version",
+            Kind::Order => "order",
+            Kind::Duplicate => "duplicate",
+            Kind::Field => "field",
+            Kind::Missing => "missing",
+            Kind::CrossCheck => "cross-check",
+            Kind::Verdict => "verdict",
+            Kind::Misplaced => "misplaced",
+            Kind::Capacity => "capacity",
+        }
+    }
 }
 
 impl std::fmt::Display for LineError {
@@ -34,6 +109,12 @@ pub struct Defect {
     /// `Q16` (65536 = at the threshold).
     pub strength: u32,
     pub flags: u8,
+    /// The magnitude and power magnitude as the line carries them
+    /// (`Q(q)`, `Q15`).
+    pub mag: u32,
+    pub pmag: u16,
+    /// Its line number in the stream.
+    pub line: usize,
 }
 
 /// Strength (`Q16` ratio to the threshold) as a ratio.
@@ -92,6 +173,12 @@ pub struct ScanResult {
     /// Score format: integer scores are `s / 2^q` distance units.
     pub q: i32,
     pub threshold: f64,
+    /// The header's thresholds as the lines compare with them (`thr`, `Q(q)`;
+    /// `pthr`, `Q15`).
+    pub thr: u32,
+    pub pthr: u32,
+    /// The header's `rows` (version 6 on).
+    pub header_rows: Option<u32>,
     /// Power channel threshold as a contrast (`pthr / 2^15`); `None`: the
     /// channel is off (`pthr` above every power magnitude).
     pub power_threshold: Option<f64>,
@@ -113,13 +200,18 @@ pub struct ScanResult {
     /// follows the lines received, never the geometry a (possibly
     /// corrupted) header claims.
     pub scores: BTreeMap<u32, BTreeMap<u32, ScoreValue>>,
-    /// Row summaries received.
+    /// Row summaries received, and the line each came on.
     pub rows: BTreeMap<u32, cvm_core::RowSummary>,
+    pub(super) row_lines: BTreeMap<u32, usize>,
+    /// `S` lines filed (within the columns, not repeated).
+    pub(super) score_lines: u64,
     pub defects: Vec<Defect>,
     /// Defects counted by row lines but not listed (per-row cap).
     pub unlisted_defects: u64,
-    /// Defect objects (`O` lines) in the order they arrived.
+    /// Defect objects (`O` lines) in the order they arrived, and the line
+    /// each came on.
     pub objects: Vec<Object>,
+    pub(super) object_lines: Vec<usize>,
     /// `O` lines that arrived in the scan, kept or not (for the end
     /// line's `obj`).
     pub objects_arrived: u64,

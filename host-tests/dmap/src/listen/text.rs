@@ -144,14 +144,23 @@ pub fn summary_text_with(dec: &Decoder, pitch_um: Option<f64>) -> String {
             }
         }
         for p in s.problems.iter().take(50) {
-            let _ = writeln!(o, "  problem at line {}: {}", p.line, p.what);
+            let _ = writeln!(
+                o,
+                "  problem at line {}: {} ({})",
+                p.line,
+                p.what,
+                p.kind.name()
+            );
         }
         if s.problem_count() > 50 {
             let _ = writeln!(o, "  ... {} more problems", s.problem_count() - 50);
         }
     }
-    if dec.scans.is_empty() {
-        let _ = writeln!(o, "no scan in the stream (no header line decoded)");
+    if let Some(sig) = dec.interrupted {
+        let _ = writeln!(o, "interrupted by {sig}: {} scan(s) complete", dec.ended());
+    }
+    if dec.replies > 0 {
+        let _ = writeln!(o, "command replies passed over: {}", dec.replies);
     }
     if dec.scans_skipped > 0 {
         let _ = writeln!(
@@ -162,7 +171,7 @@ pub fn summary_text_with(dec: &Decoder, pitch_um: Option<f64>) -> String {
     }
     let _ = writeln!(o, "line errors: {}", dec.error_count());
     for e in dec.errors.iter().take(50) {
-        let _ = writeln!(o, "  line {}: {}", e.line, e.what);
+        let _ = writeln!(o, "  line {}: {} ({})", e.line, e.what, e.kind.name());
     }
     if dec.error_count() > 50 {
         let _ = writeln!(o, "  ... {} more", dec.error_count() - 50);

@@ -1,0 +1,190 @@
+//! The line protocol's conformance vectors (docs/protocol/vectors,
+//! described in docs/protocol.md, "Conformance vectors"): they are exactly
+//! what the encoder and decoder make now (a change to either that the
+//! vectors do not carry fails here: write them again with `dmap vectors`),
+//! `dmap listen --json` decodes every stream into its expected document
+//! and exit status, and together they cover every line type, every flag
+//! and every kind of damage the document names.
+
+mod common;
+
+use common::{dmap, s};
+use serde_json::Value;
+use std::collections::BTreeSet;
+use std::path::PathBuf;
+
+fn dir() -> PathBuf {
+    PathBuf::from(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../docs/protocol/vectors"
+    ))
+}
+
+/// (name, expected document) of every vector.
+fn vectors() -> Vec<(String, Value)> {
+    let index: Value =
+        serde_json::from_slice(&std::fs::read(dir().join("index.json")).unwrap()).unwrap();
+    index
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| {
+            let name = e["name"].as_str().unwrap().to_string();
+            let doc = std::fs::read(dir().join(format!("{name}.json"))).unwrap();
+            (name, serde_json::from_slice(&doc).unwrap())
+        })
+        .collect()
+}
+
+#[test]
+fn the_vectors_are_what_the_encoder_and_decoder_make() {
+    let out = dmap(&["vectors", "--check", s(&dir())]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+#[test]
+fn listen_decodes_every_vector_as_expected() {
+    let all = vectors();
+    assert!(all.len() > 80, "{}", all.len());
+    for (name, want) in all {
+        let input = dir().join(format!("{name}.txt"));
+        let out = dmap(&["listen", "--input", s(&input), "--json"]);
+        let got: Value = serde_json::from_slice(&out.stdout)
+            .unwrap_or_else(|e| panic!("{name}: no JSON document: {e}"));
+        assert_eq!(got, want["listen"], "{name}");
+        assert_eq!(
+            Some(want["exit"].as_i64().unwrap() as i32),
+            out.status.code(),
+            "{name}"
+        );
+    }
+}
+
+/// The command channel's vectors: every request the board accepts is
+/// written again as the vectors say, every refusal a line alone can cause
+/// (not `busy`, `storage` or the link's errors, which depend on the board)
+/// occurs, and every reply decodes as they say.
+#[test]
+fn the_command_vectors_decode_as_stated_and_cover_the_refusals() {
+    use cvm_core::command::{parse_reply, parse_request};
+    let doc: Value =
+        serde_json::from_slice(&std::fs::read(dir().join("commands.json")).unwrap()).unwrap();
+    let cap = dmap::vectors::COMMAND_CAPACITY;
+    let mut refusals = BTreeSet::new();
+    for e in doc["requests"].as_array().unwrap() {
+        let line = e["line"].as_str().unwrap().as_bytes();
+        let d = &e["decode"];
+        match parse_request(line, &cap) {
+            Ok(_) => assert!(d["accepted"].is_string(), "{e}"),
+            Err((_, why)) => {
+                let reply = d["refused"].as_str().unwrap();
+                assert!(reply.contains(&format!(",err,{}", why.word())), "{e}");
+                refusals.insert(why.word());
+            }
+        }
+    }
+    assert_eq!(
+        refusals,
+        BTreeSet::from([
+            "checksum",
+            "malformed",
+            "too-long",
+            "unknown-command",
+            "unknown-key",
+            "type",
+            "range"
+        ])
+    );
+    for e in doc["replies"].as_array().unwrap() {
+        let line = e["line"].as_str().unwrap().as_bytes();
+        let ok = parse_reply(line).is_ok();
+        assert_eq!(ok, e["decode"]["accepted"].is_string(), "{e}");
+    }
+}
+
+/// Every line type occurs in a whole stream; every flag bit in a score
+/// line; every verdict; every kind of damage but the two that only
+/// `dmap listen`'s own limits raise (`--max-scans`, its memory).
+#[test]
+fn the_vectors_cover_the_protocol() {
+    let all = vectors();
+    let mut types = BTreeSet::new();
+    let mut flags = 0u8;
+    for (name, _) in all.iter().filter(|(n, _)| n.starts_with("good-")) {
+        let bytes = std::fs::read(dir().join(format!("{name}.txt"))).unwrap();
+        for l in bytes.split(|&b| b == b'\n').filter(|l| l.len() > 1) {
+            types.insert(l[0] as char);
+            if let Ok(cvm_core::protocol::Line::Scores { chars, .. }) = cvm_core::protocol::parse(l)
+            {
+                for c in chars.chunks(9) {
+                    flags |= cvm_core::protocol::decode_score(c).unwrap().flags;
+                }
+            }
+        }
+    }
+    assert_eq!(
+        types.into_iter().collect::<String>(),
+        "ADEHORS",
+        "line types of the whole streams"
+    );
+    // CLIPPED is never written (a score cannot reach the top of its
+    // range); its rule is shown by the vector range-clipped.
+    let clipped = cvm_core::flags::CLIPPED;
+    assert_eq!(flags, 0x3F & !clipped, "flags {flags:#x}");
+    let kinds: BTreeSet<String> = all
+        .iter()
+        .flat_map(|(_, v)| v["listen"]["problems"].as_array().unwrap().clone())
+        .map(|p| p["kind"].as_str().unwrap().to_string())
+        .collect();
+    let every = [
+        "no-checksum",
+        "checksum",
+        "malformed",
+        "range",
+        "unknown-type",
+        "too-long",
+        "cut",
+        "outside-scan",
+        "scan-cut",
+        "no-scan",
+        "version",
+        "order",
+        "duplicate",
+        "field",
+        "missing",
+        "cross-check",
+        "verdict",
+        "misplaced",
+    ];
+    assert_eq!(
+        kinds,
+        every.iter().map(|k| k.to_string()).collect::<BTreeSet<_>>()
+    );
+    let verdicts: BTreeSet<&str> = all
+        .iter()
+        .flat_map(|(_, v)| v["listen"]["scans"].as_array().unwrap().clone())
+        .filter_map(|s| s["verdict"].as_str().map(String::from))
+        .map(|v| match v.as_str() {
+            "good" => "good",
+            "obj" => "obj",
+            "fault-missing" => "fault-missing",
+            "fault-frames" => "fault-frames",
+            "fault-misplaced" => "fault-misplaced",
+            _ => "other",
+        })
+        .collect();
+    assert_eq!(
+        verdicts,
+        BTreeSet::from([
+            "fault-frames",
+            "fault-misplaced",
+            "fault-missing",
+            "good",
+            "obj"
+        ])
+    );
+}
