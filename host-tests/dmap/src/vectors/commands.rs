@@ -190,6 +190,14 @@ fn replies() -> Vec<Value> {
             ),
         ),
         reply(
+            "refused: conflict (row mode without a pulse width)",
+            &line(Some(13), &Reply::Refused(Refusal::Conflict)),
+        ),
+        reply(
+            "refused: a calibration without a result",
+            &line(Some(6), &Reply::Refused(Refusal::NoResult)),
+        ),
+        reply(
             "refused, no id: checksum",
             &line(None, &Reply::Refused(Refusal::Checksum)),
         ),
