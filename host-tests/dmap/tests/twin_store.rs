@@ -139,12 +139,31 @@ fn twin_scans_with(
     let scan = tmp_in(tag, "scan.npy");
     write_scan(&scan);
     let host = dmap(&[&["stream", s(&scan)], stream_opts].concat());
-    let twin = dmap(&["twin", s(&scan), "--flash", s(flash)]);
-    let (host, got) = (
+    // A status request at the first beam: its reply says the same.
+    let twin = dmap(&[
+        "twin",
+        s(&scan),
+        "--flash",
+        s(flash),
+        "--command",
+        "0:status",
+    ]);
+    let (host, out) = (
         String::from_utf8(host.stdout).unwrap(),
         String::from_utf8(twin.stdout.clone()).unwrap(),
     );
-    let (want, got): (Vec<&str>, Vec<&str>) = (host.lines().collect(), got.lines().collect());
+    let (replies, got): (Vec<&str>, Vec<&str>) = out.lines().partition(|l| l.starts_with("A,"));
+    let want: Vec<&str> = host.lines().collect();
+    assert!(
+        replies[0].starts_with("A,1,ok,status,")
+            && replies[0].contains(&format!(",store={},", store.word())),
+        "{replies:?}"
+    );
+    assert_eq!(replies.len(), 1 + VALUES, "{replies:?}");
+    for r in &replies[1..] {
+        let tail = format!(":{}*", src.as_char() as char);
+        assert!(r.starts_with("A,1,ok,") && r.contains(&tail), "{r}");
+    }
     assert!(
         got.len() > 2 && got[1..] == want[1..],
         "the firmware did not scan with {stream_opts:?}:\n--- stream\n{host}\n--- twin\n{}",
