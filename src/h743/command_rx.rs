@@ -34,8 +34,38 @@ pub enum Rx {
     Overrun,
 }
 
+/// A ring entry: the byte in bits 0..8, then what came with it; all
+/// zeros, so that the ring starts in `.bss` rather than as 4 KB of
+/// initial value in flash.
+const FRAMING: u16 = 1 << 8;
+const NOISE: u16 = 1 << 9;
+const OVERRUN: u16 = 1 << 10;
+
+fn pack(x: Rx) -> u16 {
+    match x {
+        Rx::Byte(b, None) => b as u16,
+        Rx::Byte(b, Some(LinkError::Framing)) => b as u16 | FRAMING,
+        Rx::Byte(b, Some(_)) => b as u16 | NOISE,
+        Rx::Overrun => OVERRUN,
+    }
+}
+
+fn unpack(e: u16) -> Rx {
+    if e & OVERRUN != 0 {
+        return Rx::Overrun;
+    }
+    let err = if e & FRAMING != 0 {
+        Some(LinkError::Framing)
+    } else if e & NOISE != 0 {
+        Some(LinkError::Noise)
+    } else {
+        None
+    };
+    Rx::Byte(e as u8, err)
+}
+
 struct Ring {
-    buf: [Rx; RING],
+    buf: [u16; RING],
     head: usize,
     len: usize,
     /// The ring filled up: its last slot holds an overrun, and what
@@ -46,7 +76,7 @@ struct Ring {
 impl Ring {
     const fn new() -> Self {
         Ring {
-            buf: [Rx::Overrun; RING],
+            buf: [0; RING],
             head: 0,
             len: 0,
             full: false,
@@ -70,7 +100,7 @@ impl Ring {
 
     fn put(&mut self, x: Rx) {
         if let Some(slot) = self.buf.get_mut((self.head + self.len) % RING) {
-            *slot = x;
+            *slot = pack(x);
             self.len += 1;
         }
     }
@@ -79,7 +109,7 @@ impl Ring {
         if self.len == 0 {
             return None;
         }
-        let x = self.buf.get(self.head).copied();
+        let x = self.buf.get(self.head).copied().map(unpack);
         self.head = (self.head + 1) % RING;
         self.len -= 1;
         x

@@ -471,7 +471,8 @@ fn config(u: &mut Unstructured) -> Result<Config> {
         kernels,
         weights: *u.choose(&[Weights::Uniform, Weights::Unit])?,
         normalise: u.ratio(3, 4)?,
-        full_scale: *u.choose(&[u16::MAX, 4095, 1000, 1, 0])?,
+        // 1 at the least: the header's `fs` range, which every tool keeps.
+        full_scale: *u.choose(&[u16::MAX, 4095, 1000, 1])?,
     })
 }
 
@@ -523,7 +524,7 @@ fn run(u: &mut Unstructured) -> Result<()> {
         max_defect_lines_per_row: u.int_in_range(0..=4)?,
         firmware_version: "fuzz",
         reset_cause: cvm_core::protocol::ResetCause::ALL[u.int_in_range(0..=4)?],
-        boots: u.arbitrary()?,
+        boots: u.int_in_range(1..=u32::MAX)?,
         rows: 1,
         outputs: cvm_core::settings::Outputs::DEFAULT,
         sources: [cvm_core::settings::Source::Default; cvm_core::settings::KEYS],
