@@ -381,3 +381,64 @@ fn malformed(first: u32, beam: u64) -> (Vec<Burst>, Vec<Want>) {
     }
     (bursts, want)
 }
+
+#[test]
+fn requests_beyond_the_links_capacity_are_refused_as_overruns_and_cost_no_beam() {
+    let dir = tempfile::tempdir().unwrap();
+    let scan = dir.path().join("scan.npy");
+    // The 15x15 scan of the flood test (the same build): 300 status
+    // requests back to back from beam 1, 5.4 KB in 59 ms, whose replies
+    // (16 lines each, 135 KB) would take the link 1.5 s: the receive ring
+    // fills, and what it cannot hold is lost and refused as an overrun.
+    write_scan(&scan, 50, 40, 15);
+    let opts = ["--threshold", "0.05"];
+    let scan_s = scan.to_str().unwrap();
+    let host = dmap(&[&["stream", scan_s][..], &opts].concat());
+    let burst: Vec<u8> = (1..=300u32)
+        .flat_map(|id| framed(&format!("C,{id},status")))
+        .collect();
+    let req = dir.path().join("requests.txt");
+    write_requests(&req, &[(1, &burst)]).unwrap();
+    let twin = dmap(
+        &[
+            &["twin", scan_s][..],
+            &opts,
+            &["--beam-us", "146", "--settle-ms", "3000"],
+            &["--requests", req.to_str().unwrap()],
+        ]
+        .concat(),
+    );
+    let c = counters(&twin);
+    assert_eq!(c["status"], "done", "{c}");
+    assert_eq!(c["spi_overruns"], 0, "{c}");
+    let (replies, results) = split(&twin.stdout);
+    assert!(results == host.stdout, "the flood changed the result lines");
+    // Every reply is a whole status (its line and 15 values, ids in
+    // increasing order) or a refusal without id: an overrun, or a
+    // fragment of a request after one.
+    let mut it = replies.iter().map(|l| parse_reply(l).unwrap());
+    let (mut answered, mut overruns, mut last_id) = (0, 0, 0);
+    while let Some((id, r)) = it.next() {
+        match (id, r) {
+            (Some(id), Reply::Status(_)) => {
+                assert!(id > last_id, "ids in order");
+                last_id = id;
+                answered += 1;
+                for k in Key::ALL {
+                    let (vid, v) = it.next().expect("the status's value lines");
+                    assert_eq!(vid, Some(id));
+                    assert!(matches!(v, Reply::Value { key, .. } if key == k), "{v:?}");
+                }
+            }
+            (None, Reply::Refused(Refusal::Overrun)) => overruns += 1,
+            (None, Reply::Refused(Refusal::Malformed | Refusal::Checksum)) => {}
+            other => panic!("{other:?}"),
+        }
+    }
+    assert!(overruns >= 1, "the ring overflowed: {answered} answered");
+    assert!(
+        answered >= 50,
+        "requests were answered meanwhile: {answered}"
+    );
+    assert!(answered < 300);
+}
