@@ -109,6 +109,9 @@ pub enum ConfigError {
     /// The square kernels' factor table is too short, or a block of their
     /// quadratic form could not be factored.
     Table,
+    /// A full scale of 0: every sample would flag its map saturated (the
+    /// header's `fs` is 1 to 65535).
+    FullScale,
 }
 
 impl core::fmt::Display for ConfigError {
@@ -119,6 +122,7 @@ impl core::fmt::Display for ConfigError {
             ConfigError::Weights => "a weight is negative or not finite, or all weights are zero",
             ConfigError::Range => "no fixed-point scaling keeps every accumulator in range",
             ConfigError::Table => "square kernels' factor table too short or not factorable",
+            ConfigError::FullScale => "a full scale of 0 flags every map saturated",
         })
     }
 }

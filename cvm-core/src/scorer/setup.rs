@@ -70,6 +70,9 @@ impl Scorer {
         if g.j1 == 0 || g.j2 == 0 || g.j1 as usize > MAX_J || g.j2 as usize > MAX_J {
             return Err(ConfigError::Geometry);
         }
+        if cfg.full_scale == 0 {
+            return Err(ConfigError::FullScale);
+        }
         let (j1, j2) = (g.j1 as usize, g.j2 as usize);
         let Some(passes) = Passes::new(j1, j2) else {
             return Err(ConfigError::Geometry);

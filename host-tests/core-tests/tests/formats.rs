@@ -190,6 +190,10 @@ fn configuration_and_frame_errors_say_why() {
             "no fixed-point scaling keeps every accumulator in range",
         ),
         (
+            ConfigError::FullScale.to_string(),
+            "a full scale of 0 flags every map saturated",
+        ),
+        (
             FrameError::Length.to_string(),
             "frame or state buffer of the wrong length",
         ),
@@ -197,6 +201,18 @@ fn configuration_and_frame_errors_say_why() {
     for (got, want) in messages {
         assert_eq!(got, want);
     }
+}
+
+/// A full scale of 0 is refused (the header's `fs` starts at 1, and every
+/// sample would flag its map saturated); 1 is the smallest accepted.
+#[test]
+fn a_full_scale_of_zero_is_refused() {
+    use cvm_core::{Config, ConfigError, Geometry, Scorer};
+    let mut cfg = Config::paper(Geometry::new(3, 3).unwrap());
+    cfg.full_scale = 0;
+    assert_eq!(Scorer::new(&cfg).err(), Some(ConfigError::FullScale));
+    cfg.full_scale = 1;
+    assert!(Scorer::new(&cfg).is_ok());
 }
 
 /// `threshold_from_units` is the smallest integer score whose real value
