@@ -13,7 +13,9 @@ use cvm_core_tests::{frame_flags, random_map, rng, row_summary_of, run_engine};
 use rand::RngExt;
 
 const GEOMETRIES: &[(u8, u8)] = &[(1, 1), (1, 5), (2, 2), (3, 3), (4, 6), (9, 9), (16, 16)];
-const FULL_SCALES: &[u16] = &[u16::MAX, 60000, 1000, 1, 0];
+/// Full scales down to 1, the smallest a configuration takes (0 is
+/// refused: `formats.rs`, `a_full_scale_of_zero_is_refused`).
+const FULL_SCALES: &[u16] = &[u16::MAX, 60000, 1000, 1];
 
 /// Every kernel family, normalised and raw, at the given full scale.
 fn configs(j1: u8, j2: u8, full_scale: u16) -> Vec<Config> {
