@@ -12,7 +12,7 @@ use cvm_core::protocol::{LineSink, Priority, ResetCause};
 use cvm_core::{Position, Scorer};
 
 mod common;
-use common::{dmap_ok, s};
+use common::{calibration_of_file, dmap_ok, s};
 
 fn tmp(name: &str) -> PathBuf {
     common::tmp_in("caldev", name)
@@ -86,22 +86,6 @@ fn on_the_board(scorer: &Scorer, rows: usize, cols: usize, scans: &[Vec<u16>]) -
     p.calibrator().unwrap().finish(&Rule::DEFAULT).unwrap()
 }
 
-/// What `dmap calibrate` wrote, as the board's reply carries it.
-fn from_the_file(v: &serde_json::Value) -> Calibration {
-    let int = |ch: &str, k: &str| v["channels"][ch]["integers"][k].as_u64().unwrap() as u32;
-    let thr = |ch: &str| v["channels"][ch]["thr"].as_u64().unwrap() as u32;
-    Calibration {
-        scans: v["scans"].as_u64().unwrap() as u16,
-        positions: v["channels"]["cvm"]["positions"].as_u64().unwrap() as u32,
-        threshold: thr("cvm"),
-        power_threshold: thr("power"),
-        median: int("cvm", "median"),
-        mad: int("cvm", "mad"),
-        power_median: int("power", "median"),
-        power_mad: int("power", "mad"),
-    }
-}
-
 #[test]
 fn n_scans_on_the_board_and_dmap_calibrate_agree() {
     for (preset, n) in [
@@ -132,7 +116,7 @@ fn n_scans_on_the_board_and_dmap_calibrate_agree() {
         dmap_ok(&args);
         let v: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(&cal).unwrap()).unwrap();
-        assert_eq!(from_the_file(&v), board, "{preset:?}");
+        assert_eq!(calibration_of_file(&v), board, "{preset:?}");
         assert_eq!(board.scans, n as u16);
         assert_eq!(board.positions, n * (rows * cols) as u32);
         // Real thresholds: a power channel that is on, a CVM margin above

@@ -10,32 +10,13 @@
 mod common;
 
 use common::dmap_ok as dmap;
+use common::{crc16_bitwise, framed};
 use cvm_core::command::{Key, Refusal, Reply, Source, parse_reply};
 use cvm_reference::Geometry;
 use dmap::npy::write_scan_u16;
 use dmap::twin_requests::write_requests;
 use std::path::Path;
 use std::process::Output;
-
-/// CRC-16/CCITT-FALSE, bit by bit.
-fn crc(data: &[u8]) -> u16 {
-    let mut c: u16 = 0xFFFF;
-    for &b in data {
-        c ^= (b as u16) << 8;
-        for _ in 0..8 {
-            c = if c & 0x8000 != 0 {
-                (c << 1) ^ 0x1021
-            } else {
-                c << 1
-            };
-        }
-    }
-    c
-}
-
-fn framed(body: &str) -> Vec<u8> {
-    format!("{body}*{:04X}\n", crc(body.as_bytes())).into_bytes()
-}
 
 /// A scan of noise with one bright blob (an object) in row 1.
 fn write_scan(path: &Path, rows: usize, cols: usize, j: usize) {
@@ -324,7 +305,7 @@ fn malformed(first: u32, beam: u64) -> (Vec<Burst>, Vec<Want>) {
     add(
         &|id| {
             let body = format!("C,{id},status");
-            format!("{body}*{:04x}\n", crc(body.as_bytes()) | 0xA0A0).into_bytes()
+            format!("{body}*{:04x}\n", crc16_bitwise(body.as_bytes()) | 0xA0A0).into_bytes()
         },
         None,
         Malformed,

@@ -11,7 +11,8 @@
 mod common;
 
 use common::dmap_ok as dmap;
-use cvm_core::command::{Calibration, Key, Reply, parse_reply};
+use common::{calibration_of_file, framed};
+use cvm_core::command::{Key, Reply, parse_reply};
 use cvm_core::protocol::{self, Line};
 use cvm_core::settings::Source;
 use dmap::npy::{read_scan, write_scan_u16};
@@ -23,26 +24,6 @@ const ROWS: usize = 8;
 const COLS: usize = 24;
 /// The options of every run in this file: one firmware build serves them all.
 const OPTS: [&str; 2] = ["--full-scale", "4095"];
-
-/// CRC-16/CCITT-FALSE, bit by bit.
-fn crc(data: &[u8]) -> u16 {
-    let mut c: u16 = 0xFFFF;
-    for &b in data {
-        c ^= (b as u16) << 8;
-        for _ in 0..8 {
-            c = if c & 0x8000 != 0 {
-                (c << 1) ^ 0x1021
-            } else {
-                c << 1
-            };
-        }
-    }
-    c
-}
-
-fn framed(body: &str) -> Vec<u8> {
-    format!("{body}*{:04X}\n", crc(body.as_bytes())).into_bytes()
-}
 
 /// A simulated part: the prototype's set-up, `seed`'s noise, with its
 /// defects or without.
@@ -194,22 +175,6 @@ fn a_changed_setting_takes_effect_when_the_next_scan_starts() {
     );
 }
 
-/// What `dmap calibrate` wrote, in the reply's terms.
-fn from_the_file(v: &serde_json::Value) -> Calibration {
-    let int = |ch: &str, k: &str| v["channels"][ch]["integers"][k].as_u64().unwrap() as u32;
-    let thr = |ch: &str| v["channels"][ch]["thr"].as_u64().unwrap() as u32;
-    Calibration {
-        scans: v["scans"].as_u64().unwrap() as u16,
-        positions: v["channels"]["cvm"]["positions"].as_u64().unwrap() as u32,
-        threshold: thr("cvm"),
-        power_threshold: thr("power"),
-        median: int("cvm", "median"),
-        mad: int("cvm", "mad"),
-        power_median: int("power", "median"),
-        power_mad: int("power", "mad"),
-    }
-}
-
 #[test]
 fn calibrate_5_on_the_board_equals_dmap_calibrate_and_scores_the_next_part_with_it() {
     let dir = tempfile::tempdir().unwrap();
@@ -259,7 +224,7 @@ fn calibrate_5_on_the_board_equals_dmap_calibrate_and_scores_the_next_part_with_
     );
     let v: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&cal).unwrap()).unwrap();
-    assert_eq!(board, from_the_file(&v));
+    assert_eq!(board, calibration_of_file(&v));
     assert_eq!(board.positions, (5 * ROWS * COLS) as u32);
     // The parts before the calibration ended: compiled thresholds.
     for (k, p) in parts[..6].iter().enumerate() {

@@ -12,7 +12,7 @@
 
 mod common;
 
-use common::{s, tmp_in};
+use common::{framed, s, tmp_in};
 use cvm_core::command::{Key, Store};
 use cvm_core::protocol::{self, HeaderInfo, Line};
 use cvm_core::record::{Tag, encoded_len};
@@ -371,26 +371,6 @@ fn a_half_erased_sector_is_erased_again_at_start_up_and_the_old_record_loaded() 
 }
 
 // ---- `save` on the command channel, and power cuts during it
-
-/// CRC-16/CCITT-FALSE, bit by bit (the request lines' checksum).
-fn crc16(data: &[u8]) -> u16 {
-    let mut c: u16 = 0xFFFF;
-    for &b in data {
-        c ^= (b as u16) << 8;
-        for _ in 0..8 {
-            c = if c & 0x8000 != 0 {
-                (c << 1) ^ 0x1021
-            } else {
-                c << 1
-            };
-        }
-    }
-    c
-}
-
-fn framed(body: &str) -> Vec<u8> {
-    format!("{body}*{:04X}\n", crc16(body.as_bytes())).into_bytes()
-}
 
 /// Requests at beam 5: `set` each of `sets` (ids from 1), then `save`.
 fn save_requests(tag: &str, sets: &[String]) -> std::path::PathBuf {

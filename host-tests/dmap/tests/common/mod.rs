@@ -98,3 +98,42 @@ pub fn spot_scan(path: &Path, rows: usize, cols: usize, j: usize, seed: u64) {
     let g = cvm_reference::Geometry::new(j, j).unwrap();
     dmap::npy::write_scan_u16(path, rows, cols, g, &data).unwrap();
 }
+
+/// CRC-16/CCITT-FALSE, bit by bit (polynomial 0x1021, initial 0xFFFF):
+/// the line checksum computed independently of the crate's table.
+pub fn crc16_bitwise(data: &[u8]) -> u16 {
+    let mut c: u16 = 0xFFFF;
+    for &b in data {
+        c ^= (b as u16) << 8;
+        for _ in 0..8 {
+            c = if c & 0x8000 != 0 {
+                (c << 1) ^ 0x1021
+            } else {
+                c << 1
+            };
+        }
+    }
+    c
+}
+
+/// `body*XXXX\n`, framed with [`crc16_bitwise`].
+pub fn framed(body: &str) -> Vec<u8> {
+    format!("{body}*{:04X}\n", crc16_bitwise(body.as_bytes())).into_bytes()
+}
+
+/// What `dmap calibrate` wrote in a calibration file, in the terms of the
+/// board's `calibrated` reply.
+pub fn calibration_of_file(v: &serde_json::Value) -> cvm_core::command::Calibration {
+    let int = |ch: &str, k: &str| v["channels"][ch]["integers"][k].as_u64().unwrap() as u32;
+    let thr = |ch: &str| v["channels"][ch]["thr"].as_u64().unwrap() as u32;
+    cvm_core::command::Calibration {
+        scans: v["scans"].as_u64().unwrap() as u16,
+        positions: v["channels"]["cvm"]["positions"].as_u64().unwrap() as u32,
+        threshold: thr("cvm"),
+        power_threshold: thr("power"),
+        median: int("cvm", "median"),
+        mad: int("cvm", "mad"),
+        power_median: int("power", "median"),
+        power_mad: int("power", "mad"),
+    }
+}
