@@ -10,13 +10,12 @@
 mod common;
 
 use common::dmap_ok as dmap;
-use common::{crc16_bitwise, framed};
+use common::{counters, crc16_bitwise, framed};
 use cvm_core::command::{Key, Refusal, Reply, Source, parse_reply};
 use cvm_reference::Geometry;
 use dmap::npy::write_scan_u16;
 use dmap::twin_requests::write_requests;
 use std::path::Path;
-use std::process::Output;
 
 /// A scan of noise with one bright blob (an object) in row 1.
 fn write_scan(path: &Path, rows: usize, cols: usize, j: usize) {
@@ -30,12 +29,6 @@ fn write_scan(path: &Path, rows: usize, cols: usize, j: usize) {
         data.push(500 + (state >> 33) as u16 % 300 + if blob { 6000 } else { 0 });
     }
     write_scan_u16(path, rows, cols, Geometry::new(j, j).unwrap(), &data).unwrap();
-}
-
-fn counters(out: &Output) -> serde_json::Value {
-    let err = String::from_utf8_lossy(&out.stderr);
-    let last = err.lines().rfind(|l| !l.trim().is_empty()).unwrap_or("");
-    serde_json::from_str(last).unwrap_or_else(|e| panic!("no JSON counters ({e}) in:\n{err}"))
 }
 
 /// The twin's output split: the reply lines, and everything else.

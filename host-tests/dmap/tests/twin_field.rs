@@ -11,7 +11,7 @@
 mod common;
 
 use common::dmap_ok as dmap;
-use common::{calibration_of_file, framed};
+use common::{calibration_of_file, counters, framed};
 use cvm_core::command::{Key, Reply, parse_reply};
 use cvm_core::protocol::{self, Line};
 use cvm_core::settings::Source;
@@ -290,9 +290,7 @@ fn run_with_flash(
             parse_reply(l.as_bytes()).unwrap_or_else(|e| panic!("{e:?}: {l}"))
         })
         .collect();
-    let err = String::from_utf8_lossy(&out.stderr);
-    let last = err.lines().rfind(|l| l.starts_with('{')).unwrap();
-    (decoded, got, serde_json::from_str(last).unwrap())
+    (decoded, got, counters(&out))
 }
 
 /// The value replies that follow a status reply, as (key, value, source).

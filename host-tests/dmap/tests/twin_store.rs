@@ -12,7 +12,7 @@
 
 mod common;
 
-use common::{framed, s, tmp_in};
+use common::{counters, framed, s, tmp_in};
 use cvm_core::command::{Key, Store};
 use cvm_core::protocol::{self, HeaderInfo, Line};
 use cvm_core::record::{Tag, encoded_len};
@@ -63,13 +63,6 @@ fn dmap(args: &[&str]) -> Output {
         String::from_utf8_lossy(&out.stderr)
     );
     out
-}
-
-/// The model's counters: the last line of standard error.
-fn counters(out: &Output) -> serde_json::Value {
-    let err = String::from_utf8_lossy(&out.stderr);
-    let last = err.lines().rfind(|l| !l.trim().is_empty()).unwrap_or("");
-    serde_json::from_str(last).unwrap_or_else(|e| panic!("no JSON counters ({e}) in:\n{err}"))
 }
 
 /// The configuration `dmap twin` builds the firmware for, for this scan

@@ -137,3 +137,11 @@ pub fn calibration_of_file(v: &serde_json::Value) -> cvm_core::command::Calibrat
         power_mad: int("power", "mad"),
     }
 }
+
+/// The chip model's counters: the last JSON object `dmap twin` printed on
+/// standard error.
+pub fn counters(out: &Output) -> serde_json::Value {
+    let err = String::from_utf8_lossy(&out.stderr);
+    let last = err.lines().rfind(|l| l.starts_with('{')).unwrap_or("");
+    serde_json::from_str(last).unwrap_or_else(|e| panic!("no JSON counters ({e}) in:\n{err}"))
+}
