@@ -139,6 +139,26 @@ impl Open {
     }
 }
 
+impl Object {
+    /// Every field 0.
+    pub const EMPTY: Object = Object {
+        id: 0,
+        row0: 0,
+        row1: 0,
+        col0: 0,
+        col1: 0,
+        area: 0,
+        peak: 0,
+        peak_row: 0,
+        peak_col: 0,
+        peak_mag: 0,
+        peak_power: 0,
+        channels: 0,
+        centroid_row_q8: 0,
+        centroid_col_q8: 0,
+    };
+}
+
 #[derive(Clone, Copy, Default)]
 struct Run {
     c0: u32,
@@ -169,22 +189,7 @@ impl Default for Objects {
 impl Objects {
     pub const fn new() -> Self {
         const OPEN: Open = Open {
-            obj: Object {
-                id: 0,
-                row0: 0,
-                row1: 0,
-                col0: 0,
-                col1: 0,
-                area: 0,
-                peak: 0,
-                peak_row: 0,
-                peak_col: 0,
-                peak_mag: 0,
-                peak_power: 0,
-                channels: 0,
-                centroid_row_q8: 0,
-                centroid_col_q8: 0,
-            },
+            obj: Object::EMPTY,
             last_row: 0,
             w: 0,
             wr: 0,

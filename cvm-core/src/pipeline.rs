@@ -4,12 +4,12 @@
 //! what makes their output byte-identical.
 
 use crate::calibration::Calibrator;
-use crate::objects::{Object, Objects};
+use crate::objects::{MAX_OBJECTS, Object, Objects};
 use crate::protocol::{HeaderInfo, LineSink, encode_end, encode_header, encode_object, encode_row};
 use crate::scorer::Scorer;
 pub use crate::settings::{Outputs, Settings};
 use crate::stream::{Engine, EngineError, Position, PushOutcome, RowView, Totals};
-use crate::verdict::{self, Verdict};
+use crate::verdict::{self, Ahead, Verdict};
 
 /// What the objects' closures decide so far in a scan: the objects that
 /// count towards the verdict, and those that rows closed since a board
@@ -18,6 +18,8 @@ use crate::verdict::{self, Verdict};
 struct Closures {
     counted: u32,
     untaken: u32,
+    /// Rows put out in this scan.
+    rows: u32,
 }
 
 impl Closures {
@@ -29,11 +31,50 @@ impl Closures {
     }
 }
 
+/// Objects closed and not yet encoded: the labeller runs ahead of the
+/// lines, so that the sink hears of closures and of the verdict before
+/// the rows that make them are encoded ([`Ahead`]). One row closes at
+/// most the [`MAX_OBJECTS`] objects open before it; the scan's end runs
+/// two rows and the final closing ahead, hence three times that.
+const CLOSED_CAP: usize = 3 * MAX_OBJECTS;
+
+struct Closed {
+    list: [Object; CLOSED_CAP],
+    len: usize,
+}
+
+impl Closed {
+    const fn new() -> Self {
+        const NONE: Object = Object::EMPTY;
+        Closed {
+            list: [NONE; CLOSED_CAP],
+            len: 0,
+        }
+    }
+
+    /// Keeps `o`, or returns it when full (which the bound above rules out).
+    fn keep(&mut self, o: &Object) -> Option<Object> {
+        match self.list.get_mut(self.len) {
+            Some(slot) => {
+                *slot = *o;
+                self.len += 1;
+                None
+            }
+            None => Some(*o),
+        }
+    }
+
+    fn get(&self, from: usize, to: usize) -> &[Object] {
+        self.list.get(from..to.min(self.len)).unwrap_or(&[])
+    }
+}
+
 pub struct Pipeline<'a, const MAX_COLS: usize> {
     engine: Engine<'a, MAX_COLS>,
     objects: Objects,
     settings: Settings,
     closures: Closures,
+    closed: Closed,
     verdict: Option<Verdict>,
     /// Takes every finished row while a calibration runs (see
     /// [`Pipeline::attach_calibrator`]).
@@ -62,11 +103,13 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
         let (cols, threshold) = (settings.cols, settings.threshold);
         let mut engine = Engine::with_near(scorer, cols, threshold, row_a, row_b, near)?;
         engine.set_power_threshold(settings.power_threshold);
+        engine.set_rows(settings.rows);
         Ok(Pipeline {
             engine,
             objects: Objects::new(),
             settings,
             closures: Closures::default(),
+            closed: Closed::new(),
             verdict: None,
             calibrator: None,
         })
@@ -115,6 +158,7 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
     pub fn configure(&mut self, settings: Settings) -> Result<(), EngineError> {
         self.engine.reconfigure(settings.cols, settings.threshold)?;
         self.engine.set_power_threshold(settings.power_threshold);
+        self.engine.set_rows(settings.rows);
         self.settings = settings;
         Ok(())
     }
@@ -133,6 +177,7 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
     /// Starts a scan: the header line.
     pub fn begin(&mut self, sink: &mut impl LineSink) {
         self.closures = Closures::default();
+        self.closed.len = 0;
         if let Some(c) = self.calibrator.as_deref_mut() {
             c.scan_begins();
         }
@@ -146,12 +191,14 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
             objects,
             settings,
             closures,
+            closed,
             calibrator,
             ..
         } = self;
         let mut lines = Emit {
             settings,
             closures,
+            closed,
             calibrator: calibrator.as_deref_mut(),
             sink,
         };
@@ -165,12 +212,14 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
             objects,
             settings,
             closures,
+            closed,
             calibrator,
             ..
         } = self;
         let mut lines = Emit {
             settings,
             closures,
+            closed,
             calibrator: calibrator.as_deref_mut(),
             sink,
         };
@@ -185,28 +234,63 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
     /// Ends the scan: remaining rows, the objects still open, then the end
     /// line with `lines_dropped` (score lines the output could not carry)
     /// and the part's verdict ([`Pipeline::verdict`]). Returns the scan's
-    /// totals.
+    /// totals. The verdict is decided, and told to the sink
+    /// ([`Ahead::End`]), before the last rows' lines are encoded.
     pub fn finish(&mut self, lines_dropped: u32, sink: &mut impl LineSink) -> Totals {
         let Pipeline {
             engine,
             objects,
             settings,
             closures,
+            closed,
             verdict,
             calibrator,
         } = self;
+        engine.close();
         let mut lines = Emit {
             settings,
             closures,
+            closed,
             calibrator: calibrator.as_deref_mut(),
             sink,
         };
-        let mut totals = engine.finish(&mut |row| lines.row(row, objects));
+        // Ahead of the lines: the last rows' objects, then the scan's end.
+        let mut marks = [0usize; 2];
+        let mut k = 0;
+        engine.unsent(&mut |row| {
+            let n = lines.objects_of(row, objects);
+            lines.sink.ahead(Ahead::Row {
+                rows: lines.closures.rows,
+                closed: n,
+            });
+            if let Some(m) = marks.get_mut(k) {
+                *m = lines.closed.len;
+            }
+            k += 1;
+        });
+        let before = lines.closures.counted;
+        let mut ends = *engine.totals();
+        objects.finish_with(&mut |o| lines.keep(o), &mut ends);
+        let v = Verdict::of(&ends, lines.closures.counted, &lines.settings.outputs);
+        lines.sink.ahead(Ahead::End {
+            closed: lines.closures.counted.saturating_sub(before),
+            verdict: v,
+        });
+        // The lines, in the order of a scan without lookahead.
+        let mut from = 0;
+        let mut k = 0;
+        let mut totals = engine.finish(&mut |row| {
+            let to = marks.get(k).copied().unwrap_or(from);
+            lines.lines(row, from, to);
+            from = to;
+            k += 1;
+        });
         if let Some(c) = lines.calibrator.as_deref_mut() {
             c.scan_ends();
         }
-        objects.finish_with(&mut |o| lines.object(o), &mut totals);
-        let v = Verdict::of(&totals, closures.counted, &settings.outputs);
+        lines.objects(from);
+        totals.objects = ends.objects;
+        totals.unobjected = ends.unobjected;
         *verdict = Some(v);
         encode_end(&totals, lines_dropped, v, sink);
         totals
@@ -221,17 +305,49 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
 struct Emit<'p, S> {
     settings: &'p Settings,
     closures: &'p mut Closures,
+    closed: &'p mut Closed,
     calibrator: Option<&'p mut Calibrator>,
     sink: &'p mut S,
 }
 
 impl<S: LineSink> Emit<'_, S> {
-    /// A finished row's lines, then the lines of the objects it closes.
-    /// Out of line: one copy per sink type instead of one in each of the
-    /// three closures that call it (about 16 KB of flash each on the
-    /// target).
+    /// A finished row: the objects it closes are found first and told to
+    /// the sink ([`Ahead::Row`]), then the row's lines and the objects'
+    /// lines are encoded. Out of line: one copy per sink type instead of
+    /// one in each of the closures that call it (about 16 KB of flash
+    /// each on the target).
     #[inline(never)]
     fn row(&mut self, row: &RowView, objects: &mut Objects) {
+        let from = self.closed.len;
+        let closed = self.objects_of(row, objects);
+        self.sink.ahead(Ahead::Row {
+            rows: self.closures.rows,
+            closed,
+        });
+        let to = self.closed.len;
+        self.lines(row, from, to);
+        self.closed.len = from;
+    }
+
+    /// Runs the labeller on `row`, keeping the objects it closes; counts
+    /// the row as out. Returns how many of them count.
+    fn objects_of(&mut self, row: &RowView, objects: &mut Objects) -> u32 {
+        let before = self.closures.counted;
+        objects.push_row(row, &mut |o| self.keep(o));
+        self.closures.rows = self.closures.rows.saturating_add(1);
+        self.closures.counted.saturating_sub(before)
+    }
+
+    fn keep(&mut self, o: &Object) {
+        self.closures.close(o, &self.settings.outputs);
+        if let Some(o) = self.closed.keep(o) {
+            // No room (ruled out by `CLOSED_CAP`): out now, never lost.
+            encode_object(&o, self.sink);
+        }
+    }
+
+    /// A row's lines, then those of the objects kept from `from` to `to`.
+    fn lines(&mut self, row: &RowView, from: usize, to: usize) {
         if let Some(c) = self.calibrator.as_deref_mut() {
             c.scan_row(row.scores);
         }
@@ -241,11 +357,16 @@ impl<S: LineSink> Emit<'_, S> {
             self.settings.scores,
             self.sink,
         );
-        objects.push_row(row, &mut |o| self.object(o));
+        for o in self.closed.get(from, to) {
+            encode_object(o, self.sink);
+        }
     }
 
-    fn object(&mut self, o: &Object) {
-        self.closures.close(o, &self.settings.outputs);
-        encode_object(o, self.sink);
+    /// The lines of the objects kept from `from` on; the list is emptied.
+    fn objects(&mut self, from: usize) {
+        for o in self.closed.get(from, self.closed.len) {
+            encode_object(o, self.sink);
+        }
+        self.closed.len = 0;
     }
 }

@@ -91,6 +91,20 @@ impl Verdict {
     }
 }
 
+/// What the lines about to be encoded will report, told to the line sink
+/// before them ([`crate::protocol::LineSink::ahead`]): a board acts on it
+/// at once (its REJECT output), and the lines, which take far longer to
+/// encode, follow.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Ahead {
+    /// A row is about to go out: `rows` rows of the scan are then out,
+    /// and it closes `closed` objects that count.
+    Row { rows: u32, closed: u32 },
+    /// The scan ends with `verdict`; its end closes `closed` more objects
+    /// that count. Told before the last rows' lines.
+    End { closed: u32, verdict: Verdict },
+}
+
 /// Whether object `obj` is large or strong enough to reject its part.
 pub fn counts(obj: &Object, o: &Outputs) -> bool {
     obj.area >= o.min_area && obj.peak >= o.min_strength

@@ -3,6 +3,7 @@
 //! CRC is checked before any field is read.
 
 use super::fields::ParseError;
+use crate::verdict::Ahead;
 
 /// Upper bound on the length of any line, newline included: the end
 /// line with every total at its widest and the longest verdict.
@@ -27,6 +28,10 @@ pub enum Priority {
 pub trait LineSink {
     /// `line` includes its trailing `\n`.
     fn line(&mut self, line: &[u8], priority: Priority);
+
+    /// What the next lines will report, before they are encoded (a row's
+    /// closed objects, the scan's verdict). Lines only: nothing to do.
+    fn ahead(&mut self, _news: Ahead) {}
 }
 
 // The encoder's tables are read for every character of every line. On

@@ -123,9 +123,19 @@ pub struct Engine<'a, const MAX_COLS: usize> {
     results: [[PositionScore; MAX_COLS]; 2],
     /// Index (0 or 1) of the row being received in `results`.
     cur: usize,
+    /// Each result buffer's row summary, built as its positions are decided.
+    sums: [RowSummary; 2],
+    /// Each result buffer's positions decided so far (the first ones).
+    decided: [usize; 2],
+    /// Rows of a scan, when known (0: not known; see [`Engine::set_rows`]).
+    rows: u32,
     current: Option<u32>,
     next_col: usize,
     pending: Option<u32>,
+    /// A final row not yet put out, in `results[cur]`: the scan's last
+    /// row but one, held back when the last row is complete (see
+    /// [`Engine::close`]).
+    held: Option<u32>,
     totals: Totals,
     scratch: Scratch,
 }
@@ -185,9 +195,13 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
             powers: [[0; MAX_COLS]; 2],
             results: [[PositionScore::default(); MAX_COLS]; 2],
             cur: 0,
+            sums: [RowSummary::default(); 2],
+            decided: [0; 2],
+            rows: 0,
             current: None,
             next_col: 0,
             pending: None,
+            held: None,
             totals: Totals::default(),
             scratch: Scratch::new(),
         })
@@ -261,37 +275,54 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
         self.place(pos, None, out)
     }
 
-    /// Ends the scan: the row in flight is completed (its remaining
-    /// positions without data), the last row is emitted with the border
-    /// rule, and the engine is ready for the next scan. Returns the totals.
-    pub fn finish(&mut self, out: &mut impl FnMut(&RowView)) -> Totals {
+    /// Rows of every scan from now on (0, the default: not known). Known,
+    /// the last row is decided as its beams arrive, its vertical
+    /// component by the border rule, instead of at [`Engine::finish`],
+    /// and the row before it is held back with it: once the last beam is
+    /// in, both rows are final and neither is out yet ([`Engine::unsent`]),
+    /// so that a board can act on their decisions before it encodes their
+    /// lines. The rows put out are the same either way for a scan of
+    /// exactly `rows` rows. A beam of a row past `rows` finds row
+    /// `rows - 1` decided already, with the border rule.
+    pub fn set_rows(&mut self, rows: u32) {
+        self.rows = rows;
+    }
+
+    /// Completes the scan's rows without putting any out: the row in
+    /// flight is completed (its remaining positions without data) and the
+    /// last row decided with the border rule. Then [`Engine::unsent`]
+    /// shows what [`Engine::finish`] puts out.
+    pub fn close(&mut self) {
         if self.current.is_some() {
-            self.complete_row(out);
+            self.complete_row();
         }
-        if let Some(p) = self.pending {
-            // Last row: the missing lower neighbour is the map itself.
-            let pb = (p % 2) as usize;
-            for c in 0..self.cols {
-                let meta = |b: usize| self.meta[b].get(c).copied().unwrap_or(flags::NO_DATA);
-                let (own, above) = (meta(pb), meta(1 - pb));
-                if own & flags::NO_DATA != 0 {
-                    continue;
-                }
-                let (g1, p1) = if above & flags::NO_DATA == 0 {
-                    let (a, b) = (self.slot(1 - pb, c), self.slot(pb, c));
-                    (
-                        self.scorer.distance(a, b),
-                        contrast(self.power(1 - pb, c), self.power(pb, c)),
-                    )
-                } else {
-                    (0, 0)
-                };
-                if let Some(s) = self.prev_row().get_mut(c) {
-                    s.g1 = g1;
-                    s.p1 = p1;
-                }
-            }
-            self.emit_prev(p, &mut *out);
+        self.decide_last();
+    }
+
+    /// The rows that are final and not yet out, oldest first: after
+    /// [`Engine::close`], the scan's last rows (one, or two when the
+    /// row count is known).
+    pub fn unsent(&self, f: &mut dyn FnMut(&RowView)) {
+        if self.current.is_some() {
+            return;
+        }
+        if self.held.is_some() {
+            f(&self.view(self.cur & 1));
+        }
+        let rb = (self.cur ^ 1) & 1;
+        if self.pending.is_some() && self.decided[rb] >= self.cols {
+            f(&self.view(rb));
+        }
+    }
+
+    /// Ends the scan: [`Engine::close`], then the rows not yet out are
+    /// put out, and the engine is ready for the next scan. Returns the
+    /// totals.
+    pub fn finish(&mut self, out: &mut impl FnMut(&RowView)) -> Totals {
+        self.close();
+        self.put_out_held(&mut *out);
+        if self.pending.is_some() {
+            self.emit((self.cur ^ 1) & 1, &mut *out);
         }
         let totals = self.totals;
         self.reset();
@@ -304,7 +335,15 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
         self.current = None;
         self.next_col = 0;
         self.pending = None;
+        self.held = None;
+        self.sums = [RowSummary::default(); 2];
+        self.decided = [0; 2];
         self.totals = Totals::default();
+    }
+
+    /// Row `r` is the scan's last, by the row count given.
+    fn is_last(&self, r: u32) -> bool {
+        r.checked_add(1) == Some(self.rows)
     }
 
     fn place(
@@ -331,11 +370,19 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
         }
         while self.current != Some(pos.row) {
             match self.current {
-                Some(_) => self.complete_row(out),
+                Some(r) => self.end_row(r, out),
                 None => {
+                    // The row held back goes out before its buffer is reused.
+                    self.put_out_held(&mut *out);
                     let r = self.pending.map_or(0, |p| p + 1);
                     self.current = Some(r);
                     self.next_col = 0;
+                    let rb = self.cur & 1;
+                    self.sums[rb] = RowSummary {
+                        row: r,
+                        ..RowSummary::default()
+                    };
+                    self.decided[rb] = 0;
                 }
             }
         }
@@ -353,18 +400,16 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
                 PushOutcome::Scored
             }
         };
-        if self.next_col == self.cols {
-            self.complete_row(out);
+        if self.next_col == self.cols
+            && let Some(r) = self.current
+        {
+            self.end_row(r, out);
         }
         outcome
     }
 
     fn cur_row(&mut self) -> &mut [PositionScore; MAX_COLS] {
         &mut self.results[self.cur & 1]
-    }
-
-    fn prev_row(&mut self) -> &mut [PositionScore; MAX_COLS] {
-        &mut self.results[(self.cur ^ 1) & 1]
     }
 
     fn slot(&self, buf: usize, col: usize) -> &[i32] {
@@ -437,7 +482,10 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
 
         // Vertical component of (r-1, c); a missing neighbour is replaced
         // by (r-1, c) itself. Without a new map slot c still holds (r-2, c).
-        if mid_ok {
+        // (A row decided already is the scan's last by the row count, with
+        // its border rule: see `set_rows`.)
+        let prev_rb = (self.cur ^ 1) & 1;
+        if mid_ok && self.decided[prev_rb] <= c {
             let down_ok = own & flags::NO_DATA == 0;
             let (up_p, mid_p) = (self.power(b, c), self.power(1 - b, c));
             let (g1, p1) = match (up_ok, down_ok) {
@@ -470,10 +518,34 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
                 ..PositionScore::default()
             };
         }
+        // (r-1, c) is final.
+        if self.pending.is_some() {
+            self.decide_upto(prev_rb, c + 1);
+        }
+        let last = self.is_last(r);
+        if last && own & flags::NO_DATA == 0 {
+            // The last row's vertical component, by the border rule (the
+            // missing lower neighbour is the map itself): `d(up, own)`.
+            let (g1, p1) = if has(&self.meta[1 - b]) {
+                (
+                    self.scorer.distance(self.slot(1 - b, c), self.slot(b, c)),
+                    contrast(self.power(1 - b, c), pw),
+                )
+            } else {
+                (0, 0)
+            };
+            if let Some(s) = self.cur_row().get_mut(c) {
+                s.g1 = g1;
+                s.p1 = p1;
+            }
+        }
 
         // Horizontal component of (r, c-1), now that its right neighbour is settled.
         if c >= 1 {
             self.horizontal(b, c - 1, Some(c));
+            if last {
+                self.decide_upto(self.cur, c);
+            }
         }
         self.next_col = c + 1;
     }
@@ -519,95 +591,162 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
     }
 
     /// The current row ends: remaining positions have no data, the last
-    /// position's horizontal component is final, the previous row is
-    /// emitted and the current one becomes pending.
-    fn complete_row(&mut self, out: &mut impl FnMut(&RowView)) {
+    /// position's horizontal component is final, and the row becomes
+    /// pending. The previous row, decided while this one came in, is held
+    /// back: it goes out at once ([`Engine::put_out_held`]) unless this row
+    /// is the scan's last.
+    fn complete_row(&mut self) {
         let Some(r) = self.current else { return };
         while self.next_col < self.cols {
             self.resolve(None);
         }
         let b = (r % 2) as usize;
         self.horizontal(b, self.cols - 1, None);
-        if let Some(p) = self.pending {
-            self.emit_prev(p, &mut *out);
+        if self.is_last(r) {
+            self.decide_upto(self.cur, self.cols);
         }
+        // Nothing is held here: a held row goes out before the next row
+        // starts and right after every other row's end.
+        self.held = self.pending;
         self.cur ^= 1;
         self.pending = Some(r);
         self.current = None;
         self.next_col = 0;
     }
 
-    /// Finalises magnitudes and decisions of the previous row and emits it.
-    /// Out of line and through `dyn`: one copy for every caller, and the
-    /// line encoder behind `out` is not inlined into each of them (about
-    /// 15 KB of flash per copy).
-    #[inline(never)]
-    fn emit_prev(&mut self, row: u32, out: &mut dyn FnMut(&RowView)) {
-        let mut sum = RowSummary {
-            row,
-            ..RowSummary::default()
-        };
-        for (c, s) in self.results[(self.cur ^ 1) & 1]
-            .iter_mut()
-            .take(self.cols)
-            .enumerate()
-        {
-            if s.flags & flags::NO_DATA != 0 {
-                *s = PositionScore {
-                    flags: s.flags,
-                    ..PositionScore::default()
-                };
-                sum.no_data += 1;
+    /// Row `r`, the one in flight, is complete: the row before it goes
+    /// out, unless `r` is the scan's last (both then wait for
+    /// [`Engine::finish`]).
+    fn end_row(&mut self, r: u32, out: &mut impl FnMut(&RowView)) {
+        self.complete_row();
+        if !self.is_last(r) {
+            self.put_out_held(out);
+        }
+    }
+
+    fn put_out_held(&mut self, out: &mut impl FnMut(&RowView)) {
+        if self.held.take().is_some() {
+            self.emit(self.cur & 1, out);
+        }
+    }
+
+    /// The last row pending: its undecided positions get their vertical
+    /// component by the border rule and are decided (the end of a scan
+    /// whose row count is not known, or that ended early).
+    fn decide_last(&mut self) {
+        let Some(p) = self.pending else { return };
+        let rb = (self.cur ^ 1) & 1;
+        let pb = (p % 2) as usize;
+        for c in self.decided[rb]..self.cols {
+            let meta = |b: usize| self.meta[b].get(c).copied().unwrap_or(flags::NO_DATA);
+            let (own, above) = (meta(pb), meta(1 - pb));
+            if own & flags::NO_DATA != 0 {
                 continue;
             }
-            s.mag = magnitude(s.g0, s.g1);
-            s.pmag = power::magnitude(s.p0, s.p1);
-            s.flags &= !flags::DEFECT;
-            s.strength = 0;
-            // The magnitude is at least either score, so it is at the top
-            // of its range whenever one of them is.
-            if s.mag == u32::MAX {
-                s.flags |= flags::CLIPPED;
-                self.totals.clipped += 1;
-            }
-            if s.flags & flags::DARK != 0 {
-                sum.dark += 1;
-            }
-            if s.flags & flags::SATURATED != 0 {
-                sum.saturated += 1;
-            }
-            if s.mag >= self.threshold {
-                s.flags |= flags::CVM_DEFECT;
-                s.strength = strength(s.mag, self.threshold);
-            }
-            if s.pmag as u32 >= self.power_threshold {
-                s.flags |= flags::POWER_DEFECT;
-                s.strength = s
-                    .strength
-                    .max(strength(s.pmag as u32, self.power_threshold));
-            }
-            if s.is_defect() {
-                sum.defects += 1;
-            }
-            if sum.argmax.is_none() || s.mag > sum.max {
-                sum.max = s.mag;
-                sum.argmax = Some(c as u32);
-            }
-            if sum.pargmax.is_none() || s.pmag as u32 > sum.pmax {
-                sum.pmax = s.pmag as u32;
-                sum.pargmax = Some(c as u32);
+            let (g1, p1) = if above & flags::NO_DATA == 0 {
+                let (a, b) = (self.slot(1 - pb, c), self.slot(pb, c));
+                (
+                    self.scorer.distance(a, b),
+                    contrast(self.power(1 - pb, c), self.power(pb, c)),
+                )
+            } else {
+                (0, 0)
+            };
+            if let Some(s) = self.results[rb].get_mut(c) {
+                s.g1 = g1;
+                s.p1 = p1;
             }
         }
-        self.totals.defects += sum.defects;
-        self.totals.rows += 1;
-        let view = RowView {
-            summary: sum,
-            scores: self.results[(self.cur ^ 1) & 1]
-                .get(..self.cols)
-                .unwrap_or(&[]),
+        self.decide_upto(rb, self.cols);
+    }
+
+    /// Decides the positions of result buffer `rb` up to column `end`
+    /// (excluded), in column order, each once.
+    fn decide_upto(&mut self, rb: usize, end: usize) {
+        let rb = rb & 1;
+        let end = end.min(self.cols);
+        while self.decided[rb] < end {
+            let c = self.decided[rb];
+            self.decide(rb, c);
+            self.decided[rb] = c + 1;
+        }
+    }
+
+    /// The magnitudes and decisions of a final position, added to its
+    /// row's summary.
+    fn decide(&mut self, rb: usize, c: usize) {
+        let (Some(s), Some(sum)) = (
+            self.results.get_mut(rb).and_then(|r| r.get_mut(c)),
+            self.sums.get_mut(rb),
+        ) else {
+            return;
+        };
+        if s.flags & flags::NO_DATA != 0 {
+            *s = PositionScore {
+                flags: s.flags,
+                ..PositionScore::default()
+            };
+            sum.no_data += 1;
+            return;
+        }
+        s.mag = magnitude(s.g0, s.g1);
+        s.pmag = power::magnitude(s.p0, s.p1);
+        s.flags &= !flags::DEFECT;
+        s.strength = 0;
+        // The magnitude is at least either score, so it is at the top
+        // of its range whenever one of them is.
+        if s.mag == u32::MAX {
+            s.flags |= flags::CLIPPED;
+            self.totals.clipped += 1;
+        }
+        if s.flags & flags::DARK != 0 {
+            sum.dark += 1;
+        }
+        if s.flags & flags::SATURATED != 0 {
+            sum.saturated += 1;
+        }
+        if s.mag >= self.threshold {
+            s.flags |= flags::CVM_DEFECT;
+            s.strength = strength(s.mag, self.threshold);
+        }
+        if s.pmag as u32 >= self.power_threshold {
+            s.flags |= flags::POWER_DEFECT;
+            s.strength = s
+                .strength
+                .max(strength(s.pmag as u32, self.power_threshold));
+        }
+        if s.is_defect() {
+            sum.defects += 1;
+        }
+        if sum.argmax.is_none() || s.mag > sum.max {
+            sum.max = s.mag;
+            sum.argmax = Some(c as u32);
+        }
+        if sum.pargmax.is_none() || s.pmag as u32 > sum.pmax {
+            sum.pmax = s.pmag as u32;
+            sum.pargmax = Some(c as u32);
+        }
+    }
+
+    fn view(&self, rb: usize) -> RowView<'_> {
+        let rb = rb & 1;
+        RowView {
+            summary: self.sums[rb],
+            scores: self.results[rb].get(..self.cols).unwrap_or(&[]),
             threshold: self.threshold,
             power_threshold: self.power_threshold,
-        };
-        out(&view);
+        }
+    }
+
+    /// Puts out the final row in result buffer `rb`. Out of line and
+    /// through `dyn`: one copy for every caller, and the line encoder
+    /// behind `out` is not inlined into each of them (about 15 KB of flash
+    /// per copy).
+    #[inline(never)]
+    fn emit(&mut self, rb: usize, out: &mut dyn FnMut(&RowView)) {
+        let sum = self.sums[rb & 1];
+        self.totals.defects += sum.defects;
+        self.totals.rows += 1;
+        out(&self.view(rb));
     }
 }

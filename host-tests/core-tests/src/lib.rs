@@ -135,12 +135,40 @@ pub fn run_engine_with(
     power_threshold: u32,
     frames: &[(cvm_core::Position, Option<Vec<u16>>)],
 ) -> (Vec<(RowSummary, Vec<PositionScore>)>, Totals) {
-    let plain = run_engine_near(scorer, cols, threshold, power_threshold, frames, false);
-    let near = run_engine_near(scorer, cols, threshold, power_threshold, frames, true);
+    let plain = run_engine_near(scorer, cols, threshold, power_threshold, frames, false, 0);
+    let near = run_engine_near(scorer, cols, threshold, power_threshold, frames, true, 0);
     assert!(
         plain == near,
         "the engine with the near buffer gives other results"
     );
+    // With the row count known, the last rows are decided as their beams
+    // arrive and held back for the end: the same rows must come out, for
+    // the scan's own row count and for a larger one (a scan that ends
+    // early). A scan whose last beams are all rejected or beyond the last
+    // column gives no row count of its own to test.
+    let rows = frames
+        .iter()
+        .filter(|(p, _)| (p.col as usize) < cols)
+        .map(|(p, _)| p.row)
+        .max()
+        .map_or(0, |r| r.saturating_add(1));
+    for known in [rows, rows.saturating_add(2)] {
+        for with_near in [false, true] {
+            let got = run_engine_near(
+                scorer,
+                cols,
+                threshold,
+                power_threshold,
+                frames,
+                with_near,
+                known,
+            );
+            assert!(
+                plain == got,
+                "the engine told of {known} rows gives other results"
+            );
+        }
+    }
     plain
 }
 
@@ -153,6 +181,7 @@ pub fn run_engine_near(
     power_threshold: u32,
     frames: &[(cvm_core::Position, Option<Vec<u16>>)],
     with_near: bool,
+    rows: u32,
 ) -> (Vec<(RowSummary, Vec<PositionScore>)>, Totals) {
     let words = cvm_core::stream::row_words_for(cols, scorer.config());
     let (mut a, mut b) = (vec![0i32; words], vec![0i32; words]);
@@ -166,16 +195,28 @@ pub fn run_engine_near(
             .unwrap(),
     );
     engine.set_power_threshold(power_threshold);
-    let mut rows = Vec::new();
-    let mut out = |v: &cvm_core::RowView| rows.push((v.summary, v.scores.to_vec()));
+    engine.set_rows(rows);
+    let mut out_rows = Vec::new();
+    let mut out = |v: &cvm_core::RowView| out_rows.push((v.summary, v.scores.to_vec()));
     for (pos, f) in frames {
         match f {
             Some(f) => engine.push(*pos, f, &mut out),
             None => engine.mark_missing(*pos, &mut out),
         };
     }
-    let totals = engine.finish(&mut out);
-    (rows, totals)
+    // What `close` leaves unsent is exactly what `finish` puts out.
+    engine.close();
+    let mut unsent = Vec::new();
+    engine.unsent(&mut |v| unsent.push((v.summary, v.scores.to_vec())));
+    let mut last = Vec::new();
+    let totals = engine.finish(&mut |v| last.push((v.summary, v.scores.to_vec())));
+    let before = out_rows.len();
+    out_rows.extend(last);
+    assert!(
+        out_rows.get(before..) == Some(&unsent[..]),
+        "finish put out other rows than close left unsent"
+    );
+    (out_rows, totals)
 }
 
 /// The decisions of docs/method.md §6 applied to scores that have none:

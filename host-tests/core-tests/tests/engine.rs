@@ -404,3 +404,75 @@ fn row_jump_limit_is_inclusive() {
     assert_eq!(out.len(), 1);
     assert_eq!((totals.missing, totals.rejected), (0, 1));
 }
+
+/// Told the row count, the engine puts out nothing of the scan's last two
+/// rows before it is closed: after the last beam both are final and
+/// unsent, and they are the rows the engine put out without the count.
+#[test]
+fn last_two_rows_wait_for_the_end_when_the_row_count_is_known() {
+    let mut r = rng(41);
+    for &(rows, cols, j) in &[(5usize, 7usize, 3usize), (2, 4, 4), (1, 3, 3), (3, 1, 3)] {
+        let scorer = dmap::options::ScoringArgs::default().scorer(j, j).unwrap();
+        let data = random_scan(&mut r, rows, cols, j, j);
+        let frames = clean_frames(rows, cols, j * j, &data);
+        let (want, _) = run_engine(&scorer, cols, scorer.threshold_from_units(0.02), &frames);
+        let words = cvm_core::stream::row_words_for(cols, scorer.config());
+        let (mut a, mut b) = (vec![0i32; words], vec![0i32; words]);
+        let mut engine = Box::new(
+            cvm_core::Engine::<256>::new(
+                &scorer,
+                cols as u32,
+                scorer.threshold_from_units(0.02),
+                &mut a,
+                &mut b,
+            )
+            .unwrap(),
+        );
+        engine.set_rows(rows as u32);
+        let mut out = Vec::new();
+        for (pos, f) in &frames {
+            engine.push(*pos, f.as_deref().unwrap(), &mut |v| {
+                out.push(v.summary.row)
+            });
+        }
+        let early = rows.saturating_sub(2) as u32;
+        assert_eq!(out, (0..early).collect::<Vec<_>>(), "{rows}x{cols}");
+        // Nothing is left to compute after the last beam: `unsent` shows
+        // the final rows even before `close`.
+        let mut unsent = Vec::new();
+        engine.unsent(&mut |v| unsent.push((v.summary, v.scores.to_vec())));
+        assert_eq!(unsent.len(), rows.min(2), "{rows}x{cols}");
+        assert!(unsent[..] == want[early as usize..], "{rows}x{cols}");
+        let t = engine.finish(&mut |v| out.push(v.summary.row));
+        assert_eq!(t.rows as usize, rows);
+        assert_eq!(out, (0..rows as u32).collect::<Vec<_>>());
+    }
+}
+
+/// Beams of rows past the row count given are still scored and put out
+/// (the last counted row keeping its border-rule decisions), every
+/// position once and in order.
+#[test]
+fn rows_past_the_count_given_are_put_out_in_order() {
+    let mut r = rng(42);
+    let (rows, cols, j) = (5usize, 6usize, 3usize);
+    let scorer = dmap::options::ScoringArgs::default().scorer(j, j).unwrap();
+    let data = random_scan(&mut r, rows, cols, j, j);
+    let frames = clean_frames(rows, cols, j * j, &data);
+    let words = cvm_core::stream::row_words_for(cols, scorer.config());
+    let (mut a, mut b) = (vec![0i32; words], vec![0i32; words]);
+    let thr = scorer.threshold_from_units(0.02);
+    let mut engine =
+        Box::new(cvm_core::Engine::<256>::new(&scorer, cols as u32, thr, &mut a, &mut b).unwrap());
+    engine.set_rows(3);
+    let mut out = Vec::new();
+    for (pos, f) in &frames {
+        engine.push(*pos, f.as_deref().unwrap(), &mut |v| {
+            out.push((v.summary.row, v.scores.len()))
+        });
+    }
+    let t = engine.finish(&mut |v| out.push((v.summary.row, v.scores.len())));
+    let want: Vec<_> = (0..rows as u32).map(|r| (r, cols)).collect();
+    assert_eq!(out, want);
+    assert_eq!((t.rows, t.frames, t.missing), (5, 30, 0));
+}
