@@ -10,6 +10,7 @@ use cvm_core::calibration::Calibrator;
 use cvm_core::pipeline::{Pipeline, Settings};
 use cvm_core::protocol::{LineSink, Priority};
 use cvm_core::stream::Totals;
+use cvm_core::verdict::Ahead;
 
 use crate::acquire::BeamRecord;
 use crate::outputs::Progress;
@@ -226,6 +227,10 @@ struct Promote<'s, S>(&'s mut S);
 impl<S: LineSink> LineSink for Promote<'_, S> {
     fn line(&mut self, line: &[u8], _priority: Priority) {
         self.0.line(line, Priority::Keep);
+    }
+
+    fn ahead(&mut self, news: Ahead) {
+        self.0.ahead(news);
     }
 }
 

@@ -7,7 +7,7 @@
 
 use cvm_core::protocol::ResetCause;
 use cvm_core::settings::{Outputs, RejectMode};
-use cvm_core::verdict::Verdict;
+use cvm_core::verdict::{Ahead, Verdict};
 
 /// What the scan driver reports after a step (see
 /// [`crate::driver::ScanDriver::progress`]).
@@ -169,6 +169,30 @@ impl OutputLogic {
             now: self.now,
             pulses,
         })
+    }
+}
+
+impl OutputLogic {
+    /// What the pipeline tells ahead of a row's or the scan's lines
+    /// ([`Ahead`]): the pulses of the objects a row closes (row mode) and
+    /// the scan's verdict are acted on before those lines are encoded.
+    /// The [`OutputLogic::step`] after the scoring step then finds
+    /// nothing new, so a board that takes this news must pass
+    /// `closed = 0` there (the closures were told here).
+    pub fn ahead(&mut self, news: Ahead) -> Option<Change> {
+        let mut p = self.seen;
+        let closed = match news {
+            Ahead::Row { rows, closed } => {
+                p.rows = rows;
+                closed
+            }
+            Ahead::End { closed, verdict } => {
+                p.finished = p.finished.wrapping_add(1);
+                p.verdict = Some(verdict);
+                closed
+            }
+        };
+        self.step(p, closed)
     }
 }
 

@@ -11,6 +11,7 @@ use core::sync::atomic::{AtomicU32, Ordering};
 
 use cvm_core::protocol::ResetCause;
 use cvm_core::settings::{Outputs, RejectMode};
+use cvm_core::verdict::Ahead;
 use cvm_fw_app::outputs::{Asserted, Change, OutputLogic, level};
 use embassy_stm32::gpio::{Level, Output, Speed};
 use embassy_stm32::interrupt;
@@ -183,9 +184,23 @@ impl PlcOutputs {
         PlcOutputs { logic }
     }
 
-    /// After a scoring step: the pins follow the driver's progress.
-    pub fn step(&mut self, p: cvm_fw_app::outputs::Progress, closed: u32) {
-        let Some(Change { now, pulses }) = self.logic.step(p, closed) else {
+    /// After a scoring step: the pins follow the driver's progress. (The
+    /// closures come ahead of the lines: [`PlcOutputs::ahead`].)
+    pub fn step(&mut self, p: cvm_fw_app::outputs::Progress) {
+        let change = self.logic.step(p, 0);
+        self.apply(change);
+    }
+
+    /// The pipeline's news ahead of a row's or the scan's lines: the
+    /// pins move before those lines are encoded (docs/firmware.md,
+    /// "Latency").
+    pub fn ahead(&mut self, news: Ahead) {
+        let change = self.logic.ahead(news);
+        self.apply(change);
+    }
+
+    fn apply(&mut self, change: Option<Change>) {
+        let Some(Change { now, pulses }) = change else {
             return;
         };
         self.write(now);

@@ -6,9 +6,10 @@ use core::sync::atomic::Ordering;
 
 use cvm_core::calibration::{Progress, Rule};
 use cvm_core::command::Refusal;
-use cvm_core::protocol::MAX_LINE;
+use cvm_core::protocol::{LineSink, MAX_LINE, Priority};
+use cvm_core::verdict::Ahead;
 use cvm_fw_app::control::Control;
-use cvm_fw_app::driver::ScanDriver;
+use cvm_fw_app::driver::{CountingSink, ScanDriver};
 use defmt::{error, info, warn};
 use embassy_stm32::mode::Async;
 use embassy_stm32::peripherals::IWDG1;
@@ -52,6 +53,30 @@ pub async fn uart_task(mut uart: UartTx<'static, Async>) {
                 errors
             );
         }
+    }
+}
+
+/// The scoring task's sink: lines to the UART queue, and the pipeline's
+/// news ahead of them to READY and REJECT, so that the pins move before
+/// the lines that report the same verdict are encoded.
+struct PinSink<'a>(
+    &'a mut QueueSink<{ crate::config::h743::QUEUE_BYTES }>,
+    &'a mut PlcOutputs,
+);
+
+impl LineSink for PinSink<'_> {
+    fn line(&mut self, line: &[u8], priority: Priority) {
+        self.0.line(line, priority);
+    }
+
+    fn ahead(&mut self, news: Ahead) {
+        self.1.ahead(news);
+    }
+}
+
+impl CountingSink for PinSink<'_> {
+    fn dropped(&self) -> u32 {
+        self.0.dropped()
     }
 }
 
@@ -103,11 +128,12 @@ pub async fn score_task(
                 CHANGED.store(false, Ordering::Release);
                 take_control(driver, control);
             }
-            let finished = driver.step(rec, &mut frames, &mut sink);
+            let finished = driver.step(rec, &mut frames, &mut PinSink(&mut sink, &mut plc));
             if driver.take_applied() {
                 plc.configure(&driver.settings().outputs);
             }
-            plc.step(driver.progress(), driver.take_closed());
+            let _ = driver.take_closed();
+            plc.step(driver.progress());
             if finished {
                 scan_ended(driver, control);
             }
@@ -129,8 +155,10 @@ pub async fn score_task(
         if !idle_ended && last_beam.elapsed() >= Duration::from_millis(IDLE_END_MS) {
             loop {
                 wait_for_room(&mut wdg).await;
-                let (more, finished) = driver.end_of_data(&mut frames, &mut sink);
-                plc.step(driver.progress(), driver.take_closed());
+                let (more, finished) =
+                    driver.end_of_data(&mut frames, &mut PinSink(&mut sink, &mut plc));
+                let _ = driver.take_closed();
+                plc.step(driver.progress());
                 KICK.signal(());
                 if finished {
                     warn!("no beam for {} ms: scan ended early", IDLE_END_MS);

@@ -9,9 +9,11 @@ use std::path::PathBuf;
 
 #[derive(Args, Clone, Debug)]
 pub struct PinArgs {
-    /// Write the output pins' timeline to FILE (CSV: us,pin,level,beam,row;
-    /// each edge with its model time in µs and the last beam whose DRDY
-    /// came before it, -1 before the first)
+    /// Write the output pins' timeline to FILE (CSV:
+    /// us,pin,level,beam,row,read_end_us,read_beam; each edge with its
+    /// model time in µs, the last beam whose DRDY came before it, and the
+    /// end of the last frame read before it and its beam; -1 before the
+    /// first)
     #[arg(long = "pins", value_name = "FILE")]
     pub pins: Option<PathBuf>,
     /// REJECT's mode in the firmware built: part (at the scan's end) or
@@ -54,6 +56,19 @@ pub struct Edge {
     pub level: u8,
     pub beam: i64,
     pub row: i64,
+    /// When the last frame read before the edge ended (its last sample
+    /// clocked), in µs, and its beam (-1 before the first).
+    pub read_end_us: f64,
+    pub read_beam: i64,
+}
+
+impl Edge {
+    /// From the end of the last frame read to the edge: the firmware's
+    /// own latency (the read itself takes a frame time, which at the
+    /// SPI limit is the whole beam period).
+    pub fn after_read_us(&self) -> Option<f64> {
+        (self.read_beam >= 0).then(|| self.us - self.read_end_us)
+    }
 }
 
 /// The edges of the model's counters (`pins`).
@@ -69,6 +84,8 @@ pub fn edges(counters: &serde_json::Value) -> Vec<Edge> {
                         level: u8::try_from(e["level"].as_u64()?).ok()?,
                         beam: e["beam"].as_i64()?,
                         row: e["row"].as_i64()?,
+                        read_end_us: e["read_end_us"].as_f64()?,
+                        read_beam: e["read_beam"].as_i64()?,
                     })
                 })
                 .collect()
@@ -78,9 +95,12 @@ pub fn edges(counters: &serde_json::Value) -> Vec<Edge> {
 
 /// The timeline as the file holds it.
 pub fn timeline_csv(edges: &[Edge]) -> String {
-    let mut s = String::from("us,pin,level,beam,row\n");
+    let mut s = String::from("us,pin,level,beam,row,read_end_us,read_beam\n");
     for e in edges {
-        s += &format!("{:.3},{},{},{},{}\n", e.us, e.pin, e.level, e.beam, e.row);
+        s += &format!(
+            "{:.3},{},{},{},{},{:.3},{}\n",
+            e.us, e.pin, e.level, e.beam, e.row, e.read_end_us, e.read_beam
+        );
     }
     s
 }
@@ -115,9 +135,13 @@ pub fn report(args: &PinArgs, counters: &serde_json::Value, uart: &[u8]) -> Resu
         .iter()
         .filter(|e| e.pin == "READY" || e.pin == "REJECT")
     {
+        let read = e
+            .after_read_us()
+            .map(|d| format!(", {d:.1} us after beam {}'s read", e.read_beam))
+            .unwrap_or_default();
         let _ = writeln!(
             err,
-            "pin {} {} at {:.3} us after beam {} (row {})",
+            "pin {} {} at {:.3} us after beam {} (row {}){read}",
             e.pin,
             if e.level == 1 { "high" } else { "low" },
             e.us,

@@ -313,8 +313,13 @@ fn demo_part_is_rejected_at_the_scans_end() {
     let us: f64 = reject[0][0].parse().unwrap();
     // The last beam's DRDY: 20 ms after reset, then 1 520 periods of 53 µs.
     let latency = us - (20_000.0 + 1520.0 * 53.0);
-    println!("demo: REJECT {latency:.1} us after the last beam's DRDY");
-    assert!(latency > 0.0 && latency < 1_000.0, "{latency}");
+    // From the end of its frame's read: within one beam period.
+    assert_eq!(reject[0][6], "1520", "{csv}");
+    let after_read = us - reject[0][5].parse::<f64>().unwrap();
+    println!(
+        "demo: REJECT {latency:.1} us after the last beam's DRDY, {after_read:.1} us after its read"
+    );
+    assert!(after_read > 0.0 && after_read < 53.0, "{after_read}");
     let qemu = dmap(&["emulate", &s(&scan), "--scores", "--threshold", "0.5"]);
     assert_eq!(verdicts(&qemu.stdout), ["obj"]);
 }
@@ -356,7 +361,7 @@ fn demo_in_row_mode_pulses_once_per_object() {
         .collect();
     assert_eq!(last_rows.len(), 2, "{text}");
     let csv = std::fs::read_to_string(&pins).unwrap();
-    let reject: Vec<(f64, u8, i64)> = csv
+    let reject: Vec<(f64, u8, i64, f64, i64)> = csv
         .lines()
         .skip(1)
         .map(|l| l.split(',').collect::<Vec<_>>())
@@ -366,6 +371,8 @@ fn demo_in_row_mode_pulses_once_per_object() {
                 f[0].parse().unwrap(),
                 f[2].parse().unwrap(),
                 f[3].parse().unwrap(),
+                f[5].parse().unwrap(),
+                f[6].parse().unwrap(),
             )
         })
         .collect();
@@ -389,6 +396,16 @@ fn demo_in_row_mode_pulses_once_per_object() {
             up.2
         );
         let latency = up.0 - (20_000.0 + due_beam as f64 * period);
-        println!("demo, row mode: pulse {k} {latency:.1} us after beam {due_beam}'s DRDY");
+        // From the end of the due beam's read: within one beam period.
+        assert_eq!(up.4, due_beam, "pulse {k}: {csv}");
+        let after_read = up.0 - up.3;
+        println!(
+            "demo, row mode: pulse {k} {latency:.1} us after beam {due_beam}'s DRDY, \
+             {after_read:.1} us after its read"
+        );
+        assert!(
+            after_read > 0.0 && after_read < period,
+            "pulse {k}: {after_read}"
+        );
     }
 }

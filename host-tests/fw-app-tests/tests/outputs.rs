@@ -220,3 +220,93 @@ fn row_mode_delays_each_rows_pulses_by_the_set_rows() {
     assert_eq!(o.step(at(9, 0), 1), None);
     assert_eq!(o.step(at(10, 1), 0), pulse(1));
 }
+
+/// The news the pipeline tells ahead of its lines moves the outputs as
+/// the scoring step's progress would, and the step after it, which the
+/// board runs with no closures, finds nothing left to do: no edge twice,
+/// no pulse twice.
+#[test]
+fn news_ahead_of_the_lines_moves_the_outputs_once() {
+    use cvm_core::verdict::Ahead;
+    // Part mode, held: REJECT goes up on the news of a rejecting end.
+    let mut o = OutputLogic::start(Outputs::DEFAULT, ResetCause::PowerOn);
+    o.step(progress(1, 0, None, false), 0);
+    assert_eq!(o.ahead(Ahead::Row { rows: 1, closed: 1 }), None);
+    assert_eq!(
+        o.ahead(Ahead::End {
+            closed: 0,
+            verdict: Verdict::Objects
+        }),
+        Some(Change {
+            now: asserted(true, true),
+            pulses: 0
+        })
+    );
+    assert_eq!(
+        o.step(progress(1, 1, Some(Verdict::Objects), false), 0),
+        None
+    );
+    // A fault: READY drops with the news, REJECT goes up.
+    o.step(progress(2, 1, Some(Verdict::Objects), false), 0);
+    let fault = Verdict::Fault(Fault::Missing);
+    assert_eq!(
+        o.ahead(Ahead::End {
+            closed: 0,
+            verdict: fault
+        }),
+        Some(Change {
+            now: asserted(false, true),
+            pulses: 0
+        })
+    );
+    assert_eq!(o.step(progress(2, 2, Some(fault), false), 0), None);
+    // Part mode with a width: one pulse, not two.
+    let s = Outputs {
+        pulse_us: 300,
+        ..Outputs::DEFAULT
+    };
+    let mut o = OutputLogic::start(s, ResetCause::PowerOn);
+    o.step(progress(1, 0, None, false), 0);
+    let end = Ahead::End {
+        closed: 1,
+        verdict: Verdict::Objects,
+    };
+    assert_eq!(o.ahead(end).map(|c| c.pulses), Some(1));
+    assert_eq!(
+        o.step(progress(1, 1, Some(Verdict::Objects), false), 0),
+        None
+    );
+    // Row mode, delay 1: a row's closures pulse when the next row's news
+    // comes, the end's closures with the end.
+    let s = Outputs {
+        reject_mode: RejectMode::Row,
+        pulse_us: 300,
+        row_delay: 1,
+        ..Outputs::DEFAULT
+    };
+    let mut o = OutputLogic::start(s, ResetCause::PowerOn);
+    o.step(progress(1, 0, None, false), 0);
+    assert_eq!(o.ahead(Ahead::Row { rows: 1, closed: 2 }), None);
+    let at = |rows| Progress {
+        rows,
+        ..progress(1, 0, None, false)
+    };
+    assert_eq!(o.step(at(1), 0), None);
+    assert_eq!(
+        o.ahead(Ahead::Row { rows: 2, closed: 0 }).map(|c| c.pulses),
+        Some(2)
+    );
+    assert_eq!(o.step(at(2), 0), None);
+    assert_eq!(o.ahead(Ahead::Row { rows: 3, closed: 1 }), None);
+    assert_eq!(o.ahead(end).map(|c| c.pulses), Some(2));
+    assert_eq!(
+        o.step(
+            Progress {
+                rows: 3,
+                ..progress(1, 1, Some(Verdict::Objects), false)
+            },
+            0
+        ),
+        None
+    );
+}

@@ -95,6 +95,9 @@ class Detector:
         self.reads_without_cs = 0
         self.injected = {}
         self.done_at = self.times[-1] if self.times else 0
+        # When the last sample of the latest frame was clocked out, and
+        # of which beam (the firmware has the frame from then on).
+        self.read_end = (-1, -1)
 
     def _schedule(self, t):
         times = []
@@ -185,12 +188,16 @@ class Detector:
         if bits == 16:
             v = self.frame[self.index] if self.index < len(self.frame) else 0
             self.index += 1
+            if self.index == len(self.frame):
+                self.read_end = (self.m.core.cycles, self.beam)
             return v
         # 8-bit frames: the two bytes of each sample, MSB first.
         s = self.index // 2
         v = self.frame[s] if s < len(self.frame) else 0
         b = (v >> 8) if self.index % 2 == 0 else (v & 0xFF)
         self.index += 1
+        if self.index == 2 * len(self.frame):
+            self.read_end = (self.m.core.cycles, self.beam)
         return b
 
     def unread(self):

@@ -47,7 +47,7 @@ class Machine:
             self.core.uc.mem_write(lo, STACK_PAINT * ((hi - lo) // 4))
         self.uart = []          # (byte, cycle)
         self.resets = []        # (cause, cycle)
-        self.pin_edges = []     # (cycle, name, level, beam), every recorded pin change
+        self.pin_edges = []     # (cycle, name, level, beam, read end), every recorded pin change
         self.detector = None
         self.halted_until = 0
         self.spi_rx_stream = 1
@@ -107,7 +107,8 @@ class Machine:
         name = RECORDED_PINS.get((port, pin))
         if name:
             beam = self.detector.beam if self.detector else -1
-            self.pin_edges.append((self.core.cycles, name, level, beam))
+            read_end = getattr(self.detector, "read_end", (-1, -1))
+            self.pin_edges.append((self.core.cycles, name, level, beam, read_end))
 
     def start_profile(self):
         """Counts instructions per function from now on."""
@@ -153,8 +154,9 @@ class Machine:
         for (port, pin), name in RECORDED_PINS.items():
             g = self.gpio[port]
             if g.mode(pin) == 1 and g.r[0x14] >> pin & 1:
-                self.pin_edges.append((self.core.cycles, name, 0,
-                                       self.detector.beam if self.detector else -1))
+                det = self.detector
+                self.pin_edges.append((self.core.cycles, name, 0, det.beam if det else -1,
+                                       getattr(det, "read_end", (-1, -1))))
         flags = system.RSR_PIN | (system.RSR_IWDG1 if cause == "watchdog" else system.RSR_SFT)
         self.bus.drop_chip_events()
         self.bus.error = None
@@ -358,9 +360,13 @@ def _stats(self):
         s["faults_injected"] = det.injected
         s["spi_reads_without_cs"] = det.reads_without_cs
     cols = det.scan.cols if det is not None else 0
+    # Each edge with the latest DRDY's beam and the end of the latest
+    # frame read (the time its last sample was clocked, and its beam).
     s["pins"] = [{"us": round(t * 1e6 / CLOCK_HZ, 3), "pin": name, "level": level,
-                  "beam": beam, "row": beam // cols if cols and beam >= 0 else -1}
-                 for t, name, level, beam in self.pin_edges]
+                  "beam": beam, "row": beam // cols if cols and beam >= 0 else -1,
+                  "read_end_us": round(r[0] * 1e6 / CLOCK_HZ, 3) if r[0] >= 0 else -1,
+                  "read_beam": r[1]}
+                 for t, name, level, beam, r in self.pin_edges]
     return s
 
 

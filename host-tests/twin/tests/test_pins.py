@@ -25,7 +25,7 @@ class Pins(unittest.TestCase):
         b.write(MODER, 4, (b.read(MODER, 4) & ~0b11) | 0b01)
 
     def edges(self):
-        return [(name, level, beam) for _, name, level, beam in self.m.pin_edges]
+        return [(name, level, beam) for _, name, level, beam, _ in self.m.pin_edges]
 
     def test_bsrr_and_odr_changes_are_recorded_once(self):
         e, b = self.m.gpio["E"], self.m.gpio["B"]
