@@ -62,6 +62,18 @@ pub struct Object {
     pub centroid_col_q8: u64,
 }
 
+/// `n / d` (`None` for `d = 0`), in 64 bits whenever both fit: a 128-bit
+/// division is a long software routine on the target (several thousand
+/// instructions per object closed, on the path to a board's verdict),
+/// and every object of fewer than `2^16` positions at the largest
+/// weights fits.
+fn div(n: u128, d: u128) -> Option<u128> {
+    match (u64::try_from(n), u64::try_from(d)) {
+        (Ok(n), Ok(d)) => n.checked_div(d).map(u128::from),
+        _ => n.checked_div(d),
+    }
+}
+
 #[derive(Clone, Copy, Default)]
 struct Open {
     obj: Object,
@@ -90,10 +102,12 @@ impl Open {
             o.peak_mag = p.mag;
             o.peak_power = p.pmag;
         }
-        let w = ((p.strength >> 8) as u64).clamp(1, MAX_WEIGHT) as u128;
-        self.w += w;
-        self.wr += w * (row - o.row0) as u128;
-        self.wc += w * col as u128;
+        // Each product is below 2^56 (see the module's ranges): one 64-bit
+        // multiply, then a 128-bit sum.
+        let w = ((p.strength >> 8) as u64).clamp(1, MAX_WEIGHT);
+        self.w += w as u128;
+        self.wr += (w * (row - o.row0) as u64) as u128;
+        self.wc += (w * col as u64) as u128;
         self.last_row = row;
     }
 
@@ -128,10 +142,7 @@ impl Open {
 
     fn close(&self) -> Object {
         let mut o = self.obj;
-        if let (Some(r), Some(c)) = (
-            (self.wr << 8).checked_div(self.w),
-            (self.wc << 8).checked_div(self.w),
-        ) {
+        if let (Some(r), Some(c)) = (div(self.wr << 8, self.w), div(self.wc << 8, self.w)) {
             o.centroid_row_q8 = r as u64 + ((o.row0 as u64) << 8);
             o.centroid_col_q8 = c as u64;
         }
@@ -236,17 +247,19 @@ impl Objects {
         if let Some(n) = self.n_runs.get_mut(cur) {
             *n = 0;
         }
-        let mut c = 0usize;
         let scores = view.scores;
-        while c < scores.len() {
-            if !scores.get(c).is_some_and(|p| p.is_defect()) {
-                c += 1;
-                continue;
-            }
-            let start = c;
-            while scores.get(c).is_some_and(|p| p.is_defect()) {
-                c += 1;
-            }
+        let mut c = 0usize;
+        // Iterators, not indexing: this scan runs over every position of
+        // every row, on the path to a board's verdict.
+        while let Some(start) = scores
+            .get(c..)
+            .and_then(|s| s.iter().position(PositionScore::is_defect))
+        {
+            let start = c + start;
+            let len = scores
+                .get(start..)
+                .map_or(0, |s| s.iter().take_while(|p| p.is_defect()).count());
+            c = start + len.max(1);
             self.run(row, start, c, scores, cur);
         }
         self.prev = cur;
@@ -260,7 +273,13 @@ impl Objects {
         self.close_all(out);
         totals.objects = self.reported;
         totals.unobjected = self.unobjected;
-        *self = Objects::new();
+        // Every slot is free and no run kept: the tables' contents are
+        // never read again, so only the counts restart (clearing 4.5 KB
+        // would delay a board's verdict).
+        self.prev = 0;
+        self.next_id = 0;
+        self.reported = 0;
+        self.unobjected = 0;
     }
 
     fn close_all(&mut self, out: &mut dyn FnMut(&Object)) {
@@ -278,8 +297,12 @@ impl Objects {
             let Some(r) = self.runs.get(prev).and_then(|rs| rs.get(i)).copied() else {
                 break;
             };
-            // 8-neighbourhood: within one column of the run.
-            if r.c1.saturating_add(1) < c0u || r.c0 > c1u.saturating_add(1) {
+            // 8-neighbourhood: within one column of the run. The previous
+            // row's runs are in column order: none after this one touches.
+            if r.c0 > c1u.saturating_add(1) {
+                break;
+            }
+            if r.c1.saturating_add(1) < c0u {
                 continue;
             }
             match slot {
@@ -303,8 +326,8 @@ impl Objects {
             return;
         };
         if let Some(o) = self.open.get_mut(s as usize) {
-            for (i, p) in scores.iter().enumerate().take(c1).skip(c0) {
-                o.add(row, i as u32, p);
+            for (p, col) in scores.get(c0..c1).unwrap_or(&[]).iter().zip(c0u..) {
+                o.add(row, col, p);
             }
         }
         if let Some(r) = self.runs.get_mut(cur).and_then(|rs| rs.get_mut(n)) {
