@@ -10,6 +10,9 @@ usage: scripts/measure.sh WHAT [ARGS]
                                square 15; TOP=n functions, default 20) (emulation.md)
   twin-profile                 instructions per beam by stage, H743 release ELF on the chip
                                model, 9x9 and 15x15 (KERNELS=square, TOP=n) (twin.md)
+  latency                      READY/REJECT latency: a 4 x 300 paper-sim part at 9x9 (53 us)
+                               and 15x15 (146 us) on the chip model, REJECT's edge after
+                               the last frame's read (firmware.md)
   store-boot                   start-up cost of the settings store, H743 release ELF (default
                                configuration) on the chip model, per bank-2 content (firmware.md)
   twin-cost [ARGS]             estimated cycles per beam on the H743 (the chip model's bus and
@@ -179,6 +182,24 @@ twin_profile() {
         (cd "$root/host-tests/twin" && python3 -m h743twin.profile "$elf" "$j" "$j" --top "${TOP:-0}" \
             --start-ms "$(twin_start_ms)")
         echo
+    done
+}
+
+# REJECT's latency in part mode at the SPI-limit beam rates: 4 x 300
+# paper-sim parts (the release width), the H743 release ELF built for
+# them by `dmap twin`, the edge timed from the end of the last frame read.
+latency() {
+    bash "$root/scripts/setup.sh"
+    build_dmap
+    local work j p
+    scratch
+    work=${scratch_dirs[-1]}
+    for j in 9 15; do
+        p=$([ "$j" = 9 ] && echo 53 || echo 146)
+        sim_scan "$work/s$j.npy" "$j" 4 300
+        "$dmap_bin" twin "$work/s$j.npy" --beam-us "$p" --pins "$work/p$j.csv" \
+            >"$work/o$j.txt" 2>"$work/e$j.txt"
+        echo "${j}x${j} at $p us: $(grep -m1 '^E,' "$work/o$j.txt" | grep -o 'defects=[0-9]*,obj=[0-9]*'), $(grep -m1 'pin REJECT high' "$work/e$j.txt")"
     done
 }
 
@@ -641,6 +662,7 @@ case $what in
     icount) icount ;;
     profile) profile "$@" ;;
     twin-profile) twin_profile ;;
+    latency) latency ;;
     store-boot) store_boot ;;
     twin-cost) twin_cost "$@" ;;
     objects) objects "$@" ;;

@@ -67,7 +67,7 @@ impl Edge {
     /// own latency (the read itself takes a frame time, which at the
     /// SPI limit is the whole beam period).
     pub fn after_read_us(&self) -> Option<f64> {
-        (self.read_beam >= 0).then(|| self.us - self.read_end_us)
+        (self.read_beam >= 0).then_some(self.us - self.read_end_us)
     }
 }
 

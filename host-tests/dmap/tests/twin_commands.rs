@@ -12,25 +12,10 @@ mod common;
 use common::dmap_ok as dmap;
 use common::{counters, crc16_bitwise, framed};
 use cvm_core::command::{Key, Refusal, Reply, Source, parse_reply};
-use cvm_reference::Geometry;
-use dmap::npy::write_scan_u16;
 use dmap::twin_requests::write_requests;
 use std::path::Path;
 
 /// A scan of noise with one bright blob (an object) in row 1.
-fn write_scan(path: &Path, rows: usize, cols: usize, j: usize) {
-    let mut state = 11u64;
-    let mut data = Vec::with_capacity(rows * cols * j * j);
-    for i in 0..rows * cols * j * j {
-        state = state
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        let blob = i / (j * j) == cols + 3 && i % 2 == 0;
-        data.push(500 + (state >> 33) as u16 % 300 + if blob { 6000 } else { 0 });
-    }
-    write_scan_u16(path, rows, cols, Geometry::new(j, j).unwrap(), &data).unwrap();
-}
-
 /// The twin's output split: the reply lines, and everything else.
 fn split(out: &[u8]) -> (Vec<Vec<u8>>, Vec<u8>) {
     let (mut replies, mut results) = (Vec::new(), Vec::new());
@@ -183,7 +168,7 @@ fn a_flood_of_requests_at_the_spi_limit_costs_no_beam_15x15() {
     // 2000 beams at 146 µs: 0.29 s, a request every 2 beams (one every
     // 292 µs: about 90 % of the link's capacity with the replies and
     // result lines).
-    write_scan(&scan, 50, 40, 15);
+    common::blob_scan(&scan, 50, 40, 15);
     let opts = ["--threshold", "0.05"];
     let thr = header_thr(&dmap(&[&["stream", scan.to_str().unwrap()][..], &opts].concat()).stdout);
     let (bursts, want) = flood(1000, 2, thr);
@@ -196,7 +181,7 @@ fn a_flood_of_requests_at_the_spi_limit_costs_no_beam_9x9_and_malformed_ones_are
     let scan = dir.path().join("scan.npy");
     // 7600 beams at 53 µs: 0.40 s, a request every 7 beams (371 µs),
     // then the malformed ones.
-    write_scan(&scan, 76, 100, 9);
+    common::blob_scan(&scan, 76, 100, 9);
     let opts = ["--threshold", "0.05"];
     let thr = header_thr(&dmap(&[&["stream", scan.to_str().unwrap()][..], &opts].concat()).stdout);
     let (mut bursts, mut want) = flood(1000, 7, thr);
@@ -364,7 +349,7 @@ fn requests_beyond_the_links_capacity_are_refused_as_overruns_and_cost_no_beam()
     // requests back to back from beam 1, 5.4 KB in 59 ms, whose replies
     // (16 lines each, 135 KB) would take the link 1.5 s: the receive ring
     // fills, and what it cannot hold is lost and refused as an overrun.
-    write_scan(&scan, 50, 40, 15);
+    common::blob_scan(&scan, 50, 40, 15);
     let opts = ["--threshold", "0.05"];
     let scan_s = scan.to_str().unwrap();
     let host = dmap(&[&["stream", scan_s][..], &opts].concat());

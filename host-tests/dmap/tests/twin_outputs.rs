@@ -409,3 +409,38 @@ fn demo_in_row_mode_pulses_once_per_object() {
         );
     }
 }
+
+/// At 15x15 and its SPI-limit beam rate (146 µs), the scan of the
+/// request-flood test (the same build): a part with one object is
+/// rejected, REJECT going up within one beam period of the end of the
+/// last frame's read.
+#[test]
+fn a_15x15_part_is_rejected_within_a_beam_period_of_its_last_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let scan = dir.path().join("scan.npy");
+    common::blob_scan(&scan, 50, 40, 15);
+    let pins = dir.path().join("pins.csv");
+    let twin = dmap(&[
+        "twin",
+        &s(&scan),
+        "--threshold",
+        "0.05",
+        "--beam-us",
+        "146",
+        "--pins",
+        &s(&pins),
+    ]);
+    assert_eq!(verdicts(&twin.stdout), ["obj"]);
+    let csv = std::fs::read_to_string(&pins).unwrap();
+    let up: Vec<Vec<&str>> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').collect())
+        .filter(|f: &Vec<&str>| f[1] == "REJECT" && f[2] == "1")
+        .collect();
+    assert_eq!(up.len(), 1, "{csv}");
+    assert_eq!(up[0][6], "1999", "{csv}");
+    let after_read = up[0][0].parse::<f64>().unwrap() - up[0][5].parse::<f64>().unwrap();
+    println!("15x15: REJECT {after_read:.1} us after the last frame's read");
+    assert!(after_read > 0.0 && after_read < 146.0, "{after_read}");
+}

@@ -145,3 +145,25 @@ pub fn counters(out: &Output) -> serde_json::Value {
     let last = err.lines().rfind(|l| l.starts_with('{')).unwrap_or("");
     serde_json::from_str(last).unwrap_or_else(|e| panic!("no JSON counters ({e}) in:\n{err}"))
 }
+
+/// A `rows` x `cols` scan of `j` x `j` maps of low noise with one bright
+/// blob, in beam `cols + 3` (row 1): an object that closes early.
+pub fn blob_scan(path: &Path, rows: usize, cols: usize, j: usize) {
+    let mut state = 11u64;
+    let mut data = Vec::with_capacity(rows * cols * j * j);
+    for i in 0..rows * cols * j * j {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        let blob = i / (j * j) == cols + 3 && i % 2 == 0;
+        data.push(500 + (state >> 33) as u16 % 300 + if blob { 6000 } else { 0 });
+    }
+    dmap::npy::write_scan_u16(
+        path,
+        rows,
+        cols,
+        cvm_reference::Geometry::new(j, j).unwrap(),
+        &data,
+    )
+    .unwrap();
+}
