@@ -24,13 +24,14 @@
 //! order) is rejected and counted, one beyond the last column is counted as
 //! extra; neither shifts any later position.
 
+mod decide;
 mod results;
 
 pub use results::{Position, PositionScore, RowSummary, RowView, Totals, strength};
 
 use crate::flags;
-use crate::power::{self, POWER_OFF, contrast};
-use crate::scorer::{FrameError, Prepared, Scorer, Scratch, magnitude};
+use crate::power::{POWER_OFF, contrast};
+use crate::scorer::{FrameError, Prepared, Scorer, Scratch};
 
 /// Why an engine could not be set up.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -628,125 +629,5 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
         if self.held.take().is_some() {
             self.emit(self.cur & 1, out);
         }
-    }
-
-    /// The last row pending: its undecided positions get their vertical
-    /// component by the border rule and are decided (the end of a scan
-    /// whose row count is not known, or that ended early).
-    fn decide_last(&mut self) {
-        let Some(p) = self.pending else { return };
-        let rb = (self.cur ^ 1) & 1;
-        let pb = (p % 2) as usize;
-        for c in self.decided[rb]..self.cols {
-            let meta = |b: usize| self.meta[b].get(c).copied().unwrap_or(flags::NO_DATA);
-            let (own, above) = (meta(pb), meta(1 - pb));
-            if own & flags::NO_DATA != 0 {
-                continue;
-            }
-            let (g1, p1) = if above & flags::NO_DATA == 0 {
-                let (a, b) = (self.slot(1 - pb, c), self.slot(pb, c));
-                (
-                    self.scorer.distance(a, b),
-                    contrast(self.power(1 - pb, c), self.power(pb, c)),
-                )
-            } else {
-                (0, 0)
-            };
-            if let Some(s) = self.results[rb].get_mut(c) {
-                s.g1 = g1;
-                s.p1 = p1;
-            }
-        }
-        self.decide_upto(rb, self.cols);
-    }
-
-    /// Decides the positions of result buffer `rb` up to column `end`
-    /// (excluded), in column order, each once.
-    fn decide_upto(&mut self, rb: usize, end: usize) {
-        let rb = rb & 1;
-        let end = end.min(self.cols);
-        while self.decided[rb] < end {
-            let c = self.decided[rb];
-            self.decide(rb, c);
-            self.decided[rb] = c + 1;
-        }
-    }
-
-    /// The magnitudes and decisions of a final position, added to its
-    /// row's summary.
-    fn decide(&mut self, rb: usize, c: usize) {
-        let (Some(s), Some(sum)) = (
-            self.results.get_mut(rb).and_then(|r| r.get_mut(c)),
-            self.sums.get_mut(rb),
-        ) else {
-            return;
-        };
-        if s.flags & flags::NO_DATA != 0 {
-            *s = PositionScore {
-                flags: s.flags,
-                ..PositionScore::default()
-            };
-            sum.no_data += 1;
-            return;
-        }
-        s.mag = magnitude(s.g0, s.g1);
-        s.pmag = power::magnitude(s.p0, s.p1);
-        s.flags &= !flags::DEFECT;
-        s.strength = 0;
-        // The magnitude is at least either score, so it is at the top
-        // of its range whenever one of them is.
-        if s.mag == u32::MAX {
-            s.flags |= flags::CLIPPED;
-            self.totals.clipped += 1;
-        }
-        if s.flags & flags::DARK != 0 {
-            sum.dark += 1;
-        }
-        if s.flags & flags::SATURATED != 0 {
-            sum.saturated += 1;
-        }
-        if s.mag >= self.threshold {
-            s.flags |= flags::CVM_DEFECT;
-            s.strength = strength(s.mag, self.threshold);
-        }
-        if s.pmag as u32 >= self.power_threshold {
-            s.flags |= flags::POWER_DEFECT;
-            s.strength = s
-                .strength
-                .max(strength(s.pmag as u32, self.power_threshold));
-        }
-        if s.is_defect() {
-            sum.defects += 1;
-        }
-        if sum.argmax.is_none() || s.mag > sum.max {
-            sum.max = s.mag;
-            sum.argmax = Some(c as u32);
-        }
-        if sum.pargmax.is_none() || s.pmag as u32 > sum.pmax {
-            sum.pmax = s.pmag as u32;
-            sum.pargmax = Some(c as u32);
-        }
-    }
-
-    fn view(&self, rb: usize) -> RowView<'_> {
-        let rb = rb & 1;
-        RowView {
-            summary: self.sums[rb],
-            scores: self.results[rb].get(..self.cols).unwrap_or(&[]),
-            threshold: self.threshold,
-            power_threshold: self.power_threshold,
-        }
-    }
-
-    /// Puts out the final row in result buffer `rb`. Out of line and
-    /// through `dyn`: one copy for every caller, and the line encoder
-    /// behind `out` is not inlined into each of them (about 15 KB of flash
-    /// per copy).
-    #[inline(never)]
-    fn emit(&mut self, rb: usize, out: &mut dyn FnMut(&RowView)) {
-        let sum = self.sums[rb & 1];
-        self.totals.defects += sum.defects;
-        self.totals.rows += 1;
-        out(&self.view(rb));
     }
 }
