@@ -254,7 +254,19 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
             calibrator: calibrator.as_deref_mut(),
             sink,
         };
-        // Ahead of the lines: the last rows' objects, then the scan's end.
+        // Ahead of the lines: the verdict when the totals decide it, the
+        // last rows' objects, then the scan's end.
+        let mut defects = engine.totals().defects;
+        engine.unsent(&mut |row| defects = defects.saturating_add(row.summary.defects));
+        let early = Verdict::without_objects(
+            engine.totals(),
+            defects,
+            lines.closures.counted,
+            &lines.settings.outputs,
+        );
+        if let Some(v) = early {
+            lines.sink.ahead(Ahead::Verdict(v));
+        }
         let mut marks = [0usize; 2];
         let mut k = 0;
         engine.unsent(&mut |row| {
@@ -272,6 +284,9 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
         let mut ends = *engine.totals();
         objects.finish_with(&mut |o| lines.keep(o), &mut ends);
         let v = Verdict::of(&ends, lines.closures.counted, &lines.settings.outputs);
+        if early.is_none() {
+            lines.sink.ahead(Ahead::Verdict(v));
+        }
         lines.sink.ahead(Ahead::End {
             closed: lines.closures.counted.saturating_sub(before),
             verdict: v,

@@ -97,12 +97,39 @@ impl Verdict {
 /// encode, follow.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Ahead {
+    /// The scan's verdict, as soon as it is known: right after its last
+    /// beam when the totals decide it (a fault, an object that counted
+    /// already, or rules under which every object counts), else once the
+    /// labeller has run over the last rows. Always before the last rows'
+    /// lines, and before [`Ahead::End`].
+    Verdict(Verdict),
     /// A row is about to go out: `rows` rows of the scan are then out,
     /// and it closes `closed` objects that count.
     Row { rows: u32, closed: u32 },
     /// The scan ends with `verdict`; its end closes `closed` more objects
     /// that count. Told before the last rows' lines.
     End { closed: u32, verdict: Verdict },
+}
+
+impl Verdict {
+    /// The verdict of a scan with these totals when it does not depend on
+    /// which objects its defects form (`None` when it does): a fault; an
+    /// object that counted already (`counted`); or rules under which
+    /// every object counts (every object has an area of at least 1 and a
+    /// peak of at least `2^16`), when any defect position (`defects`, all
+    /// of the scan's) makes an object or is left out of one, and both
+    /// reject. Equal to [`Verdict::of`] with the objects' counts.
+    pub fn without_objects(t: &Totals, defects: u32, counted: u32, o: &Outputs) -> Option<Self> {
+        let v = Verdict::of(t, counted, o);
+        if v.is_fault() || counted > 0 {
+            return Some(v);
+        }
+        (o.min_area <= 1 && o.min_strength <= 1 << 16).then_some(if defects > 0 {
+            Verdict::Objects
+        } else {
+            Verdict::Good
+        })
+    }
 }
 
 /// Whether object `obj` is large or strong enough to reject its part.

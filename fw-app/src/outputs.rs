@@ -57,6 +57,9 @@ pub struct OutputLogic {
     /// Row mode: (rows out when due, pulses), oldest first.
     delayed: [(u32, u32); DELAYED_ROWS],
     n_delayed: usize,
+    /// The open scan's verdict was told ahead ([`Ahead::Verdict`]) and
+    /// acted on: its end does not act again.
+    told: bool,
 }
 
 impl OutputLogic {
@@ -76,6 +79,7 @@ impl OutputLogic {
             seen: Progress::default(),
             delayed: [(0, 0); DELAYED_ROWS],
             n_delayed: 0,
+            told: false,
         }
     }
 
@@ -144,6 +148,7 @@ impl OutputLogic {
                     self.now.reject = false;
                 }
                 if p.finished != self.seen.finished
+                    && !self.told
                     && let Some(v) = p.verdict
                     && v.rejects()
                 {
@@ -163,6 +168,7 @@ impl OutputLogic {
             && let Some(v) = p.verdict
         {
             self.now.ready = !v.is_fault();
+            self.told = false;
         }
         self.seen = p;
         (self.now != before || pulses > 0).then_some(Change {
@@ -174,14 +180,16 @@ impl OutputLogic {
 
 impl OutputLogic {
     /// What the pipeline tells ahead of a row's or the scan's lines
-    /// ([`Ahead`]): the pulses of the objects a row closes (row mode) and
-    /// the scan's verdict are acted on before those lines are encoded.
+    /// ([`Ahead`]): the scan's verdict (READY, part mode's REJECT) and the
+    /// pulses of the objects a row closes (row mode) are acted on before
+    /// those lines are encoded.
     /// The [`OutputLogic::step`] after the scoring step then finds
     /// nothing new, so a board that takes this news must pass
     /// `closed = 0` there (the closures were told here).
     pub fn ahead(&mut self, news: Ahead) -> Option<Change> {
         let mut p = self.seen;
         let closed = match news {
+            Ahead::Verdict(v) => return self.verdict_ahead(v),
             Ahead::Row { rows, closed } => {
                 p.rows = rows;
                 closed
@@ -193,6 +201,30 @@ impl OutputLogic {
             }
         };
         self.step(p, closed)
+    }
+
+    /// The open scan's verdict, told before its end: READY, and part
+    /// mode's REJECT, as at the end (row mode's pulses wait for the end's
+    /// closures).
+    fn verdict_ahead(&mut self, v: Verdict) -> Option<Change> {
+        if self.told {
+            return None;
+        }
+        self.told = true;
+        let before = self.now;
+        let mut pulses = 0;
+        if self.settings.reject_mode == RejectMode::Part && v.rejects() {
+            if self.settings.pulse_us == 0 {
+                self.now.reject = true;
+            } else {
+                pulses = 1;
+            }
+        }
+        self.now.ready = !v.is_fault();
+        (self.now != before || pulses > 0).then_some(Change {
+            now: self.now,
+            pulses,
+        })
     }
 }
 

@@ -2,8 +2,10 @@
 //! drives REJECT from it before it encodes the lines, so it must say what
 //! the lines then say. Checked against the lines themselves, parsed back:
 //! each row's news comes before its row line and counts the objects that
-//! count among the object lines after it; the scan's news comes before the
-//! last two rows' lines and carries the end line's verdict.
+//! count among the object lines after it; the scan's verdict and its end
+//! come before the last two rows' lines and carry the end line's verdict,
+//! the verdict before the labeller has run over those rows whenever the
+//! totals decide it.
 
 use cvm_core::Position;
 use cvm_core::pipeline::{Pipeline, Settings};
@@ -98,6 +100,8 @@ fn news_ahead_of_the_lines_says_what_the_lines_say() {
         // Walk the records: news, then lines.
         let mut row_news: Vec<(u32, u32)> = Vec::new();
         let mut end_news = None;
+        // The verdict's news: its value and how many row news came before.
+        let mut verdict_news = Vec::new();
         let mut end_news_at_row = None;
         let mut row_lines = 0u32;
         // Counting objects after each row line (index: rows out so far).
@@ -105,6 +109,10 @@ fn news_ahead_of_the_lines_says_what_the_lines_say() {
         let mut end_verdict = None;
         for rec in &recs {
             match rec {
+                Rec::Ahead(Ahead::Verdict(v)) => {
+                    assert!(end_news.is_none(), "case {case}: verdict after the end");
+                    verdict_news.push((*v, row_news.len()));
+                }
                 Rec::Ahead(Ahead::Row { rows: n, closed }) => row_news.push((*n, *closed)),
                 Rec::Ahead(Ahead::End { closed, verdict }) => {
                     end_news = Some((*closed, *verdict));
@@ -144,6 +152,17 @@ fn news_ahead_of_the_lines_says_what_the_lines_say() {
             assert_eq!(counted_after[k + 1], closed + extra, "case {case} row {k}");
         }
         assert_eq!(Some(verdict), end_verdict, "case {case}");
+        // The verdict once, the same; before the labeller's news of the
+        // last rows when the rules let every object count (area 0 or 1:
+        // every object has one position, and the peak of a defect).
+        assert_eq!(verdict_news.len(), 1, "case {case}");
+        assert_eq!(verdict_news[0].0, verdict, "case {case}");
+        let before_last_rows = rows - rows.min(2);
+        if outputs.min_area <= 1 || verdict.is_fault() {
+            assert_eq!(verdict_news[0].1, before_last_rows, "case {case}");
+        } else {
+            assert!(verdict_news[0].1 >= before_last_rows, "case {case}");
+        }
         // The scan's news came before the last two rows' lines.
         assert_eq!(
             end_news_at_row,

@@ -310,3 +310,51 @@ fn news_ahead_of_the_lines_moves_the_outputs_once() {
         None
     );
 }
+
+/// The verdict told as soon as the totals decide it, before the end's
+/// news: part mode's REJECT and READY move then, and neither the end nor
+/// the step after it moves them again; row mode's pulses still wait for
+/// the end's closures.
+#[test]
+fn the_verdict_told_before_the_end_acts_once() {
+    use cvm_core::verdict::Ahead;
+    for pulse_us in [0, 300] {
+        let s = Outputs {
+            pulse_us,
+            ..Outputs::DEFAULT
+        };
+        let mut o = OutputLogic::start(s, ResetCause::PowerOn);
+        o.step(progress(1, 0, None, false), 0);
+        let told = o.ahead(Ahead::Verdict(Verdict::Objects)).unwrap();
+        assert_eq!(told.now.reject, pulse_us == 0);
+        assert_eq!(told.pulses, u32::from(pulse_us > 0));
+        let end = Ahead::End {
+            closed: 2,
+            verdict: Verdict::Objects,
+        };
+        assert_eq!(o.ahead(end), None);
+        assert_eq!(
+            o.step(progress(1, 1, Some(Verdict::Objects), false), 0),
+            None
+        );
+        // The next part starts released and is judged afresh.
+        o.step(progress(2, 1, Some(Verdict::Objects), false), 0);
+        let fault = Verdict::Fault(Fault::Frames);
+        let told = o.ahead(Ahead::Verdict(fault)).unwrap();
+        assert!(!told.now.ready);
+        assert_eq!(told.pulses, u32::from(pulse_us > 0));
+    }
+    let row = Outputs {
+        reject_mode: RejectMode::Row,
+        pulse_us: 300,
+        ..Outputs::DEFAULT
+    };
+    let mut o = OutputLogic::start(row, ResetCause::PowerOn);
+    o.step(progress(1, 0, None, false), 0);
+    assert_eq!(o.ahead(Ahead::Verdict(Verdict::Objects)), None);
+    let end = Ahead::End {
+        closed: 2,
+        verdict: Verdict::Objects,
+    };
+    assert_eq!(o.ahead(end).map(|c| c.pulses), Some(2));
+}
