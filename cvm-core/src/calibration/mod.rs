@@ -47,6 +47,7 @@
 
 pub mod histogram;
 pub mod rule;
+pub mod tail;
 
 use crate::command::Calibration;
 use crate::flags;
@@ -210,13 +211,16 @@ impl Calibrator {
             return Err(CalibrationError::TooManyPositions);
         }
         let (Some(cvm), Some(mut power)) = (
-            rule::channel(&self.cvm, rule),
-            rule::channel(&self.power, rule),
+            rule::channel(&self.cvm, rule, self.scans),
+            rule::channel(&self.power, rule, self.scans),
         ) else {
             return Err(CalibrationError::NoPositions);
         };
         if power.threshold > power::POWER_MAX {
+            // Off: no magnitude reaches it.
             power.threshold = power::POWER_OFF;
+            power.rate_ppb = power.rate_ppb.map(|_| 0);
+            power.min_strength = u32::MAX;
         }
         Ok(Statistics {
             scans: self.scans,
