@@ -4,9 +4,16 @@
 //! and `dmap calibrate` runs on scan files, so both give the same
 //! thresholds from the same scans.
 //!
-//! # The rule
+//! # The rules
 //!
-//! Per channel, over the magnitudes of every position with data of every
+//! [`Rule::Spread`] (below) or [`Rule::Tail`] ([`tail`]: the threshold at
+//! which an exponential fit of the channel's upper tail expects a target
+//! rate of false positions per part, at least the maximum plus one).
+//! Whichever sets the threshold, each [`Channel`] also carries the tail
+//! fit, the false positions per part it predicts at the threshold, and the
+//! smallest rise above the median the threshold detects.
+//!
+//! The spread rule: per channel, over the magnitudes of every position with data of every
 //! reference scan (the CVM gradient magnitudes `mag` in the scorer's
 //! `Q(q)` format, and the power magnitudes `pmag` in `Q15`,
 //! [`crate::power`]; dark, saturated, clipped and border positions

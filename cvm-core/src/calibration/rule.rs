@@ -72,8 +72,11 @@ impl Rule {
         rate_ppm: DEFAULT_RATE_PPM,
         tail_ppm: DEFAULT_TAIL_PPM,
     };
-    /// The device's rule (`calibrate N`) and `dmap calibrate`'s default.
-    pub const DEFAULT: Rule = Rule::SPREAD;
+    /// The device's rule (`calibrate N`) and `dmap calibrate`'s default:
+    /// the tail rule, which left no false object on 20 unseen defect-free
+    /// parts of each measured set-up, where the spread rule left three on
+    /// one of them (docs/experiments.md, "Thresholds from a target rate").
+    pub const DEFAULT: Rule = Rule::TAIL;
 
     /// The share of the magnitudes the tail fit takes.
     pub fn tail_ppm(&self) -> u32 {
@@ -147,6 +150,19 @@ pub fn quantile_rank(quantile_ppm: u32, n: u32) -> u32 {
     r.clamp(1, n.max(1) as u64) as u32
 }
 
+/// The fewest values the tail fit takes when there are more: with 10 the
+/// scale's standard error is under a third of it.
+pub const MIN_TAIL_VALUES: u32 = 10;
+
+/// The 1-based rank the tail starts from: the nearest rank of `1 - f`
+/// (`f = tail_ppm / 10^6`), at most `n - MIN_TAIL_VALUES`, at least 1.
+pub fn tail_rank(tail_ppm: u32, n: u32) -> u32 {
+    let keep = (P_DEN as u32).saturating_sub(tail_ppm.min(P_DEN as u32));
+    quantile_rank(keep, n)
+        .min(n.saturating_sub(MIN_TAIL_VALUES))
+        .max(1)
+}
+
 /// The channel's statistics under `rule` over `scans` scans, or `None`
 /// without values.
 pub fn channel<const BINS: usize>(h: &Histogram<BINS>, rule: &Rule, scans: u16) -> Option<Channel> {
@@ -156,9 +172,7 @@ pub fn channel<const BINS: usize>(h: &Histogram<BINS>, rule: &Rule, scans: u16) 
     let n = h.len();
     let (mid, median) = h.median();
     let mad = h.mad(mid);
-    // The tail starts at the bin of the nearest-rank 1 - f quantile.
-    let keep = (P_DEN as u32).saturating_sub(rule.tail_ppm().min(P_DEN as u32));
-    let fit = tail::fit(h, h.bin_of_rank(quantile_rank(keep, n)));
+    let fit = tail::fit(h, h.bin_of_rank(tail_rank(rule.tail_ppm(), n)));
     let (quantile, threshold) = match *rule {
         Rule::Spread {
             quantile_ppm,

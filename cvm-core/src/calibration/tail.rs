@@ -10,8 +10,9 @@
 //! its histogram bin (capped at the exact maximum),
 //!
 //! - the tail starts at `u`, the top of the bin of the nearest-rank
-//!   `1 - f` quantile (rank `ceil((1 - f) n)`, `f` the tail fraction),
-//!   capped at the maximum;
+//!   `1 - f` quantile (rank `ceil((1 - f) n)`, `f` the tail fraction, but
+//!   at most `n - 10` and at least 1, so that a small calibration still
+//!   fits ten values: [`super::rule::tail_rank`]), capped at the maximum;
 //! - the tail is the `N_u` values above `u` (bins past `u`'s), `E` the sum
 //!   of their excesses over `u`;
 //! - above `u` a value exceeds `u + x` with probability

@@ -144,13 +144,13 @@ fn hand_computed_rule() {
     assert_eq!(bin_range(bin_of(1000)), (1000, 1003));
     assert_eq!(bin_range(bin_of(70000)), (69632, 70143));
     let c = feed(&[1000, 1001, 70000], &[0; 3]);
-    let s = c.statistics(&Rule::DEFAULT).unwrap().cvm;
+    let s = c.statistics(&Rule::SPREAD).unwrap().cvm;
     // Representatives 1002 1002 69888: median 1002, deviations 0 0 68886,
     // MAD 0; thr = max + 0 + 1.
     assert_eq!((s.median, s.mad, s.threshold), (1002, 0, 70001));
-    // The default rule: margin ceil(3 * 1.4826 * MAD).
+    // The spread rule's defaults: margin ceil(3 * 1.4826 * MAD).
     let c = feed(&[10, 20, 30], &[0; 3]);
-    let s = c.statistics(&Rule::DEFAULT).unwrap().cvm;
+    let s = c.statistics(&Rule::SPREAD).unwrap().cvm;
     // median 20, deviations 10 0 10, MAD 10: ceil(44.478) = 45.
     assert_eq!((s.median, s.mad, s.threshold), (20, 10, 30 + 45 + 1));
 }
@@ -160,9 +160,9 @@ fn power_threshold_above_every_magnitude_is_off() {
     // Power magnitudes 0 and 40000 (a dark neighbour): median 0, MAD 0;
     // thr 40001 stays.
     let c = feed(&[5, 5], &[0, 40000]);
-    assert_eq!(c.finish(&Rule::DEFAULT).unwrap().power_threshold, 40001);
+    assert_eq!(c.finish(&Rule::SPREAD).unwrap().power_threshold, 40001);
     let c = feed(&[5, 5], &[POWER_MAX as u16, 0]);
-    let s = c.statistics(&Rule::DEFAULT).unwrap();
+    let s = c.statistics(&Rule::SPREAD).unwrap();
     assert_eq!(s.power.threshold, POWER_OFF);
     assert_eq!(s.cvm.threshold, 6);
     // A margin past the largest magnitude turns the power channel off and
@@ -262,7 +262,7 @@ proptest! {
 
     #[test]
     fn one_position(v in values(), p in 0u16..=POWER_MAX as u16) {
-        let s = feed(&[v], &[p]).statistics(&Rule::DEFAULT).unwrap();
+        let s = feed(&[v], &[p]).statistics(&Rule::SPREAD).unwrap();
         let rep = bin_ref(v).2 as u32;
         prop_assert_eq!((s.cvm.max, s.cvm.quantile, s.cvm.median, s.cvm.mad), (v, v, rep, 0));
         prop_assert_eq!(s.cvm.threshold, v.saturating_add(1));

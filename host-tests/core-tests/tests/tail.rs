@@ -37,7 +37,11 @@ fn reference(values: &[u32], tail_ppm: u32) -> (ExpTail, u32) {
     v.sort_unstable();
     let n = v.len() as u64;
     let keep = 1_000_000 - tail_ppm.min(1_000_000) as u64;
-    let rank = ((keep * n).div_ceil(1_000_000)).clamp(1, n) as usize;
+    // At most n - 10: ten values in the tail when there are more.
+    let rank = ((keep * n).div_ceil(1_000_000))
+        .clamp(1, n)
+        .min(n.saturating_sub(10))
+        .max(1) as usize;
     let start = bin_range(bin_of(v[rank - 1])).1.min(max);
     let reps: Vec<f64> = v
         .iter()
@@ -124,10 +128,20 @@ fn hand_computed_tail_threshold_and_rate() {
     assert_eq!((s.threshold, s.tail.count, s.rate_ppb), (8, 0, None));
     // The spread rule reports the fit's rate at its own threshold: 1..=100
     // with k = 3: median 50, MAD 25, thr = 100 + ceil(111.195) + 1 = 213;
-    // the fit of the top 1 % (rank 99: u = 99, N_u = 1, s = 1) predicts
-    // exp(-114) per part there: 0 per 10^9 parts.
+    // the fit of the top 1 % takes at least ten values (rank 90: the same
+    // tail as above), and predicts 10 exp(-123 / 5.5) = 1.94e-9 per part
+    // there: rounded up, 2 per 10^9 parts.
     let s = feed(&values, 1).statistics(&Rule::SPREAD).unwrap().cvm;
-    assert_eq!((s.threshold, s.tail.start, s.tail.count), (213, 99, 1));
+    assert_eq!((s.threshold, s.tail.start, s.tail.count), (213, 90, 10));
+    assert_eq!(s.rate_ppb, Some(2));
+    // A fit far past 2^-64: 0 per 10^9 parts.
+    let s = feed(&values, 1)
+        .statistics(&Rule::Spread {
+            quantile_ppm: 1_000_000,
+            k_milli: 100_000,
+        })
+        .unwrap()
+        .cvm;
     assert_eq!(s.rate_ppb, Some(0));
 }
 

@@ -96,12 +96,12 @@ fn tail_rule_meets_its_target_by_the_f64_formulas() {
     let n = m.len();
     assert_eq!(n, (14 + 13) * 16);
     let max = *m.iter().max().unwrap();
-    // The tail's start: the top of the bin of rank ceil(0.95 n), at most
-    // the maximum; its values: the representatives above it, at most the
+    // The tail's start: the top of the bin of rank ceil(0.95 n) (at most
+    // n - 10), at most the maximum; its values: the representatives above it, at most the
     // maximum.
     let mut sorted = m.clone();
     sorted.sort_unstable();
-    let rank = (95 * n).div_ceil(100);
+    let rank = (95 * n).div_ceil(100).min(n - 10);
     let start = bin(sorted[rank - 1]).0.min(max);
     let reps: Vec<f64> = m.iter().map(|&x| bin(x).1.min(max) as f64).collect();
     let fit = cvm_reference::exp_tail(&reps, start as f64);

@@ -34,6 +34,14 @@
 //! ([`power::POWER_MAX`], a reference with a dark neighbour) is recorded
 //! as [`power::POWER_OFF`]: the channel is off.
 //!
+//! `--rule tail` sets each threshold instead where an exponential fit of
+//! the channel's upper tail (the top `--tail-fraction` of the magnitudes,
+//! default 1 %) expects `--rate` false positions per part (default 0.001),
+//! at least the maximum plus one (`cvm_core::calibration::tail`). Either
+//! way the file and the summary give, per channel, the tail fit, the false
+//! positions per part it predicts at the threshold, and the smallest rise
+//! above the median the threshold detects (`min_strength`).
+//!
 //! `--scores` is another thing: a rule in f64 with exact medians on
 //! precomputed gradient images of any distance, for `dmap eval` only.
 //!
@@ -41,7 +49,8 @@
 //! normalisation, full scale); applying it to any other configuration is
 //! refused. Each channel has its entry in `"channels"` (`"cvm"`, `"power"`:
 //! `threshold`, `thr`, `q`, and the statistics, also as `integers`).
-//! Version 3 files come from this rule; version 2 files (the rule before
+//! Version 4 files name the rule and carry the tail fit; version 3 files
+//! (the spread rule, before that) and version 2 files (the rule before
 //! it, exact medians over every magnitude) are still applied, their
 //! thresholds being the same kind of integer. Version 1 files, made before the power
 //! channel, have no power entry and are refused with a request to
@@ -83,8 +92,8 @@ pub struct CalibrateArgs {
     #[arg(long, value_name = "N", default_value_t = u16::MAX,
           value_parser = clap::value_parser!(u16).range(1..))]
     pub full_scale: u16,
-    /// Rule that sets both channels' thresholds (default: the board's, `cvm_core`'s
-    /// Rule::DEFAULT)
+    /// Rule that sets both channels' thresholds (default: the one whose parameters are given,
+    /// else the board's, `cvm_core`'s Rule::DEFAULT: tail)
     #[arg(long, value_enum)]
     pub rule: Option<RuleName>,
     /// Spread rule: quantile of the reference magnitudes the threshold starts from (default 1:

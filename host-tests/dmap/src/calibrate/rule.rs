@@ -74,10 +74,21 @@ fn exact_units(v: f64, den: u64) -> Option<u32> {
 }
 
 impl Rule {
-    /// The rule of `o`: `--rule` or the board's, the other parameters at
-    /// their defaults; refuses a parameter of the other rule.
+    /// The rule of `o`: `--rule`, else the one whose parameters are given,
+    /// else the board's; the other parameters at their defaults. Refuses a
+    /// parameter of the other rule.
     pub fn from_options(o: &Options) -> Result<Self> {
-        let name = o.name.unwrap_or_else(RuleName::default_rule);
+        let spread = o.quantile.is_some() || o.k.is_some();
+        let tail = o.rate.is_some() || o.tail.is_some();
+        let name = match (o.name, spread, tail) {
+            (Some(name), _, _) => name,
+            (None, true, false) => RuleName::Spread,
+            (None, false, true) => RuleName::Tail,
+            (None, true, true) => bail!(
+                "--quantile and --k belong to the spread rule, --rate and --tail-fraction to the tail rule: give the parameters of one (and --rule)"
+            ),
+            (None, false, false) => RuleName::default_rule(),
+        };
         let foreign: &[(&str, bool)] = match name {
             RuleName::Spread => &[
                 ("--rate", o.rate.is_some()),
@@ -302,9 +313,27 @@ mod tests {
             e.contains("--rate is not a parameter of the spread rule"),
             "{e}"
         );
-        // Without --rule: the board's.
+        // Without --rule: the one whose parameters are given, else the
+        // board's; never both.
         let board = exact(Options::default()).unwrap();
         assert_eq!(board, CoreRule::DEFAULT);
+        let implied = |o: Options| Rule::from_options(&o).map(|r| r.name);
+        let k = Options {
+            k: Some(2.0),
+            ..Options::default()
+        };
+        assert_eq!(implied(k).unwrap(), RuleName::Spread);
+        let rate = Options {
+            rate: Some(0.01),
+            ..Options::default()
+        };
+        assert_eq!(implied(rate).unwrap(), RuleName::Tail);
+        let both = Options {
+            k: Some(2.0),
+            ..rate
+        };
+        let e = implied(both).unwrap_err().to_string();
+        assert!(e.contains("give the parameters of one"), "{e}");
     }
 
     #[test]
