@@ -23,7 +23,9 @@ on the defective part (seed 1), matched with its truth by
 `scripts/measure.sh objects`, and on the unseen defect-free parts (seeds
 21-40). Last, the tail fit's prediction against what the unseen parts
 show: the positions per part at or above the levels where the fit expects
-1, 0.1 and 0.01 of them.
+1, 0.1 and 0.01 of them; and, with the spread and tail files, whether a
+scattering disc (`{v}_halo{share}.npy`, `dmap simulate --scatter`) of each
+share is found.
 
 usage: calibration_rule.py DMAP OUT_DIR
 """
@@ -138,8 +140,21 @@ def rate(ch):
     return "-" if r is None else f"{r:.2g}"
 
 
+def halo(v, f, share):
+    """The scattering disc of `{v}_halo{share}.npy`: found (channels) or missed, peaks."""
+    stem = f"{v}_halo{share}"
+    with open(f"{stem}_{os.path.basename(f)[:-5]}.lines", "wb") as fh:
+        run("stream", f"{stem}.npy", "--scores", "--calibration", f, stdout=fh)
+    done = subprocess.run(["bash", f"{root}/scripts/measure.sh", "objects", fh.name, f"{stem}.truth.npy"],
+                          capture_output=True, text=True, check=True)
+    line = [ln for ln in done.stdout.splitlines() if ln.startswith("  truth")][0]
+    peaks = line[line.index("[peaks: ") + 8:-1].replace(" vs thr ", " / ").replace(" vs ", " / ")
+    return ("found, " + line.split("channels ")[1].split(" ")[0] if "missed" not in line
+            else "missed") + f" ({peaks})"
+
+
 os.chdir(out)
-rows, checks = [], []
+rows, checks, halos = [], [], []
 for v, title, seeds in SETUPS:
     refs = [f"{v}_free_s{s}.npy" for s in seeds]
     files = {}
@@ -187,6 +202,12 @@ for v, title, seeds in SETUPS:
                     f"{rate(c['cvm'])} / {rate(c['power'])} | {found[0]}, {found[1]} | "
                     f"{sum(o for o, _ in counts)} ({sum(1 for o, _ in counts if o)} parts) | "
                     f"{sum(d for _, d in counts)} |")
+for v, title, _ in SETUPS:
+    for name in ("spread", "tail"):
+        f = f"rule_{v}_{name}.json"
+        if os.path.exists(f"{v}_halo0.05.npy"):
+            halos.append(f"| {title} | {name} | "
+                         + " | ".join(halo(v, f, s) for s in ("0.05", "0.1", "0.2", "0.3")) + " |")
 print("| set-up | rule | CVM thr | power thr | estimated false positions per part (CVM / power) | "
       f"defective part | false objects on {len(UNSEEN)} unseen parts | defective positions on them |")
 print("|---|---|---|---|---|---|---|---|")
@@ -195,3 +216,10 @@ print()
 print("| set-up | channel | the fit expects per part | observed per unseen part (mean) |")
 print("|---|---|---|---|")
 print("\n".join(checks))
+print()
+print("Scattering discs, two positions across, share of the light crossing them 5 / 10 / 20 / 30 %"
+      " (peaks: CVM / its thr, power / its thr):")
+print()
+print("| set-up | rule | 5 % | 10 % | 20 % | 30 % |")
+print("|---|---|---|---|---|---|")
+print("\n".join(halos))

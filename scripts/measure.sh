@@ -572,6 +572,19 @@ calibration_rule() { # [OUT_DIR]
             [ "$v" != proto ] && { [ "$s" = 14 ] || [ "$s" = 15 ]; } && continue
             [ -f "$o" ] || nice -n 10 "$dmap_bin" simulate --threads 2 "${opts[@]}" "${more[@]}" -o "$o" 2>&1 | sed -n 1p >&2
         done
+        # One scattering disc, two positions across, per share; the
+        # preset's defects moved off the raster (prototype: a patch at
+        # 11 mm; paper-sim: one bubble at 60 mm, on a 41x41 raster).
+        case $v in
+            proto) more=(--scratch 11,11,11.5,11.5 2,2,2) ;;
+            simblur) more=(--bubble 60,0,5,0.1 --rows 41 --cols 41 --center-mm 10,10 10,10,2) ;;
+            *) continue ;;
+        esac
+        for s in 0.05 0.1 0.2 0.3; do
+            local o="$out/${v}_halo$s.npy" last=$(( ${#more[@]} - 1 ))
+            [ -f "$o" ] || nice -n 10 "$dmap_bin" simulate --threads 2 "${opts[@]}" "${more[@]:0:$last}" \
+                "--scatter=${more[$last]},$s" --seed 2 -o "$o" 2>&1 | sed -n 1p >&2
+        done
     done
     python3 "$root/scripts/calibration_rule.py" "$dmap_bin" "$out"
 }
