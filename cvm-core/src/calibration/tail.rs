@@ -90,10 +90,10 @@ pub const EXP2_NEG_Q32: [u64; LOG_FRAC as usize] = [
     4_294_967_119,
 ];
 
-/// The rate of the target and of [`rate_ppb`] is in false positions per
-/// `RATE_DEN` parts for the target (`A`), per [`RATE_PPB_DEN`] for the
-/// estimate.
+/// The target `A` is in false positions per `RATE_DEN` parts.
 pub const RATE_DEN: u64 = 1_000_000;
+/// The estimate of [`rate_ppb`] is in false positions per `RATE_PPB_DEN`
+/// parts.
 pub const RATE_PPB_DEN: u64 = 1_000_000_000;
 
 /// `floor(2^24 log2 x)` up to the squaring's truncation (0 for `x <= 1`).
