@@ -22,9 +22,11 @@ usage: scripts/measure.sh WHAT [ARGS]
                                P the scan pitch in um (default 334) (experiments.md)
   experiments [OUT_DIR]        the paper's experiments rerun, about 45 minutes (REUSE=1 keeps
                                scans and EMD scores already in OUT_DIR) (experiments.md)
-  calibration-rule [OUT_DIR]   the streaming calibration rule against the one before it:
-                               thresholds and the firmware's objects; simulates the scans
-                               OUT_DIR lacks (experiments.md)
+  calibration-rule [OUT_DIR]   the calibration rules (exact medians, spread, tail, maxima)
+                               against each other: thresholds, the firmware's objects on the
+                               defective part and 20 unseen good parts per set-up, the tail
+                               fit against them; simulates the scans OUT_DIR lacks
+                               (experiments.md)
   emd-vs-pot [--pairs N]       exact EMD against POT's ot.emd2 (needs numpy, pot) (performance.md)
   soak [WORKDIR]               a full paper-sim scan on the emulated firmware against the host,
                                byte for byte, every position accounted for (reliability.md)
@@ -568,9 +570,11 @@ experiments() {
     calibration_rule "$out"
 }
 
-# The streaming calibration rule (dmap calibrate, the board's) against the
-# rule before it, exact medians over every magnitude (experiments.md,
-# "Calibration"): the references, defective parts and unseen parts of
+# The calibration rules against each other (experiments.md, "Calibration"
+# and "Thresholds from a target rate"): the streaming spread rule (the
+# board's), the rule before it (exact medians over every magnitude), the
+# tail rule, and an extreme-value fit of the references' maxima; the
+# references, defective parts and unseen parts (seeds 21-40) of
 # `experiments`, simulated here when OUT_DIR lacks them.
 calibration_rule() { # [OUT_DIR]
     local out=${1:-$root/host-tests/target/experiments} v s opts
@@ -583,11 +587,24 @@ calibration_rule() { # [OUT_DIR]
             simblur) opts=(--preset paper-sim --spot-um 300) ;;
             *) opts=(--preset paper-sim) ;;
         esac
-        for s in 1 11 12 13 14 15 21 22 23 24 25 26 27 28 29 30; do
+        for s in 1 11 12 13 14 15 $(seq 21 40); do
             local o="$out/${v}_free_s$s.npy" more=(--defect-free --seed "$s")
             [ "$s" = 1 ] && o="$out/$v.npy" more=()
             [ "$v" != proto ] && { [ "$s" = 14 ] || [ "$s" = 15 ]; } && continue
             [ -f "$o" ] || nice -n 10 "$dmap_bin" simulate --threads 2 "${opts[@]}" "${more[@]}" -o "$o" 2>&1 | sed -n 1p >&2
+        done
+        # One scattering disc, two positions across, per share; the
+        # preset's defects moved off the raster (prototype: a patch at
+        # 11 mm; paper-sim: one bubble at 60 mm, on a 41x41 raster).
+        case $v in
+            proto) more=(--scratch 11,11,11.5,11.5 2,2,2) ;;
+            simblur) more=(--bubble 60,0,5,0.1 --rows 41 --cols 41 --center-mm 10,10 10,10,2) ;;
+            *) continue ;;
+        esac
+        for s in 0.05 0.1 0.2 0.3; do
+            local o="$out/${v}_halo$s.npy" last=$(( ${#more[@]} - 1 ))
+            [ -f "$o" ] || nice -n 10 "$dmap_bin" simulate --threads 2 "${opts[@]}" "${more[@]:0:$last}" \
+                "--scatter=${more[$last]},$s" --seed 2 -o "$o" 2>&1 | sed -n 1p >&2
         done
     done
     python3 "$root/scripts/calibration_rule.py" "$dmap_bin" "$out"

@@ -186,9 +186,16 @@ pub extern "C" fn _start() -> ! {
                 }
             }
             5 => {
-                let rule = Rule {
-                    quantile_ppm: black_box(1_000_000),
-                    k_milli: black_box(3000),
+                let rule = if black_box(true) {
+                    Rule::Spread {
+                        quantile_ppm: black_box(1_000_000),
+                        k_milli: black_box(3000),
+                    }
+                } else {
+                    Rule::Tail {
+                        rate_ppm: black_box(1000),
+                        tail_ppm: black_box(10_000),
+                    }
                 };
                 if let Some(c) = pipeline.calibrator() {
                     black_box(c.progress());

@@ -4,9 +4,16 @@
 //! and `dmap calibrate` runs on scan files, so both give the same
 //! thresholds from the same scans.
 //!
-//! # The rule
+//! # The rules
 //!
-//! Per channel, over the magnitudes of every position with data of every
+//! [`Rule::Spread`] (below) or [`Rule::Tail`] ([`tail`]: the threshold at
+//! which an exponential fit of the channel's upper tail expects a target
+//! rate of false positions per part, at least the maximum plus one).
+//! Whichever sets the threshold, each [`Channel`] also carries the tail
+//! fit, the false positions per part it predicts at the threshold, and the
+//! smallest rise above the median the threshold detects.
+//!
+//! The spread rule: per channel, over the magnitudes of every position with data of every
 //! reference scan (the CVM gradient magnitudes `mag` in the scorer's
 //! `Q(q)` format, and the power magnitudes `pmag` in `Q15`,
 //! [`crate::power`]; dark, saturated, clipped and border positions
@@ -47,6 +54,7 @@
 
 pub mod histogram;
 pub mod rule;
+pub mod tail;
 
 use crate::command::Calibration;
 use crate::flags;
@@ -210,13 +218,16 @@ impl Calibrator {
             return Err(CalibrationError::TooManyPositions);
         }
         let (Some(cvm), Some(mut power)) = (
-            rule::channel(&self.cvm, rule),
-            rule::channel(&self.power, rule),
+            rule::channel(&self.cvm, rule, self.scans),
+            rule::channel(&self.power, rule, self.scans),
         ) else {
             return Err(CalibrationError::NoPositions);
         };
         if power.threshold > power::POWER_MAX {
+            // Off: no magnitude reaches it.
             power.threshold = power::POWER_OFF;
+            power.rate_ppb = power.rate_ppb.map(|_| 0);
+            power.min_strength = u32::MAX;
         }
         Ok(Statistics {
             scans: self.scans,

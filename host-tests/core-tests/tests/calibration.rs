@@ -36,8 +36,29 @@ fn margin_ref(k_milli: u32, mad: u64) -> u128 {
     (k_milli as u128 * 14826 * mad as u128).div_ceil(10_000_000)
 }
 
-/// The rule on one channel's values, brute force.
+/// A channel's spread-rule fields: positions, max, quantile, median, MAD,
+/// threshold and the minimum strength.
+fn spread(c: &Channel) -> [u32; 7] {
+    [
+        c.positions,
+        c.max,
+        c.quantile,
+        c.median,
+        c.mad,
+        c.threshold,
+        c.min_strength,
+    ]
+}
+
+/// The spread rule on one channel's values, brute force.
 fn channel_ref(values: &[u32], rule: &Rule) -> Channel {
+    let &Rule::Spread {
+        quantile_ppm,
+        k_milli,
+    } = rule
+    else {
+        unreachable!("the spread rule")
+    };
     let n = values.len();
     let mut v = values.to_vec();
     v.sort_unstable();
@@ -48,10 +69,10 @@ fn channel_ref(values: &[u32], rule: &Rule) -> Channel {
     let mut dev: Vec<u64> = reps.iter().map(|&r| r.abs_diff(median)).collect();
     dev.sort_unstable();
     let mad = dev[mid];
-    let rank = ((rule.quantile_ppm as u128 * n as u128).div_ceil(1_000_000) as usize).clamp(1, n);
+    let rank = ((quantile_ppm as u128 * n as u128).div_ceil(1_000_000) as usize).clamp(1, n);
     let max = *v.last().unwrap();
     let quantile = bin_ref(v[rank - 1]).1.min(max as u64);
-    let thr = (quantile as u128 + margin_ref(rule.k_milli, mad) + 1).min(u32::MAX as u128);
+    let thr = (quantile as u128 + margin_ref(k_milli, mad) + 1).min(u32::MAX as u128);
     Channel {
         positions: n as u32,
         max,
@@ -59,6 +80,8 @@ fn channel_ref(values: &[u32], rule: &Rule) -> Channel {
         median: median as u32,
         mad: mad as u32,
         threshold: thr as u32,
+        min_strength: (thr as u32).saturating_sub(median as u32),
+        ..Channel::default()
     }
 }
 
@@ -100,7 +123,7 @@ fn hand_computed_rule() {
     // 4 95, sorted 0 1 1 2 2 ..., lower median 2; k = 2: margin
     // ceil(2 * 1.4826 * 2) = ceil(5.9304) = 6, thr = 100 + 6 + 1.
     let cvm = [1, 2, 3, 4, 5, 6, 7, 8, 9, 100];
-    let rule = Rule {
+    let rule = Rule::Spread {
         quantile_ppm: 1_000_000,
         k_milli: 2000,
     };
@@ -111,7 +134,7 @@ fn hand_computed_rule() {
         (100, 5, 2, 107)
     );
     // p = 0.9: rank 9, the value 9; k = 0: thr 10.
-    let p9 = Rule {
+    let p9 = Rule::Spread {
         quantile_ppm: 900_000,
         k_milli: 0,
     };
@@ -121,13 +144,13 @@ fn hand_computed_rule() {
     assert_eq!(bin_range(bin_of(1000)), (1000, 1003));
     assert_eq!(bin_range(bin_of(70000)), (69632, 70143));
     let c = feed(&[1000, 1001, 70000], &[0; 3]);
-    let s = c.statistics(&Rule::DEFAULT).unwrap().cvm;
+    let s = c.statistics(&Rule::SPREAD).unwrap().cvm;
     // Representatives 1002 1002 69888: median 1002, deviations 0 0 68886,
     // MAD 0; thr = max + 0 + 1.
     assert_eq!((s.median, s.mad, s.threshold), (1002, 0, 70001));
-    // The default rule: margin ceil(3 * 1.4826 * MAD).
+    // The spread rule's defaults: margin ceil(3 * 1.4826 * MAD).
     let c = feed(&[10, 20, 30], &[0; 3]);
-    let s = c.statistics(&Rule::DEFAULT).unwrap().cvm;
+    let s = c.statistics(&Rule::SPREAD).unwrap().cvm;
     // median 20, deviations 10 0 10, MAD 10: ceil(44.478) = 45.
     assert_eq!((s.median, s.mad, s.threshold), (20, 10, 30 + 45 + 1));
 }
@@ -137,15 +160,15 @@ fn power_threshold_above_every_magnitude_is_off() {
     // Power magnitudes 0 and 40000 (a dark neighbour): median 0, MAD 0;
     // thr 40001 stays.
     let c = feed(&[5, 5], &[0, 40000]);
-    assert_eq!(c.finish(&Rule::DEFAULT).unwrap().power_threshold, 40001);
+    assert_eq!(c.finish(&Rule::SPREAD).unwrap().power_threshold, 40001);
     let c = feed(&[5, 5], &[POWER_MAX as u16, 0]);
-    let s = c.statistics(&Rule::DEFAULT).unwrap();
+    let s = c.statistics(&Rule::SPREAD).unwrap();
     assert_eq!(s.power.threshold, POWER_OFF);
     assert_eq!(s.cvm.threshold, 6);
     // A margin past the largest magnitude turns the power channel off and
     // saturates the CVM one.
     let c = feed(&[0, 1000, 100_000], &[0, 100, 2000]);
-    let big = Rule {
+    let big = Rule::Spread {
         quantile_ppm: 1_000_000,
         k_milli: u32::MAX,
     };
@@ -203,7 +226,7 @@ fn rules() -> impl Strategy<Value = Rule> {
         prop_oneof![Just(1_000_000u32), 0u32..=1_000_000],
         prop_oneof![Just(3000u32), 0u32..20_000, Just(u32::MAX)],
     )
-        .prop_map(|(quantile_ppm, k_milli)| Rule {
+        .prop_map(|(quantile_ppm, k_milli)| Rule::Spread {
             quantile_ppm,
             k_milli,
         })
@@ -220,13 +243,14 @@ proptest! {
     ) {
         let (cvm, power): (Vec<u32>, Vec<u16>) = pairs.iter().copied().unzip();
         let s = feed(&cvm, &power).statistics(&rule).unwrap();
-        prop_assert_eq!(s.cvm, channel_ref(&cvm, &rule));
+        prop_assert_eq!(spread(&s.cvm), spread(&channel_ref(&cvm, &rule)));
         let p32: Vec<u32> = power.iter().map(|&p| p as u32).collect();
         let mut pref = channel_ref(&p32, &rule);
         if pref.threshold > POWER_MAX {
             pref.threshold = POWER_OFF;
+            pref.min_strength = u32::MAX;
         }
-        prop_assert_eq!(s.power, pref);
+        prop_assert_eq!(spread(&s.power), spread(&pref));
         // Taken in two parts and merged, or in another order: the same.
         let k = split.min(cvm.len());
         let mut a = feed(&cvm[..k], &power[..k]);
@@ -238,7 +262,7 @@ proptest! {
 
     #[test]
     fn one_position(v in values(), p in 0u16..=POWER_MAX as u16) {
-        let s = feed(&[v], &[p]).statistics(&Rule::DEFAULT).unwrap();
+        let s = feed(&[v], &[p]).statistics(&Rule::SPREAD).unwrap();
         let rep = bin_ref(v).2 as u32;
         prop_assert_eq!((s.cvm.max, s.cvm.quantile, s.cvm.median, s.cvm.mad), (v, v, rep, 0));
         prop_assert_eq!(s.cvm.threshold, v.saturating_add(1));

@@ -7,7 +7,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use clap::{ArgAction, Args, ValueEnum};
-use cvm_sim::{Bubble, Config, Face, Interaction, Shape, SurfaceDefect, Vec3, preset};
+use cvm_sim::{Bubble, Config, Face, Interaction, Scatterer, Shape, SurfaceDefect, Vec3, preset};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use crate::cli_values::{finite_f64, finite_f64s, j1xj2};
@@ -46,7 +46,7 @@ pub struct SimulateArgs {
     /// Output truth mask (.npy, bool, rows x cols); default: SCAN with `.truth.npy`
     #[arg(long, value_name = "MASK.npy")]
     pub truth: Option<PathBuf>,
-    /// Remove all bubbles and surface defects (the reference part): with another
+    /// Remove all bubbles, surface defects and scattering discs (the reference part): with another
     /// --seed, the same part with other noise (shot, read, laser), no defects
     #[arg(long)]
     pub defect_free: bool,
@@ -115,6 +115,16 @@ pub struct SimulateArgs {
         value_parser = finite_f64s
     )]
     pub scratches: Vec<Vec<f64>>,
+    /// Scattering disc of the front face "X,Y,SIZE,SHARE[,WIDTH_RAD]": centre in mm, diameter
+    /// in raster positions (pitches), share of the light crossing it sent into a halo (0 < SHARE
+    /// <= 1), halo rms angle per axis (rad, default 0.06); repeatable, marked in the truth mask
+    #[arg(
+        long = "scatter",
+        value_name = "X,Y,SIZE,SHARE[,WIDTH]",
+        allow_hyphen_values = true,
+        value_parser = finite_f64s
+    )]
+    pub scatters: Vec<Vec<f64>>,
     /// Micro-facet size of the rough surface patches (µm)
     #[arg(long)]
     pub facet_um: Option<f64>,
@@ -187,6 +197,39 @@ fn count(values: &[f64], flag: &str, min: usize, max: usize) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// Halo rms angle of a `--scatter` disc that gives none (rad): a forward
+/// lobe of inclusions about ten wavelengths across (docs/spread-study.md).
+pub const DEFAULT_HALO_RAD: f64 = 0.06;
+
+/// One `--scatter X,Y,SIZE,SHARE[,WIDTH]` on a raster of `pitch` mm.
+fn scatterer(v: &[f64], pitch: f64) -> Result<Scatterer> {
+    count(v, "--scatter", 4, 5)?;
+    let given = || v.iter().map(f64::to_string).collect::<Vec<_>>().join(",");
+    let (size, share) = (v[2], v[3]);
+    let width = v.get(4).copied().unwrap_or(DEFAULT_HALO_RAD);
+    if size <= 0.0 {
+        bail!(
+            "--scatter {}: the disc's size must be positive (raster positions across), got {size}",
+            given()
+        );
+    }
+    if !(share > 0.0 && share <= 1.0) {
+        bail!(
+            "--scatter {}: the scattered share must be in (0, 1], got {share}",
+            given()
+        );
+    }
+    if !(width > 0.0 && width < 0.5) {
+        bail!(
+            "--scatter {}: the halo width must be in (0, 0.5) rad, got {width}",
+            given()
+        );
+    }
+    // The radius follows the pitch, which the configuration's check refuses
+    // when not positive.
+    Ok(Scatterer::across(v[0], v[1], size, pitch, share, width))
 }
 
 /// Most worker threads `--threads` starts.
@@ -302,9 +345,17 @@ pub fn config(a: &SimulateArgs) -> Result<Config> {
         s.facet = a.facet_um.map_or(s.facet, |v| v / 1000.0);
         s.tilt_sigma = a.tilt_rad.unwrap_or(s.tilt_sigma);
     }
+    if !a.scatters.is_empty() {
+        p.scatterers = a
+            .scatters
+            .iter()
+            .map(|v| scatterer(v, c.raster.pitch))
+            .collect::<Result<_>>()?;
+    }
     if a.defect_free {
         p.bubbles.clear();
         p.defects.clear();
+        p.scatterers.clear();
     }
     let rx = &mut c.receiver;
     if let Some(d) = a.detector {

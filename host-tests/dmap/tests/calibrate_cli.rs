@@ -260,7 +260,8 @@ fn threshold_follows_the_documented_rule() {
             own.iter().filter(|&&x| x >= t).count()
         );
     }
-    assert_eq!(v["version"], 3);
+    assert_eq!(v["version"], 4);
+    assert_eq!(v["rule"]["name"], "spread");
     assert_eq!(v["scans"], 2);
     assert_eq!(v["references"].as_array().unwrap().len(), 2);
     assert_eq!(

@@ -206,6 +206,135 @@ fn simulate_takes_detector_bubble_and_scratch_as_typed() {
     }
 }
 
+/// Share of a map's counts outside the 3x3 cells around its brightest cell.
+fn outside_core(map: &[f64], j1: usize, j2: usize) -> f64 {
+    let (mut best, mut at) = (f64::MIN, 0);
+    for (i, &v) in map.iter().enumerate() {
+        if v > best {
+            (best, at) = (v, i);
+        }
+    }
+    let (r0, c0) = (at / j2, at % j2);
+    let total: f64 = map.iter().sum();
+    let core: f64 = (0..j1 * j2)
+        .filter(|i| (i / j2).abs_diff(r0) <= 1 && (i % j2).abs_diff(c0) <= 1)
+        .map(|i| map[i])
+        .sum();
+    1.0 - core / total
+}
+
+/// `--scatter` places a scattering disc: its positions are marked in the
+/// truth mask (the beam's footprint reaching the disc, as for the other
+/// defects), the map of a beam through it spreads light into a halo, and
+/// the positions whose beam misses it are the scan without it, bit for bit.
+#[test]
+fn simulate_places_scattering_discs_in_the_scan_and_the_truth() {
+    let base = [
+        "simulate",
+        "--preset",
+        "prototype",
+        "--rows",
+        "7",
+        "--cols",
+        "7",
+        "--rays",
+        "64",
+        "--center-mm",
+        "10,10",
+        "--threads",
+        "1",
+    ];
+    let run = |name: &str, extra: &[&str]| {
+        let out = tmp(&format!("scatter-{name}.npy"));
+        ok(&dmap(&[&base[..], extra, &["-o", s(&out)]].concat()));
+        let truth = tmp(&format!("scatter-{name}.truth.npy"));
+        (
+            npy::read_scan(&out).unwrap(),
+            npy::read_mask(&truth).unwrap(),
+        )
+    };
+    let (plain, none) = run("plain", &[]);
+    assert!(none.data.iter().all(|&t| !t));
+    // One position across (radius 0.167 mm) at the raster's centre: the
+    // truth reaches radius + one waist (0.25 mm) = 0.417 mm, so the centre
+    // and its four neighbours (0.334 mm away), not the diagonals (0.472 mm).
+    let (disc, truth) = run("disc", &["--scatter", "10,10,1,0.5"]);
+    let marked: Vec<(usize, usize)> = (0..49)
+        .filter(|&i| truth.data[i])
+        .map(|i| (i / 7, i % 7))
+        .collect();
+    assert_eq!(marked, vec![(2, 3), (3, 2), (3, 3), (3, 4), (4, 3)]);
+    let (j1, j2) = (plain.geometry.j1(), plain.geometry.j2());
+    let (before, after) = (
+        outside_core(plain.map(3, 3), j1, j2),
+        outside_core(disc.map(3, 3), j1, j2),
+    );
+    // Half the light crossing the disc (59 % of the beam) goes into a halo
+    // of 0.06 rad, 3 mm rms on the 1 mm cells: far more outside the core.
+    assert!(after > before + 0.1, "outside the core {before} -> {after}");
+    for (r, c) in [(0, 0), (0, 6), (6, 0), (6, 6)] {
+        assert_eq!(plain.map(r, c), disc.map(r, c), "({r}, {c})");
+    }
+    // A wider halo puts less of it on the array than the default 0.06 rad.
+    let (wide, _) = run("wide", &["--scatter", "10, 10, 1, 0.5, 0.3"]);
+    let on = |m: &[f64]| m.iter().sum::<f64>();
+    assert!(on(wide.map(3, 3)) < on(disc.map(3, 3)));
+    // A disc elsewhere, even scattering everything, changes nothing here.
+    let (far, nothing) = run("far", &["--scatter=-10,-10,2,1"]);
+    assert_eq!(far.data, plain.data);
+    assert!(nothing.data.iter().all(|&t| !t));
+    // The reference part has none.
+    let (free, clean) = run("free", &["--scatter", "10,10,1,0.5", "--defect-free"]);
+    assert_eq!(free.data, plain.data);
+    assert!(clean.data.iter().all(|&t| !t));
+}
+
+#[test]
+fn simulate_refuses_bad_scattering_discs_in_one_line() {
+    let o = tmp("bad-scatter.npy");
+    let base = ["simulate", "--preset", "prototype", "-o", s(&o)];
+    for (v, needle) in [
+        (
+            "1,2,3",
+            "--scatter 1,2,3: expected 4..=5 comma-separated numbers, got 3",
+        ),
+        (
+            "1,2,3,0.1,0.06,7",
+            "expected 4..=5 comma-separated numbers, got 6",
+        ),
+        (
+            "1,2,0,0.1",
+            "--scatter 1,2,0,0.1: the disc's size must be positive",
+        ),
+        (
+            "1,2,-1,0.1",
+            "size must be positive (raster positions across), got -1",
+        ),
+        ("1,2,3,0", "the scattered share must be in (0, 1], got 0"),
+        (
+            "1,2,3,1.5",
+            "the scattered share must be in (0, 1], got 1.5",
+        ),
+        (
+            "1,2,3,0.2,0",
+            "the halo width must be in (0, 0.5) rad, got 0",
+        ),
+        (
+            "1,2,3,0.2,0.5",
+            "the halo width must be in (0, 0.5) rad, got 0.5",
+        ),
+    ] {
+        let arg = format!("--scatter={v}");
+        assert_one_line_error(&dmap(&[&base[..], &[arg.as_str()]].concat()), needle);
+    }
+    assert_usage_error(
+        &dmap(&[&base[..], &["--scatter", "1,2,nan,0.1"]].concat()),
+        "--scatter",
+        "'nan': expected a finite number",
+    );
+    assert!(!o.exists());
+}
+
 /// A 4x5 gradient whose magnitude channel is `mag`.
 fn gradient(path: &Path, mag: &[f64]) {
     let data: Vec<f64> = mag.iter().flat_map(|&m| [m * 0.6, m * 0.8, m]).collect();

@@ -24,6 +24,7 @@ mod min_cost_flow;
 mod normalise;
 mod sat;
 mod spread;
+mod tail;
 mod transport;
 
 pub use brute::{cvm_brute, lcd_brute};
@@ -38,4 +39,5 @@ pub use min_cost_flow::min_cost_transport;
 pub use normalise::{Normalised, normalise};
 pub use sat::{SummedAreaTable, cvm_sat};
 pub use spread::{local_deviation, neighbour_gradient, outside_core, spread_moment};
+pub use tail::{ExpTail, exp_tail, nearest_rank};
 pub use transport::{transport_simplex, transport_simplex_checked};

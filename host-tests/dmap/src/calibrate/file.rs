@@ -17,10 +17,13 @@ pub const FORMAT: &str = "dmap-calibration";
 /// Version of the file layout. Version 2 added the power channel
 /// (`channels.power`); version 3 made the thresholds with the streaming
 /// rule the board runs (`cvm_core::calibration`: median and MAD from the
-/// histogram's bins, `channels.*.integers`). A reader takes versions 2
-/// and 3: a threshold is applied the same way whichever rule made it, only
-/// the statistics beside it differ.
-pub const VERSION: u64 = 3;
+/// histogram's bins, `channels.*.integers`); version 4 names the rule that
+/// set them (`rule.name`: `spread` or `tail`) and adds per channel the
+/// tail fit, the estimated false positions per part and the smallest
+/// detected rise (`tail`, `false_positions_per_part`, `min_strength`). A
+/// reader takes versions 2 to 4: a threshold is applied the same way
+/// whichever rule made it, only the statistics beside it differ.
+pub const VERSION: u64 = 4;
 /// The oldest version a reader takes.
 pub const OLDEST_VERSION: u64 = 2;
 

@@ -34,6 +34,14 @@
 //! ([`power::POWER_MAX`], a reference with a dark neighbour) is recorded
 //! as [`power::POWER_OFF`]: the channel is off.
 //!
+//! `--rule tail` sets each threshold instead where an exponential fit of
+//! the channel's upper tail (the top `--tail-fraction` of the magnitudes,
+//! default 1 %) expects `--rate` false positions per part (default 0.001),
+//! at least the maximum plus one (`cvm_core::calibration::tail`). Either
+//! way the file and the summary give, per channel, the tail fit, the false
+//! positions per part it predicts at the threshold, and the smallest rise
+//! above the median the threshold detects (`min_strength`).
+//!
 //! `--scores` is another thing: a rule in f64 with exact medians on
 //! precomputed gradient images of any distance, for `dmap eval` only.
 //!
@@ -41,7 +49,8 @@
 //! normalisation, full scale); applying it to any other configuration is
 //! refused. Each channel has its entry in `"channels"` (`"cvm"`, `"power"`:
 //! `threshold`, `thr`, `q`, and the statistics, also as `integers`).
-//! Version 3 files come from this rule; version 2 files (the rule before
+//! Version 4 files name the rule and carry the tail fit; version 3 files
+//! (the spread rule, before that) and version 2 files (the rule before
 //! it, exact medians over every magnitude) are still applied, their
 //! thresholds being the same kind of integer. Version 1 files, made before the power
 //! channel, have no power entry and are refused with a request to
@@ -67,7 +76,7 @@ use crate::npy::ScanFile;
 use crate::options::ScoringArgs;
 use crate::settings;
 use file::{FORMAT, VERSION};
-use rule::{Rule, threshold_f64};
+use rule::{Options, Rule, RuleName, threshold_f64};
 
 // `dmap eval --calibration` reads calibration files too.
 pub use file::{Calibration, eval_threshold};
@@ -83,14 +92,26 @@ pub struct CalibrateArgs {
     #[arg(long, value_name = "N", default_value_t = u16::MAX,
           value_parser = clap::value_parser!(u16).range(1..))]
     pub full_scale: u16,
-    /// Quantile of the reference magnitudes the threshold starts from (1 = their maximum; a
+    /// Rule that sets both channels' thresholds (default: the one whose parameters are given,
+    /// else the board's, `cvm_core`'s Rule::DEFAULT: tail)
+    #[arg(long, value_enum)]
+    pub rule: Option<RuleName>,
+    /// Spread rule: quantile of the reference magnitudes the threshold starts from (default 1:
+    /// their maximum; a multiple of 0.000001)
+    #[arg(long, value_name = "P")]
+    pub quantile: Option<f64>,
+    /// Spread rule: margin above the quantile, in robust standard deviations (1.4826 MAD) of the
+    /// reference magnitudes (default 3; a multiple of 0.001)
+    #[arg(long, value_name = "K")]
+    pub k: Option<f64>,
+    /// Tail rule: target false positions per part, per channel (default 0.001: one in 1000
+    /// parts; a multiple of 0.000001)
+    #[arg(long, value_name = "RATE")]
+    pub rate: Option<f64>,
+    /// Tail rule: share of the reference magnitudes fitted as the upper tail (default 0.01; a
     /// multiple of 0.000001)
-    #[arg(long, value_name = "P", default_value_t = 1.0)]
-    pub quantile: f64,
-    /// Margin above the quantile, in robust standard deviations (1.4826 MAD) of the reference
-    /// magnitudes (a multiple of 0.001)
-    #[arg(long, value_name = "K", default_value_t = 3.0)]
-    pub k: f64,
+    #[arg(long, value_name = "F")]
+    pub tail_fraction: Option<f64>,
     /// The references are gradient images (`dmap score` output, any distance), not scans:
     /// the same rule in f64 on their magnitudes, for `dmap eval --calibration` only
     #[arg(long)]
@@ -286,16 +307,21 @@ fn references(a: &CalibrateArgs) -> Result<(Vec<Reference>, Config, Scorer)> {
 }
 
 pub fn run(a: &CalibrateArgs) -> Result<()> {
-    let rule = Rule {
+    let rule = Rule::from_options(&Options {
+        name: a.rule,
         quantile: a.quantile,
         k: a.k,
-    };
-    rule.check()?;
+        rate: a.rate,
+        tail: a.tail_fraction,
+    })?;
     if a.out.as_os_str() != "-" {
         let inputs: Vec<&Path> = a.refs.iter().map(PathBuf::as_path).collect();
         crate::out::refuse_inputs(&a.out, &inputs)?;
     }
     if a.scores {
+        if rule.name != RuleName::Spread {
+            bail!("--scores applies the spread rule only (--rule spread)");
+        }
         return run_scores(a, &rule);
     }
     let exact = rule.exact()?;
@@ -324,13 +350,16 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
     let (thr, pthr) = (st.cvm.threshold, st.power.threshold);
     if thr == u32::MAX {
         warnings.push(format!(
-            "the CVM channel is off: its threshold is past the largest score (--k {} is too large)",
-            fmt_num(a.k)
+            "the CVM channel is off: its threshold is past the largest score ({})",
+            match rule.name {
+                RuleName::Spread => format!("--k {} is too large", fmt_num(rule.k)),
+                RuleName::Tail => "the references' tail is too wide".into(),
+            }
         ));
     }
     if pthr == power::POWER_OFF {
         warnings.push(
-            "the power channel is off: its threshold is above every power magnitude (a reference with a dark neighbour, or --k too large)".into(),
+            "the power channel is off: its threshold is above every power magnitude (a reference with a dark neighbour, or a rule too strict)".into(),
         );
     }
     let per_ref: Vec<report::Reference> = refs
