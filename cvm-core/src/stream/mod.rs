@@ -14,6 +14,16 @@
 //! two rows of state and no map in flight, and row `r` is final (and
 //! emitted) when row `r+1` is complete.
 //!
+//! # Decisions
+//!
+//! A position is decided (magnitudes, channels, strength, its row's
+//! summary) as soon as it is final: `(r-1, c)` when beam `(r, c)` is in
+//! (`decide.rs`). Told the scan's row count ([`Engine::set_rows`]), the
+//! engine decides the last row as its beams arrive too, and holds the
+//! last two rows back: once the last beam is in nothing is left to
+//! compute, and the caller can act on the final rows ([`Engine::unsent`])
+//! before their lines are encoded.
+//!
 //! # Gaps
 //!
 //! Frames carry their position. A position that receives no frame (a gap in
