@@ -224,8 +224,8 @@ fn h743_scan(spec: &str, calibration: Option<&std::path::Path>) -> Result<String
 
 /// The CVM and power thresholds (distance units, contrast) of a
 /// calibration file, refused unless it is a `dmap calibrate` file of
-/// version 2 or 3 (the same thresholds; 3 is the streaming rule's) made
-/// for `config`.
+/// version 2, 3 or 4 (the same thresholds; 3 is the streaming rule's, 4
+/// adds the tail fit and the rule's name) made for `config`.
 fn calibration_thresholds(
     path: &std::path::Path,
     config: &serde_json::Value,
@@ -237,9 +237,9 @@ fn calibration_thresholds(
     if v["format"] != "dmap-calibration" {
         return Err(format!("{p}: not a dmap calibration file"));
     }
-    if !(v["version"] == 2 || v["version"] == 3) {
+    if !(v["version"] == 2 || v["version"] == 3 || v["version"] == 4) {
         return Err(format!(
-            "{p}: calibration file version {} (this firmware reads 2 and 3; run dmap calibrate again)",
+            "{p}: calibration file version {} (this firmware reads 2 to 4; run dmap calibrate again)",
             v["version"]
         ));
     }
