@@ -2,23 +2,14 @@
 //! as a user would: real files, the real binary.
 
 use std::path::{Path, PathBuf};
-use std::process::Output;
 
 use dmap::npy;
 
 mod common;
-use common::{dmap, ok, s};
+use common::{dmap, ok, one_line_error, s};
 
 fn tmp(name: &str) -> PathBuf {
     common::tmp_in("cal", name)
-}
-
-fn one_line_error(out: &Output, needle: &str) {
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success(), "expected failure: {err}");
-    assert_eq!(err.trim_end().lines().count(), 1, "not one line: {err}");
-    assert!(err.contains(needle), "{err:?} lacks {needle:?}");
-    assert!(!err.contains("panicked"));
 }
 
 /// A small synthetic reference: a spot drifting across a `j x j` detector

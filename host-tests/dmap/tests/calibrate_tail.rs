@@ -6,22 +6,14 @@
 //! rule had a name) still applied.
 
 use std::path::{Path, PathBuf};
-use std::process::Output;
 
 use dmap::npy;
 
 mod common;
-use common::{dmap, ok, s, spot_scan};
+use common::{dmap, ok, one_line_error, s, spot_scan};
 
 fn tmp(name: &str) -> PathBuf {
     common::tmp_in("caltail", name)
-}
-
-fn one_line_error(out: &Output, needle: &str) {
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success(), "expected failure: {err}");
-    assert_eq!(err.trim_end().lines().count(), 1, "not one line: {err}");
-    assert!(err.contains(needle), "{err:?} lacks {needle:?}");
 }
 
 fn json(path: &Path) -> serde_json::Value {

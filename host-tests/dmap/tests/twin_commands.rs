@@ -168,7 +168,7 @@ fn a_flood_of_requests_at_the_spi_limit_costs_no_beam_15x15() {
     // 2000 beams at 146 µs: 0.29 s, a request every 2 beams (one every
     // 292 µs: about 90 % of the link's capacity with the replies and
     // result lines).
-    common::blob_scan(&scan, 50, 40, 15);
+    common::blob_scan(&scan, 50, 40, 15, 11);
     let opts = ["--threshold", "0.05"];
     let thr = header_thr(&dmap(&[&["stream", scan.to_str().unwrap()][..], &opts].concat()).stdout);
     let (bursts, want) = flood(1000, 2, thr);
@@ -181,7 +181,7 @@ fn a_flood_of_requests_at_the_spi_limit_costs_no_beam_9x9_and_malformed_ones_are
     let scan = dir.path().join("scan.npy");
     // 7600 beams at 53 µs: 0.40 s, a request every 7 beams (371 µs),
     // then the malformed ones.
-    common::blob_scan(&scan, 76, 100, 9);
+    common::blob_scan(&scan, 76, 100, 9, 11);
     let opts = ["--threshold", "0.05"];
     let thr = header_thr(&dmap(&[&["stream", scan.to_str().unwrap()][..], &opts].concat()).stdout);
     let (mut bursts, mut want) = flood(1000, 7, thr);
@@ -349,7 +349,7 @@ fn requests_beyond_the_links_capacity_are_refused_as_overruns_and_cost_no_beam()
     // requests back to back from beam 1, 5.4 KB in 59 ms, whose replies
     // (16 lines each, 135 KB) would take the link 1.5 s: the receive ring
     // fills, and what it cannot hold is lost and refused as an overrun.
-    common::blob_scan(&scan, 50, 40, 15);
+    common::blob_scan(&scan, 50, 40, 15, 11);
     let opts = ["--threshold", "0.05"];
     let scan_s = scan.to_str().unwrap();
     let host = dmap(&[&["stream", scan_s][..], &opts].concat());

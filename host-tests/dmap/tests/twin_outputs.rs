@@ -418,7 +418,7 @@ fn demo_in_row_mode_pulses_once_per_object() {
 fn a_15x15_part_is_rejected_within_a_beam_period_of_its_last_read() {
     let dir = tempfile::tempdir().unwrap();
     let scan = dir.path().join("scan.npy");
-    common::blob_scan(&scan, 50, 40, 15);
+    common::blob_scan(&scan, 50, 40, 15, 11);
     let pins = dir.path().join("pins.csv");
     let twin = dmap(&[
         "twin",

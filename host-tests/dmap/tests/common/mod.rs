@@ -147,9 +147,10 @@ pub fn counters(out: &Output) -> serde_json::Value {
 }
 
 /// A `rows` x `cols` scan of `j` x `j` maps of low noise with one bright
-/// blob, in beam `cols + 3` (row 1): an object that closes early.
-pub fn blob_scan(path: &Path, rows: usize, cols: usize, j: usize) {
-    let mut state = 11u64;
+/// blob, in beam `cols + 3` (row 1): an object that closes early. The
+/// noise comes from a linear congruential generator started at `seed`.
+pub fn blob_scan(path: &Path, rows: usize, cols: usize, j: usize, seed: u64) {
+    let mut state = seed;
     let mut data = Vec::with_capacity(rows * cols * j * j);
     for i in 0..rows * cols * j * j {
         state = state
@@ -166,4 +167,14 @@ pub fn blob_scan(path: &Path, rows: usize, cols: usize, j: usize) {
         &data,
     )
     .unwrap();
+}
+
+/// `out` failed with one line on standard error that contains `needle`,
+/// and no panic.
+pub fn one_line_error(out: &Output, needle: &str) {
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "expected failure: {err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "not one line: {err}");
+    assert!(err.contains(needle), "{err:?} lacks {needle:?}");
+    assert!(!err.contains("panicked"));
 }
