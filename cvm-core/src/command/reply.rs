@@ -19,7 +19,8 @@ pub struct Calibration {
     pub scans: u16,
     /// Positions with data it took them from.
     pub positions: u32,
-    /// `thr = max + ceil(3 * 1.4826 * mad) + 1` (saturating).
+    /// The CVM threshold the board's rule set (`Rule::DEFAULT`, the tail
+    /// rule: [`crate::calibration`]).
     pub threshold: u32,
     /// The same on the power magnitudes, or `POWER_OFF` when above every
     /// power magnitude.

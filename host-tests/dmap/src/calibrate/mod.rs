@@ -34,10 +34,12 @@
 //! ([`power::POWER_MAX`], a reference with a dark neighbour) is recorded
 //! as [`power::POWER_OFF`]: the channel is off.
 //!
-//! `--rule tail` sets each threshold instead where an exponential fit of
-//! the channel's upper tail (the top `--tail-fraction` of the magnitudes,
-//! default 1 %) expects `--rate` false positions per part (default 0.001),
-//! at least the maximum plus one (`cvm_core::calibration::tail`). Either
+//! That is the spread rule (`--rule spread`, or `--k`/`--quantile` given).
+//! The default, `--rule tail` (the board's too), sets each threshold
+//! instead where an exponential fit of the channel's upper tail (the top
+//! `--tail-fraction` of the magnitudes, default 1 %, at least ten values)
+//! expects `--rate` false positions per part (default 0.001), at least the
+//! maximum plus one (`cvm_core::calibration::tail`). Either
 //! way the file and the summary give, per channel, the tail fit, the false
 //! positions per part it predicts at the threshold, and the smallest rise
 //! above the median the threshold detects (`min_strength`).
