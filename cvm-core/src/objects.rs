@@ -224,6 +224,13 @@ impl Objects {
         }
     }
 
+    /// Whether an object still open satisfies `pred` as it stands (its
+    /// area and peak so far: both only grow until it closes, merged or
+    /// not).
+    pub fn any_open(&self, pred: impl Fn(&Object) -> bool) -> bool {
+        self.open.iter().any(|o| o.used && pred(&o.obj))
+    }
+
     /// Objects reported since the last [`Objects::finish_with`].
     pub fn reported(&self) -> u32 {
         self.reported

@@ -258,11 +258,13 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
         // last rows' objects, then the scan's end.
         let mut defects = engine.totals().defects;
         engine.unsent(&mut |row| defects = defects.saturating_add(row.summary.defects));
+        let outputs = &lines.settings.outputs;
         let early = Verdict::without_objects(
             engine.totals(),
             defects,
             lines.closures.counted,
-            &lines.settings.outputs,
+            objects.any_open(|o| verdict::counts(o, outputs)),
+            outputs,
         );
         if let Some(v) = early {
             lines.sink.ahead(Ahead::Verdict(v));

@@ -113,15 +113,23 @@ pub enum Ahead {
 
 impl Verdict {
     /// The verdict of a scan with these totals when it does not depend on
-    /// which objects its defects form (`None` when it does): a fault; an
-    /// object that counted already (`counted`); or rules under which
-    /// every object counts (every object has an area of at least 1 and a
-    /// peak of at least `2^16`), when any defect position (`defects`, all
-    /// of the scan's) makes an object or is left out of one, and both
-    /// reject. Equal to [`Verdict::of`] with the objects' counts.
-    pub fn without_objects(t: &Totals, defects: u32, counted: u32, o: &Outputs) -> Option<Self> {
-        let v = Verdict::of(t, counted, o);
-        if v.is_fault() || counted > 0 {
+    /// which objects its last rows form (`None` when it does): a fault; an
+    /// object that counted already (`counted`), or one still open that
+    /// counts already as it stands (`open_counts`: its area and peak only
+    /// grow); or rules under which every object counts (every object has
+    /// an area of at least 1 and a peak of at least `2^16`), when any
+    /// defect position (`defects`, all of the scan's) makes an object or
+    /// is left out of one, and both reject. Equal to [`Verdict::of`] with
+    /// the objects' final counts.
+    pub fn without_objects(
+        t: &Totals,
+        defects: u32,
+        counted: u32,
+        open_counts: bool,
+        o: &Outputs,
+    ) -> Option<Self> {
+        let v = Verdict::of(t, counted.saturating_add(open_counts as u32), o);
+        if v.is_fault() || counted > 0 || open_counts {
             return Some(v);
         }
         (o.min_area <= 1 && o.min_strength <= 1 << 16).then_some(if defects > 0 {
