@@ -9,6 +9,7 @@ use crate::scorer::setup::{Kind, Scorer};
 use crate::scorer::square;
 use crate::scorer::sum::{FrameCopy, sum_and_saturation};
 use crate::scorer::words::{copy_words, squared_difference};
+use crate::spread;
 
 /// What [`Scorer::prepare_map`] learnt about one map.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -20,6 +21,9 @@ pub struct Prepared {
     /// With `replacing`: the score of the distance between the map the
     /// state held and the new one; 0 otherwise.
     pub score: u32,
+    /// The share of the power outside the core around the brightest cell,
+    /// `Q16` ([`crate::spread`]); 0 for a dark map.
+    pub spread: u16,
 }
 
 /// Scratch space of the square kernels: a map's folded blocks, which the
@@ -105,6 +109,7 @@ impl Scorer {
                 let blocks = self.blocks();
                 let mut copy = FrameCopy::new();
                 let (power, fl, frame) = self.sum_pass(frame, &mut copy);
+                let spread = self.spread(frame, power);
                 square::fold(&blocks, frame, self.scale(power), &mut scratch.z);
                 if !square::embed(&blocks, self.factors, &mut scratch.z) {
                     return Err(FrameError::Factors);
@@ -123,11 +128,13 @@ impl Scorer {
                     flags: fl,
                     power,
                     score: if replacing { self.to_score(acc) } else { 0 },
+                    spread,
                 })
             }
             Kind::Paper => {
                 let mut copy = FrameCopy::new();
                 let (sum, fl, frame) = self.sum_pass(frame, &mut copy);
+                let spread = self.spread(frame, sum);
                 let conv = self.scale(sum);
                 let acc = embed(
                     &self.passes,
@@ -143,9 +150,24 @@ impl Scorer {
                     flags: fl,
                     power: sum,
                     score: if replacing { self.to_score(acc) } else { 0 },
+                    spread,
                 })
             }
         }
+    }
+
+    /// The spread channel's `q` of a map (read from the fast copy the sum
+    /// pass made) whose power is `power`.
+    #[inline(always)]
+    fn spread(&self, frame: &[u16], power: u32) -> u16 {
+        let g = self.config.geometry;
+        spread::outside_core(
+            frame,
+            g.j1 as usize,
+            g.j2 as usize,
+            self.spread_half as usize,
+            power,
+        )
     }
 
     /// The sample sum of `frame`, its flags ([`flags::SATURATED`],

@@ -6,7 +6,7 @@
 use std::collections::HashMap;
 use std::sync::Mutex;
 
-use cvm_core::{Config, Kernels, PositionScore, Scorer, flags, magnitude, power};
+use cvm_core::{Config, Kernels, PositionScore, Scorer, flags, magnitude, power, spread};
 
 /// The fixed-point scorer of `cfg`, ready to prepare maps: with square
 /// kernels, their factor table built and attached ([`Scorer::with_factors`]).
@@ -34,7 +34,7 @@ pub fn scorer(cfg: &Config) -> Result<Scorer, cvm_core::ConfigError> {
 
 /// Scores every position of a `rows x cols` scan of `u16` maps (raster
 /// order, `cells` samples per map), with the border rule of docs/method.md §3.
-/// Both channels' values are filled in; the decisions (defect flags and
+/// Every channel's values are filled in; the decisions (defect flags and
 /// strength) are left to the caller, which knows the thresholds.
 ///
 /// # Panics
@@ -66,6 +66,14 @@ pub fn score_scan(scorer: &Scorer, rows: usize, cols: usize, data: &[u16]) -> Ve
         .map(|f| f.iter().map(|&a| u32::from(a)).sum())
         .collect();
     let pw = |r: usize, c: usize| powers[r * cols + c];
+    let g = scorer.geometry();
+    let (j1, j2, h) = (g.j1 as usize, g.j2 as usize, scorer.spread_half() as usize);
+    let spreads: Vec<u16> = data
+        .chunks_exact(n)
+        .zip(&powers)
+        .map(|(f, &p)| spread::outside_core(f, j1, j2, h, p))
+        .collect();
+    let sq = |r: usize, c: usize| spreads[r * cols + c];
     let mut out = Vec::with_capacity(rows * cols);
     for r in 0..rows {
         for c in 0..cols {
@@ -89,6 +97,8 @@ pub fn score_scan(scorer: &Scorer, rows: usize, cols: usize, data: &[u16]) -> Ve
             }
             let p0 = power::contrast(pw(r, l), pw(r, rr));
             let p1 = power::contrast(pw(u, c), pw(d, c));
+            let s0 = sq(r, l).abs_diff(sq(r, rr));
+            let s1 = sq(u, c).abs_diff(sq(d, c));
             out.push(PositionScore {
                 g0,
                 g1,
@@ -97,6 +107,9 @@ pub fn score_scan(scorer: &Scorer, rows: usize, cols: usize, data: &[u16]) -> Ve
                 p0,
                 p1,
                 pmag: power::magnitude(p0, p1),
+                s0,
+                s1,
+                smag: spread::magnitude(s0, s1),
                 flags: f,
             });
         }
