@@ -65,15 +65,7 @@ pub fn outside_core(frame: &[u16], j1: usize, j2: usize, half: usize, power: u32
     if power == 0 || j1 == 0 || j2 == 0 || frame.len() != j1 * j2 || frame.len() > MAX_CELLS {
         return 0;
     }
-    // The brightest cell, the first on ties: one compare per cell.
-    let mut peak = 0usize;
-    let mut top = 0u16;
-    for (k, &a) in frame.iter().enumerate() {
-        if a > top {
-            top = a;
-            peak = k;
-        }
-    }
+    let peak = brightest(frame);
     let (p1, p2) = (peak / j2, peak % j2);
     let (r0, r1) = (
         p1.saturating_sub(half),
@@ -93,6 +85,57 @@ pub fn outside_core(frame: &[u16], j1: usize, j2: usize, half: usize, power: u32
         }
     }
     share(power.saturating_sub(core), power)
+}
+
+/// Index of the brightest cell, the first on ties. Two steps: the largest
+/// sample, two samples at a time ([`max2`]), then the first cell that holds
+/// it, which stops at the spot (on average half-way through the map).
+fn brightest(frame: &[u16]) -> usize {
+    // SAFETY: every bit pattern is a valid `u32`; `align_to` only splits
+    // off the unaligned ends (the scorer's copy of a frame has none).
+    let (head, words, tail) = unsafe { frame.align_to::<u32>() };
+    let mut m2 = 0u32;
+    for &w in words {
+        m2 = max2(w, m2);
+    }
+    let mut top = (m2 as u16).max((m2 >> 16) as u16);
+    for &a in head.iter().chain(tail) {
+        top = top.max(a);
+    }
+    frame.iter().position(|&a| a == top).unwrap_or(0)
+}
+
+/// The larger of each 16-bit half of `w` and `m`: `USUB16` sets the
+/// halves' GE flags where `w`'s half is at least `m`'s, `SEL` takes those
+/// halves from `w` and the others from `m`. Two instructions for two
+/// samples.
+#[cfg(target_arch = "arm")]
+#[inline(always)]
+fn max2(w: u32, m: u32) -> u32 {
+    let r: u32;
+    // SAFETY: register operations only (`USUB16` and `SEL` are part of
+    // the Cortex-M4/M7 DSP extension of thumbv7em); `t` is an output
+    // written before `w` and `m` are read again, so it gets a register of
+    // its own.
+    unsafe {
+        core::arch::asm!(
+            "usub16 {t}, {w}, {m}",
+            "sel {r}, {w}, {m}",
+            t = out(reg) _,
+            r = lateout(reg) r,
+            w = in(reg) w,
+            m = in(reg) m,
+            options(pure, nomem, nostack)
+        );
+    }
+    r
+}
+
+/// The larger of each 16-bit half of `w` and `m`.
+#[cfg(not(target_arch = "arm"))]
+#[inline(always)]
+fn max2(w: u32, m: u32) -> u32 {
+    (w & 0xFFFF).max(m & 0xFFFF) | (w >> 16).max(m >> 16) << 16
 }
 
 /// `floor(2^16 o / p)` for `o < p < 2^24`, by long division in base `2^8`

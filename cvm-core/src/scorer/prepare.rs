@@ -22,7 +22,8 @@ pub struct Prepared {
     /// state held and the new one; 0 otherwise.
     pub score: u32,
     /// The share of the power outside the core around the brightest cell,
-    /// `Q16` ([`crate::spread`]); 0 for a dark map.
+    /// `Q16` ([`crate::spread`]); 0 for a dark map, and when not measured
+    /// ([`Scorer::prepare_beam`]).
     pub spread: u16,
 }
 
@@ -86,6 +87,8 @@ impl Scorer {
     /// row buffers (DTCM on the H743), for the horizontal distances. With
     /// paper kernels the copy is one more store per word in the column
     /// pass; square kernels copy the state after.
+    ///
+    /// The map's spread ([`Prepared::spread`]) is measured too.
     pub fn prepare_map(
         &self,
         frame: &[u16],
@@ -94,6 +97,24 @@ impl Scorer {
         scratch: &mut Scratch,
         replacing: bool,
     ) -> Result<Prepared, FrameError> {
+        self.prepare_beam(frame, state, near, scratch, replacing, true)
+    }
+
+    /// [`Scorer::prepare_map`], the spread measured only with `spread`
+    /// (else [`Prepared::spread`] is 0): the streaming engine measures it
+    /// only while its spread channel is on, so that a channel that is off
+    /// costs the beam nothing.
+    #[inline(always)]
+    pub fn prepare_beam(
+        &self,
+        frame: &[u16],
+        state: &mut [i32],
+        near: &mut [i32],
+        scratch: &mut Scratch,
+        replacing: bool,
+        spread: bool,
+    ) -> Result<Prepared, FrameError> {
+        let measure = spread;
         let n = self.cells();
         if frame.len() != n {
             return Err(FrameError::Length);
@@ -109,7 +130,11 @@ impl Scorer {
                 let blocks = self.blocks();
                 let mut copy = FrameCopy::new();
                 let (power, fl, frame) = self.sum_pass(frame, &mut copy);
-                let spread = self.spread(frame, power);
+                let spread = if measure {
+                    self.spread(frame, power)
+                } else {
+                    0
+                };
                 square::fold(&blocks, frame, self.scale(power), &mut scratch.z);
                 if !square::embed(&blocks, self.factors, &mut scratch.z) {
                     return Err(FrameError::Factors);
@@ -134,7 +159,7 @@ impl Scorer {
             Kind::Paper => {
                 let mut copy = FrameCopy::new();
                 let (sum, fl, frame) = self.sum_pass(frame, &mut copy);
-                let spread = self.spread(frame, sum);
+                let spread = if measure { self.spread(frame, sum) } else { 0 };
                 let conv = self.scale(sum);
                 let acc = embed(
                     &self.passes,

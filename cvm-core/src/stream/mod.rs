@@ -251,8 +251,13 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
         self.power_threshold
     }
 
-    /// Sets the spread channel's threshold (`Q16`; [`SPREAD_OFF`], the
-    /// default, never fires).
+    /// Sets the spread channel's threshold (`Q16`). [`SPREAD_OFF`], the
+    /// default, turns the channel off: no map's spread is measured, and
+    /// every position's `s0`, `s1` and `smag` are 0. Any other value
+    /// measures it (a threshold above [`crate::spread::SPREAD_MAX`]
+    /// measures without ever firing). Meant for between scans, as
+    /// [`Engine::reconfigure`]: the maps already held keep the spread they
+    /// were measured with.
     pub fn set_spread_threshold(&mut self, t: u32) {
         self.spread_threshold = t;
     }
@@ -469,10 +474,11 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
             .near
             .get_mut(near_start..near_start + self.words)
             .unwrap_or(&mut []);
+        let spread = self.spread_threshold != SPREAD_OFF;
         let prepared = match (frame, self.bufs[b].get_mut(start..start + self.words)) {
             (Some(f), Some(slot)) => {
                 self.scorer
-                    .prepare_map(f, slot, near, &mut self.scratch, fuse)
+                    .prepare_beam(f, slot, near, &mut self.scratch, fuse, spread)
             }
             _ => Err(FrameError::Length),
         };

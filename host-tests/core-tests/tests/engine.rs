@@ -4,7 +4,7 @@
 use cvm_core::{Position, PositionScore, Scorer, flags};
 use cvm_core_tests::{
     contrast_f64, decide, frame_flags, power_magnitude_ref, random_scan, rng, row_summary_with,
-    run_engine, run_engine_with, spread_magnitude_ref, spread_q_ref, variants,
+    run_engine, run_engine_with, variants,
 };
 use dmap::fixed::score_scan;
 use proptest::prelude::*;
@@ -55,16 +55,6 @@ fn batch_with_gaps(
             .map(|&a| u64::from(a))
             .sum::<u64>()
     };
-    let g = scorer.geometry();
-    let q = |i: usize| {
-        let half = scorer.spread_half() as usize;
-        spread_q_ref(
-            &data[i * n..(i + 1) * n],
-            g.j1 as usize,
-            g.j2 as usize,
-            half,
-        )
-    };
     let at = |r: isize, c: isize| -> Option<usize> {
         if r < 0 || c < 0 || r >= rows as isize || c >= cols as isize {
             return None;
@@ -105,8 +95,6 @@ fn batch_with_gaps(
             } else {
                 contrast_f64(pw(u), pw(d))
             };
-            let s0 = q(l).abs_diff(q(rr));
-            let s1 = q(u).abs_diff(q(d));
             PositionScore {
                 g0,
                 g1,
@@ -114,9 +102,6 @@ fn batch_with_gaps(
                 p0,
                 p1,
                 pmag: power_magnitude_ref(p0, p1),
-                s0,
-                s1,
-                smag: spread_magnitude_ref(s0, s1),
                 flags: fl[i],
                 ..Default::default()
             }

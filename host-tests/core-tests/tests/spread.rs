@@ -10,7 +10,7 @@ use cvm_core_tests::{
     spread_magnitude_ref, spread_q_ref, variants,
 };
 use cvm_reference::neighbour_gradient;
-use dmap::fixed::score_scan;
+use dmap::fixed::{add_spread, score_scan};
 use proptest::prelude::*;
 use rand::RngExt;
 
@@ -289,9 +289,18 @@ proptest! {
         let present: Vec<bool> = (0..rows * cols).map(|_| r.random_range(0..10) >= gaps).collect();
         let scorer = variants(j1, j2)[0].scorer(j1, j2).unwrap();
         let frames = frames_with_gaps(&data, n, rows, cols, &present);
-        let (out, _) = run_engine_thresholds(&scorer, cols, [u32::MAX, u32::MAX, SPREAD_OFF], &frames);
+        // Measured, never firing.
+        let on = SPREAD_MAX + 1;
+        let (out, _) = run_engine_thresholds(&scorer, cols, [u32::MAX, u32::MAX, on], &frames);
         let got = flatten(&out);
         prop_assert_eq!(got.len(), rows * cols);
+        // Off, nothing is measured; every other value is the same.
+        let (off, _) = run_engine_thresholds(&scorer, cols, [u32::MAX, u32::MAX, SPREAD_OFF], &frames);
+        let unmeasured: Vec<PositionScore> = got
+            .iter()
+            .map(|s| PositionScore { s0: 0, s1: 0, smag: 0, ..*s })
+            .collect();
+        prop_assert_eq!(flatten(&off), unmeasured);
         let qs: Vec<Option<u16>> = (0..rows * cols)
             .map(|i| present[i].then(|| spread_q_ref(&data[i * n..(i + 1) * n], j1, j2, 2)))
             .collect();
@@ -333,6 +342,7 @@ proptest! {
         let data = random_scan(&mut r, rows, cols, j1, j2);
         let scorer = variants(j1, j2)[0].scorer(j1, j2).unwrap();
         let mut batch = score_scan(&scorer, rows, cols, &data);
+        add_spread(&scorer, rows, cols, &data, &mut batch);
         let thr = batch.iter().map(|s| s.mag).max().unwrap_or(0) / 2 + 1;
         let pthr = u32::from(batch.iter().map(|s| s.pmag).max().unwrap_or(0)) + 1;
         let sthr = batch.iter().map(|s| s.smag).max().unwrap_or(0) / 2 + 1;
