@@ -6,7 +6,7 @@ use super::{Engine, PositionScore, RowView, strength};
 use crate::flags;
 use crate::power::{self, contrast};
 use crate::scorer::magnitude;
-use crate::spread;
+use crate::spread::{self, SPREAD_OFF};
 
 impl<const MAX_COLS: usize> Engine<'_, MAX_COLS> {
     /// The last row pending: its undecided positions get their vertical
@@ -72,7 +72,6 @@ impl<const MAX_COLS: usize> Engine<'_, MAX_COLS> {
         }
         s.mag = magnitude(s.g0, s.g1);
         s.pmag = power::magnitude(s.p0, s.p1);
-        s.smag = spread::magnitude(s.s0, s.s1);
         s.flags &= !flags::DEFECT;
         s.strength = 0;
         // The magnitude is at least either score, so it is at the top
@@ -97,9 +96,13 @@ impl<const MAX_COLS: usize> Engine<'_, MAX_COLS> {
                 .strength
                 .max(strength(s.pmag as u32, self.power_threshold));
         }
-        if s.smag >= self.spread_threshold {
-            s.flags |= flags::SPREAD_DEFECT;
-            s.strength = s.strength.max(strength(s.smag, self.spread_threshold));
+        // Off, nothing was measured: `s0`, `s1` and `smag` stay 0.
+        if self.spread_threshold != SPREAD_OFF {
+            s.smag = spread::magnitude(s.s0, s.s1);
+            if s.smag >= self.spread_threshold {
+                s.flags |= flags::SPREAD_DEFECT;
+                s.strength = s.strength.max(strength(s.smag, self.spread_threshold));
+            }
         }
         if s.is_defect() {
             sum.defects += 1;
