@@ -8,7 +8,7 @@
 //! leaves the detector. The share of the map's power outside a small box
 //! around the brightest cell does change: on a part without defects it is
 //! the noise floor (the box holds the whole spot), a halo puts most of its
-//! light there (docs/method.md §7).
+//! light there (docs/method.md §8).
 //!
 //! Per map, with `P` its power (sample sum) and `C` the sum of the samples
 //! in the core, the box of `h` cells to each side of the brightest cell
@@ -40,9 +40,15 @@
 //!
 //! The differences `s0`, `s1` are at most 65535 (`u16`). The magnitude is
 //! at most `floor(65535 sqrt 2) = 92680` ([`SPREAD_MAX`]), so it takes a
-//! `u32`; `s0² + s1² < 2^33` is summed in a `u64`, and below `2^32` (every
-//! map of a part without defects, whose `q` are a few hundred) the root is
-//! the 32-bit one of the power channel.
+//! `u32`. Each square is below `2^32`; when their sum is too (both
+//! differences below 46 341, every pair of neighbours on a part without
+//! defects, whose `q` are a few hundred) the root is a 32-bit Newton
+//! iteration as the power channel's, otherwise the scorer's exact 64-bit
+//! magnitude.
+//!
+//! The half-width is the scorer's ([`crate::Scorer::with_spread_half`],
+//! default [`CORE_HALF`]); the engine measures `q` only while its spread
+//! channel is on ([`crate::Engine::set_spread_threshold`]).
 
 use crate::config::MAX_CELLS;
 use crate::scorer::magnitude as magnitude64;
@@ -51,7 +57,8 @@ use crate::scorer::magnitude as magnitude64;
 pub const SPREAD_FRAC: u32 = 16;
 /// Largest spread magnitude: `floor(sqrt(2) * 65535)`.
 pub const SPREAD_MAX: u32 = 92680;
-/// A spread threshold above every magnitude: the channel never fires.
+/// The spread threshold of a channel that is off: nothing is measured and
+/// nothing fires.
 pub const SPREAD_OFF: u32 = u32::MAX;
 /// The core's default half-width `h`: a 5x5 box, which holds a spot of
 /// half a cell rms (its edge is 4 rms from the spot's centre or more).
