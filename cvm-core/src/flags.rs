@@ -14,5 +14,7 @@ pub const CLIPPED: u8 = 1 << 3;
 pub const CVM_DEFECT: u8 = 1 << 4;
 /// The position is a defect by its power gradient: `pmag >= pthr`.
 pub const POWER_DEFECT: u8 = 1 << 5;
-/// Either channel: the position is a defect.
-pub const DEFECT: u8 = CVM_DEFECT | POWER_DEFECT;
+/// The position is a defect by its spread gradient: `smag >= sthr`.
+pub const SPREAD_DEFECT: u8 = 1 << 6;
+/// Any channel: the position is a defect.
+pub const DEFECT: u8 = CVM_DEFECT | POWER_DEFECT | SPREAD_DEFECT;

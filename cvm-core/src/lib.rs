@@ -15,6 +15,7 @@ pub mod protocol;
 pub mod record;
 pub mod scorer;
 pub mod settings;
+pub mod spread;
 pub mod stream;
 pub mod tables;
 pub mod verdict;

@@ -55,7 +55,7 @@ pub struct Object {
     /// Power magnitude at the peak (`Q15`).
     pub peak_power: u16,
     /// Channels that fired anywhere in the object: [`flags::CVM_DEFECT`],
-    /// [`flags::POWER_DEFECT`].
+    /// [`flags::POWER_DEFECT`], [`flags::SPREAD_DEFECT`].
     pub channels: u8,
     /// Strength-weighted centroid, `Q8` (row, column).
     pub centroid_row_q8: u64,

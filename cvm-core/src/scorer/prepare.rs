@@ -9,6 +9,7 @@ use crate::scorer::setup::{Kind, Scorer};
 use crate::scorer::square;
 use crate::scorer::sum::{FrameCopy, sum_and_saturation};
 use crate::scorer::words::{copy_words, squared_difference};
+use crate::spread;
 
 /// What [`Scorer::prepare_map`] learnt about one map.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -20,6 +21,10 @@ pub struct Prepared {
     /// With `replacing`: the score of the distance between the map the
     /// state held and the new one; 0 otherwise.
     pub score: u32,
+    /// The share of the power outside the core around the brightest cell,
+    /// `Q16` ([`crate::spread`]); 0 for a dark map, and when not measured
+    /// ([`Scorer::prepare_beam`]).
+    pub spread: u16,
 }
 
 /// Scratch space of the square kernels: a map's folded blocks, which the
@@ -82,6 +87,8 @@ impl Scorer {
     /// row buffers (DTCM on the H743), for the horizontal distances. With
     /// paper kernels the copy is one more store per word in the column
     /// pass; square kernels copy the state after.
+    ///
+    /// The map's spread ([`Prepared::spread`]) is measured too.
     pub fn prepare_map(
         &self,
         frame: &[u16],
@@ -90,6 +97,24 @@ impl Scorer {
         scratch: &mut Scratch,
         replacing: bool,
     ) -> Result<Prepared, FrameError> {
+        self.prepare_beam(frame, state, near, scratch, replacing, true)
+    }
+
+    /// [`Scorer::prepare_map`], the spread measured only with `spread`
+    /// (else [`Prepared::spread`] is 0): the streaming engine measures it
+    /// only while its spread channel is on, so that a channel that is off
+    /// costs the beam nothing.
+    #[inline(always)]
+    pub fn prepare_beam(
+        &self,
+        frame: &[u16],
+        state: &mut [i32],
+        near: &mut [i32],
+        scratch: &mut Scratch,
+        replacing: bool,
+        spread: bool,
+    ) -> Result<Prepared, FrameError> {
+        let measure = spread;
         let n = self.cells();
         if frame.len() != n {
             return Err(FrameError::Length);
@@ -105,6 +130,11 @@ impl Scorer {
                 let blocks = self.blocks();
                 let mut copy = FrameCopy::new();
                 let (power, fl, frame) = self.sum_pass(frame, &mut copy);
+                let spread = if measure {
+                    self.spread(frame, power)
+                } else {
+                    0
+                };
                 square::fold(&blocks, frame, self.scale(power), &mut scratch.z);
                 if !square::embed(&blocks, self.factors, &mut scratch.z) {
                     return Err(FrameError::Factors);
@@ -123,11 +153,13 @@ impl Scorer {
                     flags: fl,
                     power,
                     score: if replacing { self.to_score(acc) } else { 0 },
+                    spread,
                 })
             }
             Kind::Paper => {
                 let mut copy = FrameCopy::new();
                 let (sum, fl, frame) = self.sum_pass(frame, &mut copy);
+                let spread = if measure { self.spread(frame, sum) } else { 0 };
                 let conv = self.scale(sum);
                 let acc = embed(
                     &self.passes,
@@ -143,9 +175,24 @@ impl Scorer {
                     flags: fl,
                     power: sum,
                     score: if replacing { self.to_score(acc) } else { 0 },
+                    spread,
                 })
             }
         }
+    }
+
+    /// The spread channel's `q` of a map (read from the fast copy the sum
+    /// pass made) whose power is `power`.
+    #[inline(always)]
+    fn spread(&self, frame: &[u16], power: u32) -> u16 {
+        let g = self.config.geometry;
+        spread::outside_core(
+            frame,
+            g.j1 as usize,
+            g.j2 as usize,
+            self.spread_half as usize,
+            power,
+        )
     }
 
     /// The sample sum of `frame`, its flags ([`flags::SATURATED`],

@@ -37,6 +37,9 @@ pub struct Scorer {
     /// The square kernels' factor table, once attached
     /// ([`Scorer::with_factors`]); empty otherwise.
     pub(super) factors: &'static [i32],
+    /// Half-width `h` of the spread channel's core box
+    /// ([`crate::spread`]).
+    pub(super) spread_half: u8,
 }
 
 /// Words of the largest square kernels' factor table (16x16 maps):
@@ -143,6 +146,7 @@ impl Scorer {
             passes,
             square_p,
             factors: &[],
+            spread_half: crate::spread::CORE_HALF,
         })
     }
 
@@ -211,6 +215,18 @@ impl Scorer {
 
     pub const fn config(&self) -> &Config {
         &self.config
+    }
+
+    /// This scorer with the spread channel's core half-width `h` (the box
+    /// of `2h + 1` cells a side; [`crate::spread::CORE_HALF`] by default).
+    pub const fn with_spread_half(mut self, half: u8) -> Scorer {
+        self.spread_half = half;
+        self
+    }
+
+    /// The spread channel's core half-width.
+    pub const fn spread_half(&self) -> u8 {
+        self.spread_half
     }
 
     pub const fn geometry(&self) -> Geometry {

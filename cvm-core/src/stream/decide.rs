@@ -6,6 +6,7 @@ use super::{Engine, PositionScore, RowView, strength};
 use crate::flags;
 use crate::power::{self, contrast};
 use crate::scorer::magnitude;
+use crate::spread::{self, SPREAD_OFF};
 
 impl<const MAX_COLS: usize> Engine<'_, MAX_COLS> {
     /// The last row pending: its undecided positions get their vertical
@@ -21,18 +22,20 @@ impl<const MAX_COLS: usize> Engine<'_, MAX_COLS> {
             if own & flags::NO_DATA != 0 {
                 continue;
             }
-            let (g1, p1) = if above & flags::NO_DATA == 0 {
+            let (g1, p1, s1) = if above & flags::NO_DATA == 0 {
                 let (a, b) = (self.slot(1 - pb, c), self.slot(pb, c));
                 (
                     self.scorer.distance(a, b),
                     contrast(self.power(1 - pb, c), self.power(pb, c)),
+                    self.spread(1 - pb, c).abs_diff(self.spread(pb, c)),
                 )
             } else {
-                (0, 0)
+                (0, 0, 0)
             };
             if let Some(s) = self.results[rb].get_mut(c) {
                 s.g1 = g1;
                 s.p1 = p1;
+                s.s1 = s1;
             }
         }
         self.decide_upto(rb, self.cols);
@@ -92,6 +95,14 @@ impl<const MAX_COLS: usize> Engine<'_, MAX_COLS> {
             s.strength = s
                 .strength
                 .max(strength(s.pmag as u32, self.power_threshold));
+        }
+        // Off, nothing was measured: `s0`, `s1` and `smag` stay 0.
+        if self.spread_threshold != SPREAD_OFF {
+            s.smag = spread::magnitude(s.s0, s.s1);
+            if s.smag >= self.spread_threshold {
+                s.flags |= flags::SPREAD_DEFECT;
+                s.strength = s.strength.max(strength(s.smag, self.spread_threshold));
+            }
         }
         if s.is_defect() {
             sum.defects += 1;

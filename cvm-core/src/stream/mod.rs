@@ -42,6 +42,7 @@ pub use results::{Position, PositionScore, RowSummary, RowView, Totals, strength
 use crate::flags;
 use crate::power::{POWER_OFF, contrast};
 use crate::scorer::{FrameError, Prepared, Scorer, Scratch};
+use crate::spread::SPREAD_OFF;
 
 /// Why an engine could not be set up.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -102,9 +103,9 @@ pub const fn near_words(config: &crate::Config) -> usize {
 }
 
 /// Bytes of engine state for `cols` columns: the two row buffers plus the
-/// per-column flags and powers and two rows of results.
+/// per-column flags, powers and spreads and two rows of results.
 pub const fn window_bytes(cols: usize, j1: usize, j2: usize) -> usize {
-    2 * row_words(cols, j1, j2) * 4 + cols * (2 + 8 + 2 * core::mem::size_of::<PositionScore>())
+    2 * row_words(cols, j1, j2) * 4 + cols * (2 + 8 + 4 + 2 * core::mem::size_of::<PositionScore>())
 }
 
 /// The streaming engine, for at most `MAX_COLS` columns.
@@ -117,6 +118,7 @@ pub struct Engine<'a, const MAX_COLS: usize> {
     cols: usize,
     threshold: u32,
     power_threshold: u32,
+    spread_threshold: u32,
     bufs: [&'a mut [i32]; 2],
     /// Empty, or three maps: the current row's last three, column `c` in
     /// map `c % 3`, each also copied to its row buffer. The horizontal
@@ -127,6 +129,8 @@ pub struct Engine<'a, const MAX_COLS: usize> {
     meta: [[u8; MAX_COLS]; 2],
     /// Power (sample sum) of the map in each slot of each buffer.
     powers: [[u32; MAX_COLS]; 2],
+    /// Spread `q` ([`crate::spread`]) of the map in each slot of each buffer.
+    spreads: [[u16; MAX_COLS]; 2],
     /// Results of two rows: `results[cur]` is the row being received (`g0`
     /// filled as beams arrive), the other one the previous row (`g0` final,
     /// `g1` filled as the current row arrives). A finished row changes
@@ -200,10 +204,12 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
             cols,
             threshold,
             power_threshold: POWER_OFF,
+            spread_threshold: SPREAD_OFF,
             bufs: [row_a, row_b],
             near,
             meta: [[flags::NO_DATA; MAX_COLS]; 2],
             powers: [[0; MAX_COLS]; 2],
+            spreads: [[0; MAX_COLS]; 2],
             results: [[PositionScore::default(); MAX_COLS]; 2],
             cur: 0,
             sums: [RowSummary::default(); 2],
@@ -253,6 +259,21 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
 
     pub fn power_threshold(&self) -> u32 {
         self.power_threshold
+    }
+
+    /// Sets the spread channel's threshold (`Q16`). [`SPREAD_OFF`], the
+    /// default, turns the channel off: no map's spread is measured, and
+    /// every position's `s0`, `s1` and `smag` are 0. Any other value
+    /// measures it (a threshold above [`crate::spread::SPREAD_MAX`]
+    /// measures without ever firing). Meant for between scans, as
+    /// [`Engine::reconfigure`]: the maps already held keep the spread they
+    /// were measured with.
+    pub fn set_spread_threshold(&mut self, t: u32) {
+        self.spread_threshold = t;
+    }
+
+    pub fn spread_threshold(&self) -> u32 {
+        self.spread_threshold
     }
 
     pub fn scorer(&self) -> &Scorer {
@@ -463,18 +484,20 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
             .near
             .get_mut(near_start..near_start + self.words)
             .unwrap_or(&mut []);
+        let spread = self.spread_threshold != SPREAD_OFF;
         let prepared = match (frame, self.bufs[b].get_mut(start..start + self.words)) {
             (Some(f), Some(slot)) => {
                 self.scorer
-                    .prepare_map(f, slot, near, &mut self.scratch, fuse)
+                    .prepare_beam(f, slot, near, &mut self.scratch, fuse, spread)
             }
             _ => Err(FrameError::Length),
         };
-        let (own, fused, pw) = match prepared {
+        let (own, fused, pw, sq) = match prepared {
             Ok(Prepared {
                 flags: fl,
                 power,
                 score,
+                spread,
             }) => {
                 self.totals.frames += 1;
                 if fl & flags::DARK != 0 {
@@ -483,38 +506,17 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
                 if fl & flags::SATURATED != 0 {
                     self.totals.saturated += 1;
                 }
-                (fl, score, power)
+                (fl, score, power, spread)
             }
             Err(_) => {
                 self.totals.missing += 1;
-                (flags::NO_DATA, 0, 0)
+                (flags::NO_DATA, 0, 0, 0)
             }
         };
 
-        // Vertical component of (r-1, c); a missing neighbour is replaced
-        // by (r-1, c) itself. Without a new map slot c still holds (r-2, c).
-        // (A row decided already is the scan's last by the row count, with
-        // its border rule: see `set_rows`.)
         let prev_rb = (self.cur ^ 1) & 1;
         if mid_ok && self.decided[prev_rb] <= c {
-            let down_ok = own & flags::NO_DATA == 0;
-            let (up_p, mid_p) = (self.power(b, c), self.power(1 - b, c));
-            let (g1, p1) = match (up_ok, down_ok) {
-                (true, true) => (fused, contrast(up_p, pw)),
-                (true, false) => (
-                    self.scorer.distance(self.slot(b, c), self.slot(1 - b, c)),
-                    contrast(up_p, mid_p),
-                ),
-                (false, true) => (
-                    self.scorer.distance(self.slot(1 - b, c), self.slot(b, c)),
-                    contrast(mid_p, pw),
-                ),
-                (false, false) => (0, 0),
-            };
-            if let Some(s) = self.results[(self.cur ^ 1) & 1].get_mut(c) {
-                s.g1 = g1;
-                s.p1 = p1;
-            }
+            self.vertical(b, c, up_ok, (own, fused, pw, sq));
         }
 
         if let Some(m) = self.meta[b].get_mut(c) {
@@ -522,6 +524,9 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
         }
         if let Some(p) = self.powers[b].get_mut(c) {
             *p = pw;
+        }
+        if let Some(q) = self.spreads[b].get_mut(c) {
+            *q = sq;
         }
         if let Some(s) = self.cur_row().get_mut(c) {
             *s = PositionScore {
@@ -537,17 +542,19 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
         if last && own & flags::NO_DATA == 0 {
             // The last row's vertical component, by the border rule (the
             // missing lower neighbour is the map itself): `d(up, own)`.
-            let (g1, p1) = if has(&self.meta[1 - b]) {
+            let (g1, p1, s1) = if has(&self.meta[1 - b]) {
                 (
                     self.scorer.distance(self.slot(1 - b, c), self.slot(b, c)),
                     contrast(self.power(1 - b, c), pw),
+                    self.spread(1 - b, c).abs_diff(sq),
                 )
             } else {
-                (0, 0)
+                (0, 0, 0)
             };
             if let Some(s) = self.cur_row().get_mut(c) {
                 s.g1 = g1;
                 s.p1 = p1;
+                s.s1 = s1;
             }
         }
 
@@ -559,6 +566,40 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
             }
         }
         self.next_col = c + 1;
+    }
+
+    /// Vertical component of `(r-1, c)` (row `r` in buffer `b`), which has
+    /// data, once the map of `(r, c)` is prepared: `new` is its flags, the
+    /// distance fused into its preparation, its power and its spread. A
+    /// missing neighbour is replaced by `(r-1, c)` itself; without a new
+    /// map slot `c` still holds `(r-2, c)`. (A row decided already is the
+    /// scan's last by the row count, with its border rule: see
+    /// `set_rows`.)
+    #[inline(always)]
+    fn vertical(&mut self, b: usize, c: usize, up_ok: bool, new: (u8, u32, u32, u16)) {
+        let (own, fused, pw, sq) = new;
+        let down_ok = own & flags::NO_DATA == 0;
+        let (up_p, mid_p) = (self.power(b, c), self.power(1 - b, c));
+        let (up_q, mid_q) = (self.spread(b, c), self.spread(1 - b, c));
+        let (g1, p1, s1) = match (up_ok, down_ok) {
+            (true, true) => (fused, contrast(up_p, pw), up_q.abs_diff(sq)),
+            (true, false) => (
+                self.scorer.distance(self.slot(b, c), self.slot(1 - b, c)),
+                contrast(up_p, mid_p),
+                up_q.abs_diff(mid_q),
+            ),
+            (false, true) => (
+                self.scorer.distance(self.slot(1 - b, c), self.slot(b, c)),
+                contrast(mid_p, pw),
+                mid_q.abs_diff(sq),
+            ),
+            (false, false) => (0, 0, 0),
+        };
+        if let Some(s) = self.results[(self.cur ^ 1) & 1].get_mut(c) {
+            s.g1 = g1;
+            s.p1 = p1;
+            s.s1 = s1;
+        }
     }
 
     /// `g0` of `(current, c)` from its left neighbour `c-1` and the given
@@ -577,18 +618,20 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
             Some(rc) if ok(&self.meta[b], rc) => rc,
             _ => c,
         };
-        let (g0, p0) = if left == right {
-            (0, 0)
+        let (g0, p0, s0) = if left == right {
+            (0, 0, 0)
         } else {
             (
                 self.scorer
                     .distance(self.recent(b, left), self.recent(b, right)),
                 contrast(self.power(b, left), self.power(b, right)),
+                self.spread(b, left).abs_diff(self.spread(b, right)),
             )
         };
         if let Some(s) = self.cur_row().get_mut(c) {
             s.g0 = g0;
             s.p0 = p0;
+            s.s0 = s0;
         }
     }
 
@@ -597,6 +640,16 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
         self.powers
             .get(buf)
             .and_then(|p| p.get(c))
+            .copied()
+            .unwrap_or(0)
+    }
+
+    /// Spread `q` of the map in slot `c` of buffer `buf` (0 where none is
+    /// held).
+    fn spread(&self, buf: usize, c: usize) -> u16 {
+        self.spreads
+            .get(buf)
+            .and_then(|q| q.get(c))
             .copied()
             .unwrap_or(0)
     }

@@ -32,8 +32,16 @@ pub struct PositionScore {
     pub p1: u16,
     /// `floor(sqrt(p0² + p1²))`, `Q15`.
     pub pmag: u16,
+    /// Horizontal spread difference of the neighbours, `|q(+) - q(-)|`,
+    /// `Q16` ([`crate::spread`]).
+    pub s0: u16,
+    /// Vertical spread difference, `Q16`.
+    pub s1: u16,
+    /// `floor(sqrt(s0² + s1²))`, `Q16`, at most
+    /// [`crate::spread::SPREAD_MAX`].
+    pub smag: u32,
     /// [`flags`] bits, the decisions ([`flags::CVM_DEFECT`],
-    /// [`flags::POWER_DEFECT`]) included.
+    /// [`flags::POWER_DEFECT`], [`flags::SPREAD_DEFECT`]) included.
     pub flags: u8,
 }
 

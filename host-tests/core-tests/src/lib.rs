@@ -135,8 +135,29 @@ pub fn run_engine_with(
     power_threshold: u32,
     frames: &[(cvm_core::Position, Option<Vec<u16>>)],
 ) -> (Vec<(RowSummary, Vec<PositionScore>)>, Totals) {
-    let plain = run_engine_near(scorer, cols, threshold, power_threshold, frames, false, 0);
-    let near = run_engine_near(scorer, cols, threshold, power_threshold, frames, true, 0);
+    let off = cvm_core::spread::SPREAD_OFF;
+    run_engine_thresholds(scorer, cols, [threshold, power_threshold, off], frames)
+}
+
+/// [`run_engine_with`] with every channel's threshold: CVM, power, spread.
+pub fn run_engine_thresholds(
+    scorer: &Scorer,
+    cols: usize,
+    [threshold, power_threshold, spread_threshold]: [u32; 3],
+    frames: &[(cvm_core::Position, Option<Vec<u16>>)],
+) -> (Vec<(RowSummary, Vec<PositionScore>)>, Totals) {
+    let run = |with_near: bool, rows: u32| {
+        run_engine_full(
+            scorer,
+            cols,
+            [threshold, power_threshold, spread_threshold],
+            frames,
+            with_near,
+            rows,
+        )
+    };
+    let plain = run(false, 0);
+    let near = run(true, 0);
     assert!(
         plain == near,
         "the engine with the near buffer gives other results"
@@ -154,15 +175,7 @@ pub fn run_engine_with(
         .map_or(0, |r| r.saturating_add(1));
     for known in [rows, rows.saturating_add(2)] {
         for with_near in [false, true] {
-            let got = run_engine_near(
-                scorer,
-                cols,
-                threshold,
-                power_threshold,
-                frames,
-                with_near,
-                known,
-            );
+            let got = run(with_near, known);
             assert!(
                 plain == got,
                 "the engine told of {known} rows gives other results"
@@ -183,6 +196,20 @@ pub fn run_engine_near(
     with_near: bool,
     rows: u32,
 ) -> (Vec<(RowSummary, Vec<PositionScore>)>, Totals) {
+    let off = cvm_core::spread::SPREAD_OFF;
+    let thresholds = [threshold, power_threshold, off];
+    run_engine_full(scorer, cols, thresholds, frames, with_near, rows)
+}
+
+/// [`run_engine_near`] with every channel's threshold.
+fn run_engine_full(
+    scorer: &Scorer,
+    cols: usize,
+    [threshold, power_threshold, spread_threshold]: [u32; 3],
+    frames: &[(cvm_core::Position, Option<Vec<u16>>)],
+    with_near: bool,
+    rows: u32,
+) -> (Vec<(RowSummary, Vec<PositionScore>)>, Totals) {
     let words = cvm_core::stream::row_words_for(cols, scorer.config());
     let (mut a, mut b) = (vec![0i32; words], vec![0i32; words]);
     let mut near = if with_near {
@@ -195,6 +222,9 @@ pub fn run_engine_near(
             .unwrap(),
     );
     engine.set_power_threshold(power_threshold);
+    if spread_threshold != cvm_core::spread::SPREAD_OFF {
+        engine.set_spread_threshold(spread_threshold);
+    }
     engine.set_rows(rows);
     let mut out_rows = Vec::new();
     let mut out = |v: &cvm_core::RowView| out_rows.push((v.summary, v.scores.to_vec()));
@@ -246,6 +276,44 @@ pub fn decide(scores: &mut [PositionScore], threshold: u32, power_threshold: u32
         }
         s.strength = st.into_iter().max().unwrap_or(0);
     }
+}
+
+/// The spread decision added to scores [`decide`] has decided: the
+/// channel fires when `smag` reaches `spread_threshold`, and the strength
+/// becomes the larger of the one there and the spread channel's.
+pub fn decide_spread(scores: &mut [PositionScore], spread_threshold: u32) {
+    use cvm_core::flags;
+    for s in scores.iter_mut() {
+        if s.flags & flags::NO_DATA != 0 || s.smag < spread_threshold {
+            continue;
+        }
+        s.flags |= flags::SPREAD_DEFECT;
+        let v = (s.smag as u128 * 65536) / (spread_threshold.max(1) as u128);
+        s.strength = s.strength.max(u32::try_from(v).unwrap_or(u32::MAX));
+    }
+}
+
+/// The spread channel's `q` of a map from the f64 reference:
+/// `floor(2^16 outside_core)`. Exact: the sums are integers below `2^24`,
+/// exact in f64; the quotient's rounding moves it by less than
+/// `2^16 2^-53` in units of `q`, while a true value just below an integer
+/// `k` is at least `1 / P > 2^-24` away from it.
+pub fn spread_q_ref(frame: &[u16], j1: usize, j2: usize, half: usize) -> u16 {
+    let g = cvm_reference::Geometry::new(j1, j2).expect("a geometry of the core");
+    cvm_reference::outside_core(g, &to_f64(frame), half).map_or(0, |f| (f * 65536.0).floor() as u16)
+}
+
+/// `floor(sqrt(s0² + s1²))` by exhaustive search from the f64 root.
+pub fn spread_magnitude_ref(s0: u16, s1: u16) -> u32 {
+    let s = u64::from(s0).pow(2) + u64::from(s1).pow(2);
+    let mut m = (s as f64).sqrt() as u64;
+    while m * m > s {
+        m -= 1;
+    }
+    while (m + 1) * (m + 1) <= s {
+        m += 1;
+    }
+    m as u32
 }
 
 /// Power contrast of two map sums in `Q15`, from its definition in f64:

@@ -318,7 +318,7 @@ fn window_size_table() {
     let w = cvm_core::stream::window_bytes(300, 15, 15);
     assert_eq!(
         w,
-        2 * 300 * 225 * 4 + 300 * (2 + 2 * 4 + 2 * std::mem::size_of::<PositionScore>())
+        2 * 300 * 225 * 4 + 300 * (2 + 2 * 4 + 2 * 2 + 2 * std::mem::size_of::<PositionScore>())
     );
 }
 

@@ -295,6 +295,6 @@ fn centroid_is_strength_weighted() {
     assert_eq!(got.len(), 1);
     assert_eq!(got[0].centroid_col_q8, 192);
     assert_eq!(got[0].centroid_row_q8, 0);
-    assert_eq!(got[0].channels, flags::DEFECT);
+    assert_eq!(got[0].channels, flags::CVM_DEFECT | flags::POWER_DEFECT);
     assert_eq!((got[0].peak_col, got[0].peak), (1, 3 * 65_536));
 }

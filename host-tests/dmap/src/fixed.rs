@@ -6,7 +6,7 @@
 use std::collections::HashMap;
 use std::sync::Mutex;
 
-use cvm_core::{Config, Kernels, PositionScore, Scorer, flags, magnitude, power};
+use cvm_core::{Config, Kernels, PositionScore, Scorer, flags, magnitude, power, spread};
 
 /// The fixed-point scorer of `cfg`, ready to prepare maps: with square
 /// kernels, their factor table built and attached ([`Scorer::with_factors`]).
@@ -34,7 +34,8 @@ pub fn scorer(cfg: &Config) -> Result<Scorer, cvm_core::ConfigError> {
 
 /// Scores every position of a `rows x cols` scan of `u16` maps (raster
 /// order, `cells` samples per map), with the border rule of docs/method.md §3.
-/// Both channels' values are filled in; the decisions (defect flags and
+/// The CVM and power channels' values are filled in (the spread
+/// channel's, off by default, by [`add_spread`]); the decisions (defect flags and
 /// strength) are left to the caller, which knows the thresholds.
 ///
 /// # Panics
@@ -98,10 +99,51 @@ pub fn score_scan(scorer: &Scorer, rows: usize, cols: usize, data: &[u16]) -> Ve
                 p1,
                 pmag: power::magnitude(p0, p1),
                 flags: f,
+                ..PositionScore::default()
             });
         }
     }
     out
+}
+
+/// The spread channel's values (`s0`, `s1`, `smag`) of the scores
+/// [`score_scan`] gave for the same scan, with the same border rule: what
+/// the streaming engine reports with its spread channel on.
+///
+/// # Panics
+/// If `data` or `scores` do not match `rows x cols`.
+pub fn add_spread(
+    scorer: &Scorer,
+    rows: usize,
+    cols: usize,
+    data: &[u16],
+    scores: &mut [PositionScore],
+) {
+    let n = scorer.cells();
+    assert_eq!(
+        data.len(),
+        rows * cols * n,
+        "scan length does not match its shape"
+    );
+    assert_eq!(scores.len(), rows * cols, "one score per position");
+    let g = scorer.geometry();
+    let (j1, j2, h) = (g.j1 as usize, g.j2 as usize, scorer.spread_half() as usize);
+    let q: Vec<u16> = data
+        .chunks_exact(n)
+        .map(|f| {
+            let p = f.iter().map(|&a| u32::from(a)).sum();
+            spread::outside_core(f, j1, j2, h, p)
+        })
+        .collect();
+    let at = |r: usize, c: usize| q[r * cols + c];
+    for (i, s) in scores.iter_mut().enumerate() {
+        let (r, c) = (i / cols, i % cols);
+        let (l, rr) = (c.saturating_sub(1), (c + 1).min(cols - 1));
+        let (u, d) = (r.saturating_sub(1), (r + 1).min(rows - 1));
+        s.s0 = at(r, l).abs_diff(at(r, rr));
+        s.s1 = at(u, c).abs_diff(at(d, c));
+        s.smag = spread::magnitude(s.s0, s.s1);
+    }
 }
 
 /// The gradient image of docs/method.md §2 (`rows x cols x 3`, distance units).
