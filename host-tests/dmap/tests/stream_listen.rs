@@ -515,7 +515,7 @@ fn bandwidth_figures_of_the_protocol_document() {
         peak_col: 44,
         peak_mag: 1_234_567_890,
         peak_power: 4567,
-        channels: cvm_core::flags::DEFECT,
+        channels: cvm_core::flags::CVM_DEFECT | cvm_core::flags::POWER_DEFECT,
         centroid_row_q8: 31_565,
         centroid_col_q8: 11_335,
     };
@@ -565,7 +565,7 @@ fn bandwidth_figures_of_the_protocol_document() {
             peak_col: max,
             peak_mag: max,
             peak_power: cvm_core::power::POWER_MAX as u16,
-            channels: cvm_core::flags::DEFECT,
+            channels: cvm_core::flags::CVM_DEFECT | cvm_core::flags::POWER_DEFECT,
             centroid_row_q8: u64::from(max) << 8,
             centroid_col_q8: u64::from(max) << 8,
         },
