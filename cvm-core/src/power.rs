@@ -57,18 +57,18 @@ pub fn magnitude(c0: u16, c1: u16) -> u16 {
     isqrt(c0 * c0 + c1 * c1).min(POWER_MAX) as u16
 }
 
-/// `floor(sqrt(s))` for `s <= 2^31`: Newton's iteration on integers from a
-/// power of two at or above the root. Each step `x -> (x + s/x) / 2` stays
-/// at or above `floor(sqrt(s))` and decreases until it stops, which is at
-/// the floor of the root; from at most twice the root that takes at most
-/// six steps (about 30 instructions, against about 80 for the general
-/// 64-bit magnitude).
-fn isqrt(s: u32) -> u32 {
+/// `floor(sqrt(s))`: Newton's iteration on integers from a power of two at
+/// or above the root. Each step `x -> (x + s/x) / 2` stays at or above
+/// `floor(sqrt(s))` and decreases until it stops, which is at the floor of
+/// the root; from at most twice the root that takes at most six steps
+/// (about 30 instructions, against about 80 for the general 64-bit
+/// magnitude). The spread channel's magnitude uses it too.
+pub(crate) fn isqrt(s: u32) -> u32 {
     if s < 2 {
         return s;
     }
     let bits = 32 - s.leading_zeros();
-    // 2^ceil(bits/2) >= sqrt(s); at most 2^16, so x + s/x < 2^32.
+    // 2^ceil(bits/2) >= sqrt(s); at most 2^16, so x + s/x <= 2^17.
     let mut x = 1u32 << bits.div_ceil(2);
     loop {
         let Some(q) = s.checked_div(x) else {

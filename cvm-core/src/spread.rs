@@ -51,6 +51,7 @@
 //! channel is on ([`crate::Engine::set_spread_threshold`]).
 
 use crate::config::MAX_CELLS;
+use crate::power::isqrt;
 use crate::scorer::magnitude as magnitude64;
 
 /// Fraction bits of the spread channel's values.
@@ -172,30 +173,8 @@ pub fn magnitude(s0: u16, s1: u16) -> u32 {
     let (a, b) = (s0 as u32, s1 as u32);
     // Each square is below 2^32; their sum may not be.
     match (a * a).checked_add(b * b) {
-        Some(s) => isqrt32(s),
+        Some(s) => isqrt(s),
         None => magnitude64(a, b),
-    }
-}
-
-/// `floor(sqrt(s))`: Newton's iteration on integers from a power of two at
-/// or above the root (as the power channel's). Every step stays at or
-/// above the floor of the root and decreases until it stops there.
-fn isqrt32(s: u32) -> u32 {
-    if s < 2 {
-        return s;
-    }
-    let bits = 32 - s.leading_zeros();
-    // 2^ceil(bits/2) >= sqrt(s), at most 2^16: x + s/x <= 2^16 + 2^16.
-    let mut x = 1u32 << bits.div_ceil(2);
-    loop {
-        let Some(q) = s.checked_div(x) else {
-            return x;
-        };
-        let y = (x + q) >> 1;
-        if y >= x {
-            return x;
-        }
-        x = y;
     }
 }
 
