@@ -426,3 +426,25 @@ pub fn row_summary_with(
         saturated: count(flags::SATURATED),
     }
 }
+
+/// The beams of a `rows` x `cols` scan of `n`-cell maps in raster order,
+/// each with its frame where `present` (a position's flag; `None`: all)
+/// and marked missing elsewhere.
+pub fn scan_frames(
+    data: &[u16],
+    n: usize,
+    rows: usize,
+    cols: usize,
+    present: Option<&[bool]>,
+) -> Vec<(cvm_core::Position, Option<Vec<u16>>)> {
+    (0..rows * cols)
+        .map(|i| {
+            let pos = cvm_core::Position {
+                row: (i / cols) as u32,
+                col: (i % cols) as u32,
+            };
+            let here = present.is_none_or(|p| p[i]);
+            (pos, here.then(|| data[i * n..(i + 1) * n].to_vec()))
+        })
+        .collect()
+}

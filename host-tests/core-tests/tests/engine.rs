@@ -15,15 +15,7 @@ fn clean_frames(
     n: usize,
     data: &[u16],
 ) -> Vec<(Position, Option<Vec<u16>>)> {
-    (0..rows * cols)
-        .map(|i| {
-            let pos = Position {
-                row: (i / cols) as u32,
-                col: (i % cols) as u32,
-            };
-            (pos, Some(data[i * n..(i + 1) * n].to_vec()))
-        })
-        .collect()
+    cvm_core_tests::scan_frames(data, n, rows, cols, None)
 }
 
 fn flatten(rows: &[(cvm_core::RowSummary, Vec<PositionScore>)]) -> Vec<PositionScore> {

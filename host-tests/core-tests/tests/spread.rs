@@ -4,10 +4,10 @@
 
 use cvm_core::scorer::Scratch;
 use cvm_core::spread::{self, SPREAD_MAX, SPREAD_OFF};
-use cvm_core::{Position, PositionScore, Scorer, flags};
+use cvm_core::{PositionScore, Scorer, flags};
 use cvm_core_tests::{
     GEOMETRIES, decide, decide_spread, random_map, random_scan, rng, run_engine_thresholds,
-    spread_magnitude_ref, spread_q_ref, variants,
+    scan_frames, spread_magnitude_ref, spread_q_ref, variants,
 };
 use cvm_reference::neighbour_gradient;
 use dmap::fixed::{add_spread, score_scan};
@@ -244,25 +244,6 @@ fn gradient_ref(qs: &[Option<u16>], rows: usize, cols: usize, r: usize, c: usize
     neighbour_gradient(&local, 3, 3)[4]
 }
 
-fn frames_with_gaps(
-    data: &[u16],
-    n: usize,
-    rows: usize,
-    cols: usize,
-    present: &[bool],
-) -> Vec<(Position, Option<Vec<u16>>)> {
-    (0..rows * cols)
-        .map(|i| {
-            let pos = Position {
-                row: (i / cols) as u32,
-                col: (i % cols) as u32,
-            };
-            let f = present[i].then(|| data[i * n..(i + 1) * n].to_vec());
-            (pos, f)
-        })
-        .collect()
-}
-
 fn flatten(rows: &[(cvm_core::RowSummary, Vec<PositionScore>)]) -> Vec<PositionScore> {
     rows.iter().flat_map(|(_, s)| s.iter().copied()).collect()
 }
@@ -288,7 +269,7 @@ proptest! {
         let data = random_scan(&mut r, rows, cols, j1, j2);
         let present: Vec<bool> = (0..rows * cols).map(|_| r.random_range(0..10) >= gaps).collect();
         let scorer = variants(j1, j2)[0].scorer(j1, j2).unwrap();
-        let frames = frames_with_gaps(&data, n, rows, cols, &present);
+        let frames = scan_frames(&data, n, rows, cols, Some(&present));
         // Measured, never firing.
         let on = SPREAD_MAX + 1;
         let (out, _) = run_engine_thresholds(&scorer, cols, [u32::MAX, u32::MAX, on], &frames);
@@ -348,7 +329,7 @@ proptest! {
         let sthr = batch.iter().map(|s| s.smag).max().unwrap_or(0) / 2 + 1;
         decide(&mut batch, thr, pthr);
         decide_spread(&mut batch, sthr);
-        let frames = frames_with_gaps(&data, n, rows, cols, &vec![true; rows * cols]);
+        let frames = scan_frames(&data, n, rows, cols, None);
         let (out, totals) = run_engine_thresholds(&scorer, cols, [thr, pthr, sthr], &frames);
         prop_assert_eq!(&flatten(&out), &batch);
         let fired = batch.iter().filter(|s| s.flags & flags::SPREAD_DEFECT != 0).count();
@@ -391,7 +372,7 @@ fn a_halo_fires_the_spread_channel_at_its_neighbours() {
     // 56 cells of 25 outside, of 6000 * 3/4 + 81 * 25 counts.
     assert_eq!(q_halo, share_ref(56 * 25, 4500 + 81 * 25));
     let thr = u32::from(q_halo) / 2;
-    let frames = frames_with_gaps(&data, n, rows, cols, &vec![true; rows * cols]);
+    let frames = scan_frames(&data, n, rows, cols, None);
     let (out, totals) = run_engine_thresholds(&scorer, cols, [u32::MAX, u32::MAX, thr], &frames);
     let got = flatten(&out);
     let neighbours = [(1, 3), (3, 3), (2, 2), (2, 4)];
