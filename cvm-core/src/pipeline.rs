@@ -103,6 +103,7 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
         let (cols, threshold) = (settings.cols, settings.threshold);
         let mut engine = Engine::with_near(scorer, cols, threshold, row_a, row_b, near)?;
         engine.set_power_threshold(settings.power_threshold);
+        engine.set_spread_threshold(settings.spread_threshold);
         engine.set_rows(settings.rows);
         Ok(Pipeline {
             engine,
@@ -158,6 +159,7 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
     pub fn configure(&mut self, settings: Settings) -> Result<(), EngineError> {
         self.engine.reconfigure(settings.cols, settings.threshold)?;
         self.engine.set_power_threshold(settings.power_threshold);
+        self.engine.set_spread_threshold(settings.spread_threshold);
         self.engine.set_rows(settings.rows);
         self.settings = settings;
         Ok(())

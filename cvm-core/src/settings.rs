@@ -65,6 +65,10 @@ pub struct Settings {
     /// Power magnitude (`Q15`) at or above which a position is a defect
     /// ([`crate::power::POWER_OFF`]: never).
     pub power_threshold: u32,
+    /// Spread magnitude (`Q16`) at or above which a position is a defect
+    /// ([`crate::spread::SPREAD_OFF`], the default: the channel is off and
+    /// measures nothing).
+    pub spread_threshold: u32,
     /// Emit per-position score (`S`) lines.
     pub scores: bool,
     /// At most this many defect (`D`) lines per row, the strongest; the row
@@ -94,7 +98,7 @@ pub const KEYS: usize = 15;
 
 impl Settings {
     /// Settings of `cols` x `rows` scans with these thresholds, everything
-    /// else at its default: no score or defect lines, [`Outputs::DEFAULT`],
+    /// else at its default: the spread channel off, no score or defect lines, [`Outputs::DEFAULT`],
     /// every value compiled in, no settings record, a power-on start.
     pub const fn new(
         cols: u32,
@@ -107,6 +111,7 @@ impl Settings {
             cols,
             threshold,
             power_threshold,
+            spread_threshold: crate::spread::SPREAD_OFF,
             scores: false,
             max_defect_lines_per_row: 0,
             firmware_version,

@@ -97,6 +97,8 @@ pub fn compiled_settings(cause: ResetCause, boots: u32) -> Settings {
         cols: COLS as u32,
         threshold: TABLES.threshold_from_units(THRESHOLD_UNITS),
         power_threshold: cvm_core::power::threshold_from_units(POWER_THRESHOLD_UNITS),
+        // Off until the build-time configuration and the settings record carry it.
+        spread_threshold: cvm_core::spread::SPREAD_OFF,
         scores: SCORES,
         max_defect_lines_per_row: MAX_DEFECT_LINES_PER_ROW,
         firmware_version: FIRMWARE_VERSION,

@@ -36,6 +36,7 @@ fn settings(rows: usize, cols: usize, thresholds: (u32, u32), outputs: Outputs) 
         cols: cols as u32,
         threshold: thresholds.0,
         power_threshold: thresholds.1,
+        spread_threshold: cvm_core::spread::SPREAD_OFF,
         scores: true,
         max_defect_lines_per_row: 4,
         firmware_version: "ahead-test",

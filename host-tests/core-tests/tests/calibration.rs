@@ -300,6 +300,7 @@ fn the_pipeline_hook_takes_the_armed_scans_positions() {
         cols: cols as u32,
         threshold: scorer.threshold_from_units(0.02),
         power_threshold: 3000,
+        spread_threshold: cvm_core::spread::SPREAD_OFF,
         scores: false,
         max_defect_lines_per_row: 3,
         firmware_version: "calibration-test",

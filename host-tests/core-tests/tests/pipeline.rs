@@ -37,6 +37,7 @@ fn header_rows_and_end_match_the_engine() {
             cols: cols as u32,
             threshold,
             power_threshold,
+            spread_threshold: cvm_core::spread::SPREAD_OFF,
             scores,
             max_defect_lines_per_row: 3,
             firmware_version: "pipeline-test",

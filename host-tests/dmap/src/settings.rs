@@ -171,6 +171,7 @@ fn pipeline_settings(
         cols: cols as u32,
         threshold: scorer.threshold_from_units(threshold_units),
         power_threshold: cvm_core::power::threshold_from_units(power_threshold_units),
+        spread_threshold: cvm_core::spread::SPREAD_OFF,
         scores: output.scores,
         max_defect_lines_per_row: output.max_defect_lines,
         firmware_version: cvm_core::VERSION,

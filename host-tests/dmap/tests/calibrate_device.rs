@@ -45,6 +45,7 @@ fn on_the_board(scorer: &Scorer, rows: usize, cols: usize, scans: &[Vec<u16>]) -
         cols: cols as u32,
         threshold: scorer.threshold_from_units(0.1),
         power_threshold: 3277,
+        spread_threshold: cvm_core::spread::SPREAD_OFF,
         scores: true,
         max_defect_lines_per_row: 4,
         firmware_version: "calibrate-device-test",

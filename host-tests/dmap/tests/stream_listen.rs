@@ -690,6 +690,7 @@ fn absurd_claimed_size_is_refused() {
         cols: 4_000_000,
         threshold: 1,
         power_threshold: 3277,
+        spread_threshold: cvm_core::spread::SPREAD_OFF,
         scores: true,
         max_defect_lines_per_row: 16,
         firmware_version: "0.1.0",

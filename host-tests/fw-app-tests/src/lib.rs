@@ -83,6 +83,7 @@ impl Scan {
             cols: self.cols,
             threshold: scorer.threshold_from_units(0.006),
             power_threshold: cvm_core::power::threshold_from_units(0.1),
+            spread_threshold: cvm_core::spread::SPREAD_OFF,
             scores,
             max_defect_lines_per_row: 4,
             firmware_version: "test",
