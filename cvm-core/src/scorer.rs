@@ -62,4 +62,4 @@ pub use prepare::{Prepared, Scratch};
 pub use setup::{MAX_FACTOR_WORDS, Scorer};
 /// The sum pass, exposed for the test that checks when it copies the frame.
 #[doc(hidden)]
-pub use sum::{FrameCopy, sum_and_saturation};
+pub use sum::{FrameCopy, sum_and_peak};

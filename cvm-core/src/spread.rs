@@ -70,10 +70,28 @@ pub const CORE_HALF: u8 = 2;
 /// `half`. 0 for a dark map and for a frame whose length is not `j1 j2`
 /// (the scorer rejects those before).
 pub fn outside_core(frame: &[u16], j1: usize, j2: usize, half: usize, power: u32) -> u16 {
+    let top = frame.iter().copied().max().unwrap_or(0);
+    outside_core_of_peak(frame, j1, j2, half, power, top)
+}
+
+/// [`outside_core`] of a map whose largest sample is `top`, which the
+/// scorer's sum pass finds on the way (two instructions per two samples,
+/// `scorer::sum`), so that only the search for the first cell holding it
+/// is left here: it stops at the spot, on average half-way through the
+/// map. A `top` that no cell holds (not the scorer's) centres the core on
+/// the first cell.
+pub fn outside_core_of_peak(
+    frame: &[u16],
+    j1: usize,
+    j2: usize,
+    half: usize,
+    power: u32,
+    top: u16,
+) -> u16 {
     if power == 0 || j1 == 0 || j2 == 0 || frame.len() != j1 * j2 || frame.len() > MAX_CELLS {
         return 0;
     }
-    let peak = brightest(frame);
+    let peak = first_of(frame, top);
     let (p1, p2) = (peak / j2, peak % j2);
     let (r0, r1) = (
         p1.saturating_sub(half),
@@ -95,55 +113,70 @@ pub fn outside_core(frame: &[u16], j1: usize, j2: usize, half: usize, power: u32
     share(power.saturating_sub(core), power)
 }
 
-/// Index of the brightest cell, the first on ties. Two steps: the largest
-/// sample, two samples at a time ([`max2`]), then the first cell that holds
-/// it, which stops at the spot (on average half-way through the map).
-fn brightest(frame: &[u16]) -> usize {
+/// Index of the first cell holding `top`, the map's largest sample (0 if
+/// none does). Two cells a word: a lane of [`at_least2`] is non-zero
+/// exactly where a sample reaches `top`, which for the largest sample
+/// means equals it.
+fn first_of(frame: &[u16], top: u16) -> usize {
     // SAFETY: every bit pattern is a valid `u32`; `align_to` only splits
     // off the unaligned ends (the scorer's copy of a frame has none).
-    let (head, words, tail) = unsafe { frame.align_to::<u32>() };
-    let mut m2 = 0u32;
-    for &w in words {
-        m2 = max2(w, m2);
+    let (head, words, _) = unsafe { frame.align_to::<u32>() };
+    let by_cell = |from: usize| {
+        frame
+            .iter()
+            .skip(from)
+            .position(|&a| a == top)
+            .map_or(0, |i| from + i)
+    };
+    if !head.is_empty() {
+        return by_cell(0);
     }
-    let mut top = (m2 as u16).max((m2 >> 16) as u16);
-    for &a in head.iter().chain(tail) {
-        top = top.max(a);
+    let top2 = top as u32 * 0x0001_0001;
+    for (i, &w) in words.iter().enumerate() {
+        let m = at_least2(w, top2);
+        if m != 0 {
+            // The first cell of a word is its low half (little-endian).
+            return 2 * i + (m & 0xFFFF == 0) as usize;
+        }
     }
-    frame.iter().position(|&a| a == top).unwrap_or(0)
+    by_cell(2 * words.len())
 }
 
-/// The larger of each 16-bit half of `w` and `m`: `USUB16` sets the
-/// halves' GE flags where `w`'s half is at least `m`'s, `SEL` takes those
-/// halves from `w` and the others from `m`. Two instructions for two
-/// samples.
+/// Each 16-bit half of `w` that is at least the matching half of `t`
+/// as all ones, the others 0: `USUB16` sets a half's GE flags when the
+/// subtraction does not borrow, `SEL` picks ones there. Two
+/// instructions for two samples.
 #[cfg(target_arch = "arm")]
 #[inline(always)]
-fn max2(w: u32, m: u32) -> u32 {
+fn at_least2(w: u32, t: u32) -> u32 {
     let r: u32;
     // SAFETY: register operations only (`USUB16` and `SEL` are part of
-    // the Cortex-M4/M7 DSP extension of thumbv7em); `t` is an output
-    // written before `w` and `m` are read again, so it gets a register of
-    // its own.
+    // the Cortex-M4/M7 DSP extension of thumbv7em); `d` is written before
+    // the inputs are read again, so it gets a register of its own.
     unsafe {
         core::arch::asm!(
-            "usub16 {t}, {w}, {m}",
-            "sel {r}, {w}, {m}",
-            t = out(reg) _,
+            "usub16 {d}, {w}, {t}",
+            "sel {r}, {ones}, {zero}",
+            d = out(reg) _,
             r = lateout(reg) r,
             w = in(reg) w,
-            m = in(reg) m,
+            t = in(reg) t,
+            ones = in(reg) u32::MAX,
+            zero = in(reg) 0u32,
             options(pure, nomem, nostack)
         );
     }
     r
 }
 
-/// The larger of each 16-bit half of `w` and `m`.
+/// Each 16-bit half of `w` that is at least the matching half of `t`
+/// as all ones, the others 0.
 #[cfg(not(target_arch = "arm"))]
 #[inline(always)]
-fn max2(w: u32, m: u32) -> u32 {
-    (w & 0xFFFF).max(m & 0xFFFF) | (w >> 16).max(m >> 16) << 16
+fn at_least2(w: u32, t: u32) -> u32 {
+    let lo = if w & 0xFFFF >= t & 0xFFFF { 0xFFFF } else { 0 };
+    let hi = if w >> 16 >= t >> 16 { 0xFFFF_0000 } else { 0 };
+    lo | hi
 }
 
 /// `floor(2^16 o / p)` for `o < p < 2^24`, by long division in base `2^8`

@@ -7,7 +7,7 @@ use crate::scorer::embed::embed;
 use crate::scorer::error::FrameError;
 use crate::scorer::setup::{Kind, Scorer};
 use crate::scorer::square;
-use crate::scorer::sum::{FrameCopy, sum_and_saturation};
+use crate::scorer::sum::{FrameCopy, sum_and_peak};
 use crate::scorer::words::{copy_words, squared_difference};
 use crate::spread;
 
@@ -129,9 +129,9 @@ impl Scorer {
                 }
                 let blocks = self.blocks();
                 let mut copy = FrameCopy::new();
-                let (power, fl, frame) = self.sum_pass(frame, &mut copy);
+                let (power, fl, frame, top) = self.sum_pass(frame, &mut copy);
                 let spread = if measure {
-                    self.spread(frame, power)
+                    self.spread(frame, power, top)
                 } else {
                     0
                 };
@@ -158,8 +158,12 @@ impl Scorer {
             }
             Kind::Paper => {
                 let mut copy = FrameCopy::new();
-                let (sum, fl, frame) = self.sum_pass(frame, &mut copy);
-                let spread = if measure { self.spread(frame, sum) } else { 0 };
+                let (sum, fl, frame, top) = self.sum_pass(frame, &mut copy);
+                let spread = if measure {
+                    self.spread(frame, sum, top)
+                } else {
+                    0
+                };
                 let conv = self.scale(sum);
                 let acc = embed(
                     &self.passes,
@@ -182,32 +186,34 @@ impl Scorer {
     }
 
     /// The spread channel's `q` of a map (read from the fast copy the sum
-    /// pass made) whose power is `power`.
+    /// pass made) whose power is `power` and largest sample `top`.
     #[inline(always)]
-    fn spread(&self, frame: &[u16], power: u32) -> u16 {
+    fn spread(&self, frame: &[u16], power: u32, top: u16) -> u16 {
         let g = self.config.geometry;
-        spread::outside_core(
+        spread::outside_core_of_peak(
             frame,
             g.j1 as usize,
             g.j2 as usize,
             self.spread_half as usize,
             power,
+            top,
         )
     }
 
     /// The sample sum of `frame`, its flags ([`flags::SATURATED`],
-    /// [`flags::DARK`]) and the frame to read from then (`copy` once the
-    /// sum pass has copied it there): the first pass of both kernel sets.
+    /// [`flags::DARK`]), the frame to read from then (`copy` once the sum
+    /// pass has copied it there) and its largest sample: the first pass of
+    /// both kernel sets.
     #[inline(always)]
-    fn sum_pass<'c>(&self, frame: &'c [u16], copy: &'c mut FrameCopy) -> (u32, u8, &'c [u16]) {
-        let (sum, sat, frame) = sum_and_saturation(frame, self.config.full_scale, copy);
+    fn sum_pass<'c>(&self, frame: &'c [u16], copy: &'c mut FrameCopy) -> (u32, u8, &'c [u16], u16) {
+        let (sum, top, frame) = sum_and_peak(frame, copy);
         let mut fl = 0;
-        if sat {
+        if top >= self.config.full_scale {
             fl |= flags::SATURATED;
         }
         if sum == 0 {
             fl |= flags::DARK;
         }
-        (sum, fl, frame)
+        (sum, fl, frame, top)
     }
 }

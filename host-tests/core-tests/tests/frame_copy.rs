@@ -108,34 +108,31 @@ fn aligned_and_unaligned_frames_embed_the_same() {
 }
 
 /// The sum pass copies a frame that starts on a word (and returns the
-/// copy), and hands back any other frame itself, as it does every frame
-/// when the full scale is 0 (all saturated, scored from the frame); always
-/// with the frame's sum and saturation flag.
+/// copy), and hands back any other frame itself; always with the frame's
+/// sum and largest sample.
 #[test]
 fn the_sum_pass_copies_word_aligned_frames() {
-    use cvm_core::scorer::{FrameCopy, sum_and_saturation};
+    use cvm_core::scorer::{FrameCopy, sum_and_peak};
     let mut r = rng(78);
     for cells in [1usize, 2, 3, 4, 5, 8, 9, 81, 224, 225, 255, 256] {
-        let frame = random_map(&mut r, cells, 1);
-        let placed = Placed::new(&frame);
-        let (on, off) = (placed.on(), placed.off());
-        let sum: u32 = frame.iter().map(|&v| u32::from(v)).sum();
-        let fs = frame.iter().copied().max().unwrap();
-        for full_scale in [fs.max(1), fs.saturating_add(1), 0] {
-            let sat = frame.iter().any(|&v| v >= full_scale);
+        for spike in [None, Some(0), Some(cells - 1), Some(cells / 2)] {
+            let mut frame = random_map(&mut r, cells, 1);
+            // The largest sample first, last, in the middle, or where the
+            // random map put it.
+            if let Some(k) = spike {
+                frame[k] = u16::MAX;
+            }
+            let placed = Placed::new(&frame);
+            let (on, off) = (placed.on(), placed.off());
+            let sum: u32 = frame.iter().map(|&v| u32::from(v)).sum();
+            let top = frame.iter().copied().max().unwrap();
             let mut copy = FrameCopy::new();
-            let (s, f, got) = sum_and_saturation(on, full_scale, &mut copy);
-            assert_eq!((s, f, got), (sum, sat, on), "{cells} cells, aligned");
-            // A full scale of 0 saturates every frame: nothing to copy for.
-            let copied = got.as_ptr() != on.as_ptr();
-            assert_eq!(
-                copied,
-                full_scale > 0,
-                "{cells} cells, full scale {full_scale}"
-            );
+            let (s, t, got) = sum_and_peak(on, &mut copy);
+            assert_eq!((s, t, got), (sum, top, on), "{cells} cells, aligned");
+            assert_ne!(got.as_ptr(), on.as_ptr(), "{cells} cells: not copied");
             let mut copy = FrameCopy::new();
-            let (s, f, got) = sum_and_saturation(off, full_scale, &mut copy);
-            assert_eq!((s, f, got), (sum, sat, off), "{cells} cells, unaligned");
+            let (s, t, got) = sum_and_peak(off, &mut copy);
+            assert_eq!((s, t, got), (sum, top, off), "{cells} cells, unaligned");
             assert_eq!(got.as_ptr(), off.as_ptr(), "{cells} cells: copied");
         }
     }

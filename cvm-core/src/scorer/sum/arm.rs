@@ -1,6 +1,6 @@
 //! The Cortex-M loops of the sum pass: the whole blocks of four words of a
-//! copied frame in one hand-written loop, and the saturation test of two
-//! samples in one `UQSUB16`.
+//! copied frame in one hand-written loop, and the larger sample of two
+//! pairs in one `USUB16` and one `SEL`.
 
 use core::mem::MaybeUninit;
 
@@ -9,19 +9,16 @@ pub const BLOCKS: bool = true;
 
 /// The loop of `words_sum` over whole blocks of four words
 /// (`words.len() == dst.len()`, a non-zero multiple of 4): per block one
-/// `LDM`, one `STM` (the copy) and per word `UXTAH`, `ADD ..., LSR #16`,
-/// `UQSUB16`, `ORR`. Written by hand because the compiler, with the copy's
+/// `LDM`, one `STM` (the copy) and per word `UXTAH`, `ADD ..., LSR #16`
+/// (the sums), `USUB16`, `SEL` (the running maximum of each half, as
+/// [`max2`]). Written by hand because the compiler, with the copy's
 /// pointer as one more live register, spilled the sums to the stack.
 #[inline(always)]
-pub fn sum_copy_blocks(
-    words: &[u32],
-    dst: &mut [MaybeUninit<u32>],
-    below2: u32,
-) -> (u32, u32, u32) {
-    let (mut lo, mut hi, mut over) = (0u32, 0u32, 0u32);
+pub fn sum_copy_blocks(words: &[u32], dst: &mut [MaybeUninit<u32>]) -> (u32, u32, u32) {
+    let (mut lo, mut hi, mut top) = (0u32, 0u32, 0u32);
     let n = words.len().min(dst.len()) / 4;
     if n == 0 {
-        return (lo, hi, over);
+        return (lo, hi, top);
     }
     // SAFETY: reads `4 n` words from `words` and writes `4 n` to `dst`,
     // both at least that long; registers only otherwise.
@@ -32,20 +29,20 @@ pub fn sum_copy_blocks(
             "stm {dst}!, {{r0, r1, r2, r3}}",
             "uxtah {lo}, {lo}, r0",
             "add {hi}, {hi}, r0, lsr #16",
-            "uqsub16 r0, r0, {b}",
-            "orr {over}, {over}, r0",
+            "usub16 {t}, r0, {top}",
+            "sel {top}, r0, {top}",
             "uxtah {lo}, {lo}, r1",
             "add {hi}, {hi}, r1, lsr #16",
-            "uqsub16 r1, r1, {b}",
-            "orr {over}, {over}, r1",
+            "usub16 {t}, r1, {top}",
+            "sel {top}, r1, {top}",
             "uxtah {lo}, {lo}, r2",
             "add {hi}, {hi}, r2, lsr #16",
-            "uqsub16 r2, r2, {b}",
-            "orr {over}, {over}, r2",
+            "usub16 {t}, r2, {top}",
+            "sel {top}, r2, {top}",
             "uxtah {lo}, {lo}, r3",
             "add {hi}, {hi}, r3, lsr #16",
-            "uqsub16 r3, r3, {b}",
-            "orr {over}, {over}, r3",
+            "usub16 {t}, r3, {top}",
+            "sel {top}, r3, {top}",
             "subs {n}, {n}, #1",
             "bne 2b",
             src = inout(reg) words.as_ptr() => _,
@@ -53,8 +50,9 @@ pub fn sum_copy_blocks(
             n = inout(reg) n => _,
             lo = inout(reg) lo,
             hi = inout(reg) hi,
-            over = inout(reg) over,
-            b = in(reg) below2,
+            top = inout(reg) top,
+            // `USUB16` only sets the GE flags that `SEL` reads.
+            t = out(reg) _,
             // r0-r3 hold the four words: `LDM`/`STM` order their register
             // lists by number, so the list is written in that order.
             out("r0") _,
@@ -64,24 +62,29 @@ pub fn sum_copy_blocks(
             options(nostack)
         );
     }
-    (lo, hi, over)
+    (lo, hi, top)
 }
 
-/// Both 16-bit halves of `w` minus those of `below2`, saturating at 0
-/// (`UQSUB16`): non-zero iff a half of `w` exceeds the matching half of
-/// `below2`.
+/// The larger of each 16-bit half of `w` and `m`: `USUB16` sets the
+/// halves' GE flags where `w`'s half is at least `m`'s, `SEL` takes those
+/// halves from `w` and the others from `m`. Two instructions for two
+/// samples.
 #[inline(always)]
-pub fn above2(w: u32, below2: u32) -> u32 {
+pub fn max2(w: u32, m: u32) -> u32 {
     let r: u32;
-    // SAFETY: a pure register operation (`UQSUB16` is part of the
-    // Cortex-M4/M7 DSP extension of thumbv7em).
+    // SAFETY: register operations only (`USUB16` and `SEL` are part of
+    // the Cortex-M4/M7 DSP extension of thumbv7em); `t` is an output
+    // written before `w` and `m` are read again, so it gets a register of
+    // its own.
     unsafe {
         core::arch::asm!(
-            "uqsub16 {r}, {w}, {b}",
+            "usub16 {t}, {w}, {m}",
+            "sel {r}, {w}, {m}",
+            t = out(reg) _,
             r = lateout(reg) r,
             w = in(reg) w,
-            b = in(reg) below2,
-            options(pure, nomem, nostack, preserves_flags)
+            m = in(reg) m,
+            options(pure, nomem, nostack)
         );
     }
     r
