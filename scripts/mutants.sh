@@ -21,7 +21,7 @@
 #             decisions, row summaries), against core-tests and
 #             fw-app-tests
 #   embed     the paper kernels' per-map passes in cvm-core/src/scorer/
-#             (sum and saturation, conversion, row and column passes)
+#             (sum and largest sample, conversion, row and column passes)
 #   scorer    normalisation, flags, score conversion, distances and the
 #             gradient magnitude in cvm-core/src/scorer/
 #   square    the square kernels' factors and per-map embedding,
@@ -126,7 +126,7 @@ rm -f "$stage/host-tests/dmap/tests/emulate.rs" "$stage/host-tests/dmap/tests/tw
 # mutant's name, e.g. "cvm-core/src/scorer/normalise.rs:72:5: replace Scorer::scale
 # -> (u32, i32) with (0, 0)" or "replace + with - in rows").
 fn_re() { printf '(replace|in) (%s)( |$)' "$1"; }
-embed_fns='sum_and_saturation|words_sum|copy_words|mul_hi_round|tri|rows|rows_model|cols|cols_model|above2|sum_copy_blocks|embed'
+embed_fns='sum_and_peak|words_sum|copy_words|mul_hi_round|tri|rows|rows_model|cols|cols_model|max2|sum_copy_blocks|embed'
 scorer_fns='Scorer::(normalise|normalise_power|converter|prepare|prepare_with|prepare_into|prepare_map|sum_pass|scale|distance|square_distance|to_score)|recip_sample|shr_sample|fill|squared_difference|squared_difference_blocks|reciprocal|magnitude'
 protocol_fns='crc16|LineBuf::[a-z0-9_]+|encode_score|encode_header|encode_row|encode_end|end_fields|HeaderInfo<.*>::new'
 core_tests=(--test-package cvm-core-tests --test-package cvm-fw-app-tests)

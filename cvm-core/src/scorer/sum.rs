@@ -19,7 +19,7 @@ mod portable;
 #[cfg(not(target_arch = "arm"))]
 use portable::{BLOCKS, max2, sum_copy_blocks};
 
-/// A copy of a frame's samples, made by [`sum_and_saturation`] while it
+/// A copy of a frame's samples, made by [`sum_and_peak`] while it
 /// reads them: on the H743 it is on the stack, in DTCM, so that the row
 /// pass reads the samples without wait states from there instead of from
 /// the DMA buffer in AXI SRAM. Uninitialised until copied into.

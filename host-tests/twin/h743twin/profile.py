@@ -17,7 +17,8 @@ from .machine import Machine, cycles_of_ms
 
 # (stage, substrings of function paths), first match wins.
 STAGES = (
-    ("sum and saturation flag", ("sum_and_saturation",)),
+    ("sum and largest sample", ("sum_and_peak",)),
+    ("spread channel's measure", ("cvm_core::spread",)),
     ("embedding: row pass", ("embed::rows", "cvm_rows_")),
     ("embedding: column pass", ("embed::cols", "embed::copy_words", "cvm_cols_")),
     ("embedding: square kernels' fold and factors", ("scorer::square", "cvm_square_")),
@@ -36,7 +37,7 @@ STAGES = (
                                  "PollFn", "poll_fn")),
     ("memcpy/memset, division", ("compiler_builtins", "__aeabi", "__udivmoddi4")),
 )
-SCORING = {"sum and saturation flag", "embedding: row pass",
+SCORING = {"sum and largest sample", "spread channel's measure", "embedding: row pass",
            "embedding: column pass", "embedding: square kernels' fold and factors", "distances",
            "normalise, gradient, window", "defect objects", "sequencing", "line encoding and queue"}
 
