@@ -93,6 +93,7 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
 
     /// [`Pipeline::new`] with a buffer for the current row's last three
     /// maps (see [`Engine::with_near`]).
+    #[inline(always)]
     pub fn with_near(
         scorer: &'a Scorer,
         settings: Settings,

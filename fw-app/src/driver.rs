@@ -56,6 +56,7 @@ pub struct ScanDriver<'a, const MAX_COLS: usize> {
 }
 
 impl<'a, const MAX_COLS: usize> ScanDriver<'a, MAX_COLS> {
+    #[inline(always)]
     pub fn new(pipeline: Pipeline<'a, MAX_COLS>, cols: u32, rows: u32) -> Self {
         ScanDriver {
             pipeline,
@@ -78,6 +79,12 @@ impl<'a, const MAX_COLS: usize> ScanDriver<'a, MAX_COLS> {
     /// outputs follow [`ScanDriver::settings`] from then on.
     pub fn take_applied(&mut self) -> bool {
         core::mem::take(&mut self.applied)
+    }
+
+    /// Lends `calibrator` to the pipeline (see
+    /// `Pipeline::attach_calibrator`).
+    pub fn attach_calibrator(&mut self, calibrator: &'a mut Calibrator) {
+        self.pipeline.attach_calibrator(calibrator);
     }
 
     /// The pipeline's calibrator, if one is attached.

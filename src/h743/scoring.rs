@@ -132,10 +132,18 @@ pub fn scan_driver(settings: Settings) -> &'static mut ScanDriver<'static, MAX_C
     let (row_a, rest) = axi.split_at_mut(ROW_WORDS);
     let row_b = if ROWS_IN_AXI { rest } else { sram123 };
     let near = unsafe { NEAR.take_zeroed() };
-    let mut pipeline = match Pipeline::<MAX_COLS>::with_near(scorer, settings, row_a, row_b, near) {
-        Ok(p) => p,
-        Err(e) => defmt::panic!("pipeline refused its buffers: {}", e),
-    };
-    pipeline.attach_calibrator(CALIBRATOR.take());
-    unsafe { DRIVER.take() }.write(ScanDriver::new(pipeline, settings.cols, settings.rows))
+    // Built inside the static's `write`, never as a named local: the
+    // pipeline is most of the driver's 35 KB, and each copy of it that
+    // the compiler keeps on the way is stack that the scans need (the
+    // boot test checks 4 KiB to spare).
+    let driver = unsafe { DRIVER.take() }.write(ScanDriver::new(
+        match Pipeline::<MAX_COLS>::with_near(scorer, settings, row_a, row_b, near) {
+            Ok(p) => p,
+            Err(e) => defmt::panic!("pipeline refused its buffers: {}", e),
+        },
+        settings.cols,
+        settings.rows,
+    ));
+    driver.attach_calibrator(CALIBRATOR.take());
+    driver
 }

@@ -174,6 +174,7 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
     /// memory (the H743's AXI SRAM and SRAM1-3) and `near` in fast memory
     /// (DTCM), that trades a fast copy for two slow loads per word. The
     /// results are the same.
+    #[inline(always)]
     pub fn with_near(
         scorer: &'a Scorer,
         cols: u32,
