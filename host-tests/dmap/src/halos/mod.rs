@@ -2,11 +2,13 @@
 //! docs/spread-study.md (both geometries, defect-free or with halos), the
 //! three channels calibrated by the tail rule on reference parts, and each
 //! scan run through `cvm_core::Engine` and `cvm_core::Objects` exactly as
-//! the firmware runs them. The halo test (`tests/halos_found.rs`) and the
-//! detection-curve experiment (`examples/curves.rs`) share it.
+//! the firmware runs them. The halo test (`tests/halos_found.rs`), the
+//! detection-curve experiment (`examples/curves.rs`) and the paper-sim
+//! bubble runs (`examples/paper_bubbles.rs`) share it.
 
 pub mod calib;
 pub mod parts;
+pub mod plot;
 pub mod run;
 pub mod thresholds;
 

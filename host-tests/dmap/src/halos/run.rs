@@ -6,8 +6,9 @@ use cvm_core::{Engine, Object, Objects, Position, PositionScore, RowView, Scorer
 use super::parts::Halo;
 use super::thresholds::Thresholds;
 
-/// Columns the engine is built for (the study's rasters are 39 wide).
-pub const MAX_COLS: usize = 64;
+/// Columns the engine is built for: the study's rasters (39) and the
+/// paper-sim part (300).
+pub const MAX_COLS: usize = 320;
 
 /// What the engine and the labeller put out for one scan.
 #[derive(Clone, Debug, Default)]
@@ -67,7 +68,12 @@ pub fn found(objects: &[Object], halo: &Halo) -> bool {
 
 /// Whether `o` is within one position of `halo`'s truth.
 pub fn near(o: &Object, halo: &Halo) -> bool {
-    halo.truth.iter().any(|&(r, c)| {
+    near_truth(o, &halo.truth)
+}
+
+/// Whether `o` is within one position of any of `truth` (`(row, col)`).
+pub fn near_truth(o: &Object, truth: &[(usize, usize)]) -> bool {
+    truth.iter().any(|&(r, c)| {
         let (r, c) = (r as u32, c as u32);
         r + 1 >= o.row0 && r <= o.row1 + 1 && c + 1 >= o.col0 && c <= o.col1 + 1
     })
@@ -102,8 +108,13 @@ pub fn peak_ratios(
 /// The positions of `halo`'s truth and their neighbours within one
 /// position, inside a `rows x cols` raster.
 pub fn around(halo: &Halo, rows: usize, cols: usize) -> Vec<(usize, usize)> {
-    let mut v: Vec<(usize, usize)> = halo
-        .truth
+    around_truth(&halo.truth, rows, cols)
+}
+
+/// The positions of `truth` and their neighbours within one position,
+/// inside a `rows x cols` raster.
+pub fn around_truth(truth: &[(usize, usize)], rows: usize, cols: usize) -> Vec<(usize, usize)> {
+    let mut v: Vec<(usize, usize)> = truth
         .iter()
         .flat_map(|&(r, c)| {
             (r.saturating_sub(1)..(r + 2).min(rows)).flat_map(move |rr| {
