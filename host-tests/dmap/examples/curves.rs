@@ -17,7 +17,9 @@ use cvm_core::calibration::{Rule, rule};
 use cvm_reference::{Emd, Ground, gradient_image};
 use cvm_sim::Scan;
 use dmap::halos::plot::{Chart, Series, draw};
-use dmap::halos::{Geo, Halo, Thresholds, calibrate, found, halo_part, near, run_scan};
+use dmap::halos::{
+    Geo, Halo, Thresholds, around, calibrate, found, halo_part, near, peak_ratios, run_scan,
+};
 use dmap::objects::components;
 use rayon::prelude::*;
 
@@ -82,13 +84,13 @@ fn emd_objects(mags: &[u32], thr: u32) -> Vec<cvm_core::Object> {
         .collect()
 }
 
-/// Every method's objects on one scan.
+/// Every method's objects on one scan, and the scores with all three on.
 fn objects_of(
     scorer: &Scorer,
     scan: &Scan,
     thr: Thresholds,
     emd_thr: u32,
-) -> Vec<Vec<cvm_core::Object>> {
+) -> (Vec<Vec<cvm_core::Object>>, Vec<cvm_core::PositionScore>) {
     let engine = [
         thr.cvm_only(),
         thr.power_only(),
@@ -96,12 +98,19 @@ fn objects_of(
         thr.without_spread(),
         thr,
     ];
+    let mut scores = Vec::new();
     let mut v: Vec<Vec<cvm_core::Object>> = engine
         .iter()
-        .map(|&t| run_scan(scorer, scan.rows, scan.cols, &scan.data, t).objects)
+        .map(|&t| {
+            let out = run_scan(scorer, scan.rows, scan.cols, &scan.data, t);
+            if t == thr {
+                scores = out.scores;
+            }
+            out.objects
+        })
         .collect();
     v.push(emd_objects(&emd(scan), emd_thr));
-    v
+    (v, scores)
 }
 
 struct Result {
@@ -111,6 +120,9 @@ struct Result {
     false_objects: Vec<(usize, usize)>,
     /// Objects on the halo parts away from every halo.
     stray: Vec<usize>,
+    /// worst[size][share]: with all three channels, the smallest over the
+    /// instances of the largest channel's peak over its threshold.
+    worst: Vec<Vec<f64>>,
 }
 
 fn measure(geo: Geo) -> Result {
@@ -142,6 +154,7 @@ fn measure(geo: Geo) -> Result {
         .map(|k| {
             let scan = simulate(&geo.part(k, RASTER));
             objects_of(&scorer, &scan, thr, emd_thr)
+                .0
                 .iter()
                 .map(Vec::len)
                 .collect()
@@ -156,7 +169,12 @@ fn measure(geo: Geo) -> Result {
     let jobs: Vec<(usize, u64)> = (0..SIZES.len())
         .flat_map(|si| (0..DEFECT_PARTS).map(move |k| (si, k)))
         .collect();
-    let runs: Vec<(usize, Vec<Halo>, Vec<Vec<cvm_core::Object>>)> = jobs
+    type Run = (
+        usize,
+        Vec<Halo>,
+        (Vec<Vec<cvm_core::Object>>, Vec<cvm_core::PositionScore>),
+    );
+    let runs: Vec<Run> = jobs
         .par_iter()
         .map(|&(si, k)| {
             let id = FREE_PARTS + 100 * (si as u64 + 1) + k;
@@ -172,8 +190,16 @@ fn measure(geo: Geo) -> Result {
         found: vec![vec![vec![0; SHARES.len()]; SIZES.len()]; METHODS.len()],
         false_objects,
         stray: vec![0; METHODS.len()],
+        worst: vec![vec![f64::MAX; SHARES.len()]; SIZES.len()],
     };
-    for (si, halos, objs) in &runs {
+    for (si, halos, (objs, scores)) in &runs {
+        for h in halos {
+            let ai = SHARES.iter().position(|&s| s == h.disc.share).unwrap();
+            let r = peak_ratios(scores, RASTER, around(h, RASTER, RASTER), thr);
+            let best = r.iter().cloned().fold(0.0, f64::max);
+            let w = &mut res.worst[*si][ai];
+            *w = w.min(best);
+        }
         for (m, o) in objs.iter().enumerate() {
             for h in halos {
                 let ai = SHARES.iter().position(|&s| s == h.disc.share).unwrap();
@@ -218,6 +244,24 @@ fn table(geo: Geo, r: &Result) {
     }
 }
 
+fn margins(geo: Geo, r: &Result) {
+    println!(
+        "\nall three channels, the weakest halo of {DEFECT_PARTS}: its strongest channel's peak over that channel's threshold\n"
+    );
+    println!("| {} | 5 % | 10 % | 20 % | 30 % |", geo.name());
+    println!("|---|---|---|---|---|");
+    for (si, size) in SIZES.iter().enumerate() {
+        let cells: Vec<String> = r.worst[si].iter().map(|w| format!("{w:.2}")).collect();
+        println!("| {size} position(s) | {} |", cells.join(" | "));
+    }
+}
+
+/// Each method's curve moved sideways by up to one percentage point, so
+/// that curves that coincide stay visible.
+fn nudge(m: usize) -> f64 {
+    (m as f64 - (METHODS.len() - 1) as f64 / 2.0) * 0.4
+}
+
 fn plot(geo: Geo, r: &Result) {
     let charts: Vec<Chart> = SIZES
         .iter()
@@ -238,7 +282,10 @@ fn plot(geo: Geo, r: &Result) {
                         .iter()
                         .enumerate()
                         .map(|(ai, &s)| {
-                            (s * 100.0, r.found[m][si][ai] as f64 / DEFECT_PARTS as f64)
+                            (
+                                s * 100.0 + nudge(m),
+                                r.found[m][si][ai] as f64 / DEFECT_PARTS as f64,
+                            )
                         })
                         .collect(),
                 })
@@ -247,7 +294,7 @@ fn plot(geo: Geo, r: &Result) {
         .collect();
     let im = draw(
         &charts,
-        (0.0, 32.0),
+        (2.0, 33.0),
         &[5.0, 10.0, 20.0, 30.0],
         "SCATTERED SHARE %",
     );
@@ -262,6 +309,7 @@ fn main() {
     for geo in Geo::BOTH {
         let r = measure(geo);
         table(geo, &r);
+        margins(geo, &r);
         plot(geo, &r);
     }
 }
