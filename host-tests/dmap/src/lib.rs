@@ -11,6 +11,7 @@ pub mod eval;
 pub mod fixed;
 pub mod fmt;
 pub mod font;
+pub mod halos;
 pub mod listen;
 pub mod npy;
 pub mod objects;

@@ -1,0 +1,18 @@
+//! Scattering halos against the shipped engine: the parts of
+//! docs/spread-study.md (both geometries, defect-free or with halos), the
+//! three channels calibrated by the tail rule on reference parts, and each
+//! scan run through `cvm_core::Engine` and `cvm_core::Objects` exactly as
+//! the firmware runs them. The halo test (`tests/halos_found.rs`), the
+//! detection-curve experiment (`examples/curves.rs`) and the paper-sim
+//! bubble runs (`examples/paper_bubbles.rs`) share it.
+
+pub mod calib;
+pub mod parts;
+pub mod plot;
+pub mod run;
+pub mod thresholds;
+
+pub use calib::calibrate;
+pub use parts::{Geo, Halo, halo_part};
+pub use run::{Outcome, around, found, near, peak_ratios, run_scan};
+pub use thresholds::Thresholds;
