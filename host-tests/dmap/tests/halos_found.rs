@@ -28,8 +28,14 @@ const AT: [(usize, usize); 3] = [(9, 9), (9, 29), (29, 19)];
 /// The one halo not found (geometry, size, share): on 15x15 the 10 % disc
 /// of one position, 151 µm from the nearest beam, reaches 0.71 of the
 /// spread threshold and 0.73 of the CVM threshold (docs/experiments.md).
-/// Listed, not hidden: every other halo must be found.
+/// Listed, not hidden: every other halo must be found, and this one is
+/// excused only while no beam puts more than [`EXCUSED_BELOW`] of its
+/// power into its halo.
 const MISSED: [(Geo, f64, f64); 1] = [(Geo::Fifteen, 1.0, 0.10)];
+/// The share of a beam's power in the halo under which a miss is excused:
+/// less than two thirds of what the same disc takes from a beam centred on
+/// it (0.059 for 10 % on one position).
+const EXCUSED_BELOW: f64 = 0.04;
 
 fn simulate(cfg: &cvm_sim::Config) -> Scan {
     cvm_sim::simulate(cfg, &|| {}).expect("valid part")
@@ -61,7 +67,15 @@ fn check(geo: Geo) -> Vec<String> {
                 geo.name(),
                 share * 100.0
             );
-            if MISSED.contains(&(geo, size, share)) {
+            // The most any beam of the scan puts into this halo.
+            let taken = (0..scan.rows * scan.cols)
+                .map(|p| {
+                    let (x, y) = cfg.raster.position(p / scan.cols, p % scan.cols);
+                    h.disc.beam_share(x, y, cfg.raster.waist)
+                })
+                .fold(0.0, f64::max);
+            let what = format!("{what}, at most {:.1} % of a beam's power", taken * 100.0);
+            if MISSED.contains(&(geo, size, share)) && taken < EXCUSED_BELOW {
                 eprintln!("known miss, {what}");
             } else if !found(&out.objects, h) {
                 failures.push(format!("missed {what}"));
@@ -95,8 +109,15 @@ fn check(geo: Geo) -> Vec<String> {
     failures
 }
 
+// One test per geometry, so that the two run side by side.
 #[test]
-fn halos_of_10_percent_or_more_found_and_no_false_object() {
-    let failures: Vec<String> = Geo::BOTH.into_iter().flat_map(check).collect();
+fn halos_of_10_percent_or_more_found_and_no_false_object_9x9() {
+    let failures = check(Geo::Nine);
+    assert!(failures.is_empty(), "{failures:#?}");
+}
+
+#[test]
+fn halos_of_10_percent_or_more_found_and_no_false_object_15x15() {
+    let failures = check(Geo::Fifteen);
     assert!(failures.is_empty(), "{failures:#?}");
 }
