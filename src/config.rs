@@ -51,7 +51,7 @@ pub mod emulated {
     /// Output queue of the emulated board: a whole row of score lines of
     /// the widest scan fits besides the keep reserve, so with the board's
     /// back-pressure nothing is ever dropped.
-    pub const QUEUE_BYTES: usize = 96 * 1024;
+    pub const QUEUE_BYTES: usize = 128 * 1024;
     pub const KEEP_RESERVE: usize = super::keep_reserve(MAX_COLS);
     const _: () = assert!(super::queue_fits(QUEUE_BYTES, MAX_COLS));
     /// Frame buffers: the scan file is read one beam at a time, so one is
@@ -103,7 +103,7 @@ pub mod h743 {
     pub const MAX_COLS: usize = COLS;
 
     /// Bytes of the output queue (about 1 s of lines at 921600 baud).
-    pub const QUEUE_BYTES: usize = 96 * 1024;
+    pub const QUEUE_BYTES: usize = 128 * 1024;
     pub const KEEP_RESERVE: usize = super::keep_reserve(MAX_COLS);
     const _: () = assert!(super::queue_fits(QUEUE_BYTES, MAX_COLS));
 

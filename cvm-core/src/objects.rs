@@ -54,6 +54,9 @@ pub struct Object {
     pub peak_mag: u32,
     /// Power magnitude at the peak (`Q15`).
     pub peak_power: u16,
+    /// Spread magnitude at the peak (`Q16`, [`crate::spread`]; 0 while
+    /// the spread channel is off).
+    pub peak_spread: u32,
     /// Channels that fired anywhere in the object: [`flags::CVM_DEFECT`],
     /// [`flags::POWER_DEFECT`], [`flags::SPREAD_DEFECT`].
     pub channels: u8,
@@ -101,6 +104,7 @@ impl Open {
             o.peak_col = col;
             o.peak_mag = p.mag;
             o.peak_power = p.pmag;
+            o.peak_spread = p.smag;
         }
         // Each product is below 2^56 (see the module's ranges): one 64-bit
         // multiply, then a 128-bit sum.
@@ -130,6 +134,7 @@ impl Open {
             a.peak_col = b.peak_col;
             a.peak_mag = b.peak_mag;
             a.peak_power = b.peak_power;
+            a.peak_spread = b.peak_spread;
         }
         a.id = a.id.min(b.id);
         a.row0 = base;
@@ -164,6 +169,7 @@ impl Object {
         peak_col: 0,
         peak_mag: 0,
         peak_power: 0,
+        peak_spread: 0,
         channels: 0,
         centroid_row_q8: 0,
         centroid_col_q8: 0,

@@ -1,7 +1,7 @@
 //! The `status` reply: what the board is, what it scans with and where
 //! each value came from, why it started, and how its last scan went.
 //!
-//! `A,<id>,ok,status,pv=6,fw=..,j=15x15,cap=<cols>x<rows>,store=..,rst=..,boots=..,last=<scans>/<defects>/<objects>/<verdict>,keys=<n>`,
+//! `A,<id>,ok,status,pv=7,fw=..,j=15x15,cap=<cols>x<rows>,store=..,rst=..,boots=..,last=<scans>/<defects>/<objects>/<verdict>,keys=<n>`,
 //! followed by `n` value replies (`A,<id>,ok,<key>=<value>:<source>`),
 //! one per setting in `Key::ALL`'s order: every setting with its source
 //! would not fit one line.

@@ -3,9 +3,10 @@
 
 use crate::protocol::crc16;
 
-/// Version of the command channel, carried in the `status` reply (`pv=`):
-/// the result protocol's next version, the first with commands.
-pub const VERSION: u32 = 6;
+/// Version of the protocol, carried in the `status` reply (`pv=`): the
+/// result lines' (the command channel came with version 6), so that a
+/// client knows which lines the board writes before it reads them.
+pub const VERSION: u32 = crate::protocol::VERSION;
 /// Longest request or reply line, its `\n` included. Shorter than the
 /// result lines' `protocol::MAX_LINE` (whose end line grew with the part
 /// verdict): every command line fits the 256 bytes a small gateway's

@@ -8,7 +8,7 @@ use crate::scorer::Scorer;
 use crate::settings::{KEYS, ResetCause, Settings, Source, Store};
 
 /// Protocol version written in the header.
-pub const VERSION: u32 = 6;
+pub const VERSION: u32 = 7;
 /// Longest firmware version string carried in the header.
 pub const MAX_FW: usize = 24;
 
@@ -31,6 +31,9 @@ pub struct HeaderInfo<'s> {
     pub threshold: u32,
     /// Power channel threshold, `Q15` (`pthr`; [`crate::power::POWER_OFF`]: off).
     pub power_threshold: u32,
+    /// Spread channel threshold, `Q16` (`sthr`, version 7 on;
+    /// [`crate::spread::SPREAD_OFF`]: off, as in an older header).
+    pub spread_threshold: u32,
     /// Score format: a score `s` is `s / 2^q` distance units.
     pub q: i32,
     pub scores: bool,
@@ -81,6 +84,7 @@ impl HeaderInfo<'static> {
             full_scale: cfg.full_scale,
             threshold: settings.threshold,
             power_threshold: settings.power_threshold,
+            spread_threshold: settings.spread_threshold,
             q: scorer.score_frac_bits(),
             scores: settings.scores,
             max_defect_lines: settings.max_defect_lines_per_row,
@@ -95,7 +99,7 @@ impl HeaderInfo<'static> {
     }
 }
 
-/// `H,v=6,fw=..,j=15x15,cols=300,k=P,b=0,w=uniform,norm=1,fs=65535,thr=..,pthr=..,q=23,scores=0,dcap=0,rst=por,boots=1,rows=..,src=ddddddddddddddd,store=none`
+/// `H,v=7,fw=..,j=15x15,cols=300,k=P,b=0,w=uniform,norm=1,fs=65535,thr=..,pthr=..,sthr=..,q=23,scores=0,dcap=0,rst=por,boots=1,rows=..,src=ddddddddddddddd,store=none`
 pub fn encode_header(h: &HeaderInfo, sink: &mut impl LineSink) {
     let mut l = LineBuf::new(b'H');
     l.kv_u64(b"v", h.version as u64);
@@ -123,6 +127,9 @@ pub fn encode_header(h: &HeaderInfo, sink: &mut impl LineSink) {
     l.kv_u64(b"fs", h.full_scale as u64);
     l.kv_u64(b"thr", h.threshold as u64);
     l.kv_u64(b"pthr", h.power_threshold as u64);
+    if h.version >= 7 {
+        l.kv_u64(b"sthr", h.spread_threshold as u64);
+    }
     l.field(b"q=");
     l.i64(h.q as i64);
     l.kv_u64(b"scores", h.scores as u64);
@@ -167,6 +174,11 @@ pub(super) fn parse_header<'s>(
     let full_scale = u16::try_from(f.key_u32("fs")?).map_err(|_| e)?;
     let threshold = f.key_u32("thr")?;
     let power_threshold = f.key_u32("pthr")?;
+    let spread_threshold = if version >= 7 {
+        f.key_u32("sthr")?
+    } else {
+        crate::spread::SPREAD_OFF
+    };
     let q = parse_i32(f.key("q")?).ok_or(e)?;
     let scores = f.key_flag("scores", "scores: 0 or 1")?;
     let max_defect_lines = u16::try_from(f.key_u32("dcap")?).map_err(|_| e)?;
@@ -205,6 +217,7 @@ pub(super) fn parse_header<'s>(
         full_scale,
         threshold,
         power_threshold,
+        spread_threshold,
         q,
         scores,
         max_defect_lines,

@@ -19,11 +19,12 @@ pub enum Line<'s> {
         col: u32,
         mag: u32,
         pmag: u16,
+        smag: u32,
         strength: u32,
         flags: u8,
     },
     Object(Object),
-    /// Scores of `col0..col0 + chars.len() / 9`; decode with [`super::decode_score`].
+    /// Scores of `col0..col0 + chars.len() / 12`; decode with [`super::decode_score`].
     Scores {
         row: u32,
         col0: u32,

@@ -4,7 +4,7 @@ use super::fields::{Fields, ParseError, parse_u64};
 use super::frame::{LineBuf, LineSink, Priority};
 use crate::objects::Object;
 
-/// `O,id,row0,row1,col0,col1,area,peak,peak_row,peak_col,peak_mag,peak_power,centroid_row,centroid_col,channels`:
+/// `O,id,row0,row1,col0,col1,area,peak,peak_row,peak_col,peak_mag,peak_power,peak_spread,centroid_row,centroid_col,channels`:
 /// one defect object, when it closes.
 pub fn encode_object(o: &Object, sink: &mut impl LineSink) {
     let mut l = LineBuf::new(b'O');
@@ -20,6 +20,7 @@ pub fn encode_object(o: &Object, sink: &mut impl LineSink) {
         o.peak_col as u64,
         o.peak_mag as u64,
         o.peak_power as u64,
+        o.peak_spread as u64,
         o.centroid_row_q8,
         o.centroid_col_q8,
         o.channels as u64,
@@ -51,6 +52,7 @@ pub(super) fn parse_object<'s>(
         peak_mag,
     ] = v;
     let peak_power = u16::try_from(f.u32()?).map_err(|_| e)?;
+    let peak_spread = f.u32()?;
     let centroid_row_q8 = parse_u64(f.next()?).ok_or(e)?;
     let centroid_col_q8 = parse_u64(f.next()?).ok_or(e)?;
     let channels = u8::try_from(f.u32()?).map_err(|_| e)?;
@@ -69,6 +71,7 @@ pub(super) fn parse_object<'s>(
         peak_col,
         peak_mag,
         peak_power,
+        peak_spread,
         channels,
         centroid_row_q8,
         centroid_col_q8,

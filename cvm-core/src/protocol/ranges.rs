@@ -10,6 +10,7 @@ use super::line::Line;
 use super::score::{SCORE_CHARS, ScoreValue, decode_score};
 use crate::flags;
 use crate::power::POWER_MAX;
+use crate::spread::SPREAD_MAX;
 
 /// Smallest and largest score format `q` a scorer can have.
 pub const Q_MIN: i32 = -120;
@@ -37,15 +38,17 @@ pub(super) fn check(line: &Line<'_>) -> Result<(), ParseError> {
         Line::Row { summary, .. } => bad(summary.pmax <= POWER_MAX, "pmax: 0 to 46340"),
         Line::Defect {
             pmag,
+            smag,
             strength,
             flags: fl,
             ..
         } => {
             bad(u32::from(pmag) <= POWER_MAX, "pmag: 0 to 46340")?;
+            bad(smag <= SPREAD_MAX, "smag: 0 to 92680")?;
             bad(strength >= 1 << 16, "strength: at least 65536")?;
             bad(
                 defect_flags(fl),
-                "flags: bit 4 or 5 set; bits 0, 6 and 7 clear; DARK and SATURATED not both",
+                "flags: bit 4, 5 or 6 set; bits 0 and 7 clear; DARK and SATURATED not both",
             )
         }
         Line::Object(o) => {
@@ -55,7 +58,8 @@ pub(super) fn check(line: &Line<'_>) -> Result<(), ParseError> {
                 u32::from(o.peak_power) <= POWER_MAX,
                 "peak_power: 0 to 46340",
             )?;
-            bad(o.channels != 0, "channels: 16, 32 or 48")
+            bad(o.peak_spread <= SPREAD_MAX, "peak_spread: 0 to 92680")?;
+            bad(o.channels != 0, "channels: a sum of 16, 32 and 64")
         }
         Line::Scores { chars, .. } => {
             for c in chars.chunks(SCORE_CHARS) {
@@ -100,11 +104,11 @@ fn header(h: &HeaderInfo<'_>) -> Result<(), ParseError> {
     bad(h.boots >= 1, "boots: at least 1")
 }
 
-/// A `D` line's flags: a defect (bit 4 or 5) with data (bit 0 clear), no
-/// bit beyond 5, and never both DARK and SATURATED (a dark map has no
+/// A `D` line's flags: a defect (bit 4, 5 or 6) with data (bit 0 clear),
+/// no bit beyond 6, and never both DARK and SATURATED (a dark map has no
 /// sample at full scale, which is at least 1).
 fn defect_flags(fl: u8) -> bool {
-    fl & flags::DEFECT != 0 && fl & flags::NO_DATA == 0 && fl < 64 && !dark_and_saturated(fl)
+    fl & flags::DEFECT != 0 && fl & flags::NO_DATA == 0 && fl < 128 && !dark_and_saturated(fl)
 }
 
 fn dark_and_saturated(fl: u8) -> bool {
@@ -112,16 +116,18 @@ fn dark_and_saturated(fl: u8) -> bool {
 }
 
 /// One position of an `S` line: without data, nothing else (flags
-/// `NO_DATA` alone, both magnitudes 0); with data, a power magnitude of at
-/// most 46340, never DARK and SATURATED together, and `CLIPPED` exactly
+/// `NO_DATA` alone, the three magnitudes 0); with data, a power magnitude
+/// of at most 46340, a spread magnitude of at most 92680, never DARK and
+/// SATURATED together, and `CLIPPED` exactly
 /// when the magnitude is at the top of its range (which is then a
 /// distance defect whatever the threshold).
 fn position(v: &ScoreValue) -> bool {
     if v.flags & flags::NO_DATA != 0 {
-        return v.flags == flags::NO_DATA && v.mag == 0 && v.pmag == 0;
+        return v.flags == flags::NO_DATA && v.mag == 0 && v.pmag == 0 && v.smag == 0;
     }
     let clipped = v.flags & flags::CLIPPED != 0;
     u32::from(v.pmag) <= POWER_MAX
+        && v.smag <= SPREAD_MAX
         && !dark_and_saturated(v.flags)
         && clipped == (v.mag == u32::MAX)
         && (!clipped || v.flags & flags::CVM_DEFECT != 0)

@@ -47,6 +47,7 @@ pub fn encode_row(view: &RowView, max_defect_lines: u16, scores: bool, sink: &mu
             c as u32,
             p.mag,
             p.pmag as u32,
+            p.smag,
             p.strength,
             p.flags as u32,
         ] {
@@ -129,6 +130,7 @@ pub(super) fn parse_defect<'s>(
 ) -> Result<Line<'s>, ParseError> {
     let [row, col, mag] = [f.u32()?, f.u32()?, f.u32()?];
     let pmag = u16::try_from(f.u32()?).map_err(|_| ParseError::Format)?;
+    let smag = f.u32()?;
     let strength = f.u32()?;
     let flags = u8::try_from(f.u32()?).map_err(|_| ParseError::Format)?;
     Ok(Line::Defect {
@@ -136,6 +138,7 @@ pub(super) fn parse_defect<'s>(
         col,
         mag,
         pmag,
+        smag,
         strength,
         flags,
     })

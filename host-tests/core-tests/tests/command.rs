@@ -135,7 +135,7 @@ fn replies_are_written_as_specified() {
         (
             Some(1),
             Reply::Status(status_example()),
-            "A,1,ok,status,pv=6,fw=0.1.0,j=15x15,cap=300x1000,store=ok,rst=por,boots=3,\
+            "A,1,ok,status,pv=7,fw=0.1.0,j=15x15,cap=300x1000,store=ok,rst=por,boots=3,\
              last=2/14/1/obj,keys=15",
         ),
         (

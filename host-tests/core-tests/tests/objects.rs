@@ -59,15 +59,13 @@ fn random_grid(seed: u64, rows: usize, cols: usize, blobs: usize) -> Grid {
         let (mut y, mut x) = (r.random_range(0..rows), r.random_range(0..cols));
         for _ in 0..r.random_range(1..12) {
             let p = &mut s[y * cols + x];
-            p.flags |= if r.random_bool(0.5) {
-                flags::CVM_DEFECT
-            } else {
-                flags::POWER_DEFECT
-            };
+            p.flags |= [flags::CVM_DEFECT, flags::POWER_DEFECT, flags::SPREAD_DEFECT]
+                [r.random_range(0..3)];
             // Ties on purpose: a few strength levels.
             p.strength = [65_536u32, 70_000, 1, 40_000_000][r.random_range(0..4)];
             p.mag = r.random_range(0..1000);
             p.pmag = r.random_range(0..46_341);
+            p.smag = r.random_range(0..92_681);
             y = (y as i64 + r.random_range(-1i64..=1)).clamp(0, rows as i64 - 1) as usize;
             x = (x as i64 + r.random_range(-1i64..=1)).clamp(0, cols as i64 - 1) as usize;
         }
@@ -129,6 +127,7 @@ fn reference(g: &Grid) -> Vec<Object> {
                 peak_col: pc as u32,
                 peak_mag: p.mag,
                 peak_power: p.pmag,
+                peak_spread: p.smag,
                 channels: comp
                     .iter()
                     .fold(0, |a, &(r, c)| a | (g.at(r, c).flags & flags::DEFECT)),

@@ -6,7 +6,7 @@
 
 use cvm_core::Position;
 use cvm_core::pipeline::{Pipeline, Settings};
-use cvm_core::protocol::{Line, LineSink, Priority, ResetCause, decode_score, parse};
+use cvm_core::protocol::{self, Line, LineSink, Priority, ResetCause, decode_score, parse};
 use cvm_core_tests::{random_scan, rng, run_engine_with};
 
 #[derive(Default)]
@@ -143,10 +143,13 @@ fn header_rows_and_end_match_the_engine() {
                 Line::Scores { row, col0, chars } => {
                     assert!(scores, "case {case}: score lines while off");
                     let want = &want_rows[row as usize].1;
-                    for (k, c) in chars.chunks_exact(9).enumerate() {
+                    for (k, c) in chars.chunks_exact(protocol::SCORE_CHARS).enumerate() {
                         let s = decode_score(c).unwrap();
                         let w = &want[col0 as usize + k];
-                        assert_eq!((s.flags, s.mag, s.pmag), (w.flags, w.mag, w.pmag));
+                        assert_eq!(
+                            (s.flags, s.mag, s.pmag, s.smag),
+                            (w.flags, w.mag, w.pmag, w.smag)
+                        );
                         scored[row as usize] += 1;
                     }
                 }

@@ -38,6 +38,7 @@ fn header(fw: &'static str, q: i32) -> HeaderInfo<'static> {
         full_scale: 65535,
         threshold: 12345,
         power_threshold: 3277,
+        spread_threshold: 1241,
         q,
         scores: true,
         max_defect_lines: 16,
@@ -68,7 +69,8 @@ fn header_origin_is_written_as_specified_and_version_5_still_reads() {
     let src = format!("cffd{}c", "f".repeat(KEYS - 5));
     let want_tail = format!(",rst=wdg,boots=3,rows=200,src={src},store=ok*");
     assert!(line.contains(&want_tail), "{line}");
-    assert!(line.starts_with("H,v=6,"), "{line}");
+    assert!(line.starts_with("H,v=7,"), "{line}");
+    assert!(line.contains(",pthr=3277,sthr=1241,q=23,"), "{line}");
     // A version 5 header: no origin fields, and none may follow boots.
     let v5 = "H,v=5,fw=0.1.0,j=15x15,cols=300,k=P,b=0,w=uniform,norm=1,fs=65535,thr=4194304,pthr=3277,q=23,scores=0,dcap=0,rst=por,boots=1";
     let framed = |body: &str| format!("{body}*{:04X}\n", crc16(body.as_bytes())).into_bytes();
@@ -96,7 +98,21 @@ fn header_origin_is_written_as_specified_and_version_5_still_reads() {
         assert!(protocol::parse(&framed(&l)).is_err(), "{l}");
     }
     let good = format!("{v6_short},rows=1,src={d},store=none");
-    assert!(protocol::parse(&framed(&good)).is_ok(), "{good}");
+    let good_line = framed(&good);
+    let Ok(Line::Header(h)) = protocol::parse(&good_line) else {
+        panic!("version 6 header refused: {good}")
+    };
+    // Before version 7 there is no spread channel: it reads as off.
+    assert_eq!(h.spread_threshold, cvm_core::spread::SPREAD_OFF);
+    // From version 7 on `sthr` follows `pthr`, and must.
+    let v7 = good.replace("v=6", "v=7");
+    assert!(protocol::parse(&framed(&v7)).is_err(), "{v7}");
+    let v7 = v7.replace(",pthr=3277,", ",pthr=3277,sthr=665,");
+    let v7_line = framed(&v7);
+    let Ok(Line::Header(h)) = protocol::parse(&v7_line) else {
+        panic!("version 7 header refused: {v7}")
+    };
+    assert_eq!((h.version, h.spread_threshold), (7, 665));
 }
 
 #[test]
@@ -117,7 +133,8 @@ fn header_round_trip() {
 
 /// A position as the engine can score it (docs/protocol.md, the `S`
 /// line's rules): without data nothing else; with data a power magnitude
-/// of at most 46340, not both DARK and SATURATED, CLIPPED (and then a
+/// of at most 46340, a spread magnitude of at most 92680, not both DARK
+/// and SATURATED, CLIPPED (and then a
 /// distance defect) exactly at the top magnitude, a defect's strength at
 /// least 65536. Values outside are refused (`protocol_ranges.rs`).
 fn arb_score() -> impl Strategy<Value = PositionScore> {
@@ -128,9 +145,10 @@ fn arb_score() -> impl Strategy<Value = PositionScore> {
         prop_oneof![any::<u32>(), Just(u32::MAX)],
         any::<u32>(),
         0u16..=46340,
-        0u8..64,
+        prop_oneof![0u32..=92680, Just(92680u32)],
+        0u8..128,
     )
-        .prop_map(|(g0, g1, mag, strength, pmag, mut flags)| {
+        .prop_map(|(g0, g1, mag, strength, pmag, smag, mut flags)| {
             if flags & NO_DATA != 0 {
                 return PositionScore {
                     flags: NO_DATA,
@@ -155,6 +173,7 @@ fn arb_score() -> impl Strategy<Value = PositionScore> {
                 mag,
                 strength,
                 pmag,
+                smag,
                 flags,
                 ..Default::default()
             }
@@ -164,7 +183,7 @@ fn arb_score() -> impl Strategy<Value = PositionScore> {
 proptest! {
     #[test]
     fn score_encoding_round_trips(s in arb_score()) {
-        let want = protocol::ScoreValue { mag: s.mag, pmag: s.pmag, flags: s.flags };
+        let want = protocol::ScoreValue { mag: s.mag, pmag: s.pmag, smag: s.smag, flags: s.flags };
         prop_assert_eq!(decode_score(&encode_score(&s)), Some(want));
     }
 
@@ -172,8 +191,8 @@ proptest! {
     /// score lines are droppable.
     #[test]
     fn row_lines_round_trip(row in any::<u32>(), scores in prop::collection::vec(arb_score(), 1..100), thr in any::<u32>(), max_def in 0u16..5) {
-        // A defect: data, and a channel's decision bit (bits 4 and 5).
-        let mut defects: Vec<usize> = (0..scores.len()).filter(|&c| scores[c].flags & 1 == 0 && scores[c].flags & 0x30 != 0).collect();
+        // A defect: data, and a channel's decision bit (bits 4, 5 and 6).
+        let mut defects: Vec<usize> = (0..scores.len()).filter(|&c| scores[c].flags & 1 == 0 && scores[c].flags & 0x70 != 0).collect();
         let summary = RowSummary { row, max: 77, argmax: Some(3), pmax: 4000, pargmax: Some(1), defects: defects.len() as u32, no_data: 1, dark: 2, saturated: 3 };
         let view = RowView { summary, scores: &scores, threshold: thr, power_threshold: 3000 };
         let mut s = Lines::default();
@@ -188,10 +207,11 @@ proptest! {
                     prop_assert_eq!(listed as usize, defects.len().min(max_def as usize));
                     prop_assert_eq!(*p, Priority::Keep);
                 }
-                Line::Defect { row: r, col, mag, pmag, strength, flags } => {
+                Line::Defect { row: r, col, mag, pmag, smag, strength, flags } => {
                     prop_assert_eq!(r, row);
                     prop_assert_eq!(mag, scores[col as usize].mag);
                     prop_assert_eq!(pmag, scores[col as usize].pmag);
+                    prop_assert_eq!(smag, scores[col as usize].smag);
                     prop_assert_eq!(strength, scores[col as usize].strength);
                     prop_assert_eq!(flags, scores[col as usize].flags);
                     got_defects.push(col as usize);
@@ -199,7 +219,7 @@ proptest! {
                 }
                 Line::Scores { row: r, col0, chars } => {
                     prop_assert_eq!(r, row);
-                    for (k, c) in chars.chunks(9).enumerate() {
+                    for (k, c) in chars.chunks(12).enumerate() {
                         got_scores[col0 as usize + k] = decode_score(c);
                     }
                     prop_assert_eq!(*p, Priority::Droppable);
@@ -210,7 +230,7 @@ proptest! {
         // The strongest defects, strongest first, equal strengths leftmost first.
         defects.sort_by_key(|&c| (std::cmp::Reverse(scores[c].strength), c));
         prop_assert_eq!(&got_defects[..], &defects[..defects.len().min(max_def as usize)]);
-        let want: Vec<_> = scores.iter().map(|s| Some(protocol::ScoreValue { mag: s.mag, pmag: s.pmag, flags: s.flags })).collect();
+        let want: Vec<_> = scores.iter().map(|s| Some(protocol::ScoreValue { mag: s.mag, pmag: s.pmag, smag: s.smag, flags: s.flags })).collect();
         prop_assert_eq!(got_scores, want);
     }
 
@@ -228,7 +248,7 @@ proptest! {
     /// channel among the decision bits) decodes to itself; the parser sits
     /// beside the encoder, so the two cannot drift apart unnoticed.
     #[test]
-    fn object_line_round_trips(v in prop::collection::vec(any::<u32>(), 10), power in 0u16..=46340, cr in any::<u64>(), cc in any::<u64>(), channels in 1u8..4) {
+    fn object_line_round_trips(v in prop::collection::vec(any::<u32>(), 10), power in 0u16..=46340, spread in 0u32..=92680, cr in any::<u64>(), cc in any::<u64>(), channels in 1u8..8) {
         let o = cvm_core::Object {
             id: v[0],
             row0: v[1].min(v[2]),
@@ -241,6 +261,7 @@ proptest! {
             peak_col: v[8],
             peak_mag: v[9],
             peak_power: power,
+            peak_spread: spread,
             channels: channels << 4,
             centroid_row_q8: cr,
             centroid_col_q8: cc,
@@ -394,7 +415,8 @@ fn worst_case_lines_fit() {
         peak_col: u32::MAX,
         peak_mag: u32::MAX,
         peak_power: 46340,
-        channels: 0x30,
+        peak_spread: 92680,
+        channels: 0x70,
         centroid_row_q8: u64::from(u32::MAX) << 8,
         centroid_col_q8: u64::from(u32::MAX) << 8,
     };
@@ -606,9 +628,11 @@ fn sealed(body: &str) -> Vec<u8> {
 #[test]
 fn object_fields_are_checked_one_by_one() {
     // id, row0, row1, col0, col1, area, peak, peak row, peak col, peak
-    // magnitude, peak power, centroid row and column (Q8), channels.
+    // magnitude, peak power, peak spread, centroid row and column (Q8),
+    // channels.
     let good = [
-        "0", "0", "2", "0", "3", "12", "385844", "2", "2", "4938812", "859", "296", "385", "16",
+        "0", "0", "2", "0", "3", "12", "385844", "2", "2", "4938812", "859", "1700", "296", "385",
+        "80",
     ];
     let line = |f: &[&str]| sealed(&format!("O,{}", f.join(",")));
     let with = |i: usize, v: &str| {
@@ -620,25 +644,27 @@ fn object_fields_are_checked_one_by_one() {
         panic!("the good line must parse");
     };
     assert_eq!(
-        (o.row0, o.row1, o.col0, o.col1, o.channels),
-        (0, 2, 0, 3, 16)
+        (o.row0, o.row1, o.col0, o.col1, o.peak_spread, o.channels),
+        (0, 2, 0, 3, 1700, 80)
     );
     // The widest centroid a u64 holds, 20 digits.
     let max = u64::MAX.to_string();
-    let Ok(Line::Object(o)) = protocol::parse(&with(11, &max)) else {
+    let Ok(Line::Object(o)) = protocol::parse(&with(12, &max)) else {
         panic!("a 20-digit centroid must parse");
     };
     assert_eq!(o.centroid_row_q8, u64::MAX);
-    let bad: [(usize, &str); 9] = [
+    let bad: [(usize, &str); 11] = [
         (1, "3"),                      // row0 > row1
         (3, "4"),                      // col0 > col1
-        (13, "17"),                    // a channel bit that is not a decision
-        (11, ""),                      // an empty number
-        (12, "000000000000000000001"), // 21 digits, though the value is 1
-        (11, "18446744073709551616"),  // u64::MAX + 1
+        (14, "17"),                    // a channel bit that is not a decision
+        (14, "144"),                   // bit 7, no channel
+        (12, ""),                      // an empty number
+        (13, "000000000000000000001"), // 21 digits, though the value is 1
+        (12, "18446744073709551616"),  // u64::MAX + 1
         (1, "4294967296"),             // u32::MAX + 1
         (10, "65536"),                 // peak power above u16
-        (11, "+1"),                    // not a digit
+        (11, "4294967296"),            // peak spread above u32
+        (12, "+1"),                    // not a digit
     ];
     for (i, v) in bad {
         assert_eq!(
@@ -649,16 +675,21 @@ fn object_fields_are_checked_one_by_one() {
     }
 }
 
-/// A score line carries whole scores of 9 characters: none at all, or a
+/// A score line carries whole scores of 12 characters: none at all, or a
 /// partial one, is refused.
 #[test]
 fn score_lines_hold_whole_scores() {
-    let one = "QBwQAIBJj";
+    let one = "CAAUQBwQAIBJ";
     assert!(matches!(
         protocol::parse(&sealed(&format!("S,4,7,{one}{one}"))),
-        Ok(Line::Scores { row: 4, col0: 7, chars }) if chars.len() == 18
+        Ok(Line::Scores { row: 4, col0: 7, chars }) if chars.len() == 24
     ));
-    for bad in ["", &one[..8], &format!("{one}Q")] {
+    for bad in [
+        "",
+        &one[..11],
+        &format!("{one}Q"),
+        &format!("{one}{}", &one[..9]),
+    ] {
         assert_eq!(
             protocol::parse(&sealed(&format!("S,4,7,{bad}"))).err(),
             Some(ParseError::Format),

@@ -691,7 +691,7 @@ fn raw_needs_a_threshold_and_odd_thresholds_are_explained() {
     assert_ok(&out);
     let err = stderr(&out);
     assert!(err.contains("--threshold 0.5 becomes 33554432"), "{err}");
-    assert!(String::from_utf8_lossy(&out.stdout).contains("thr=1,pthr=3277,q=-25"));
+    assert!(String::from_utf8_lossy(&out.stdout).contains("thr=1,pthr=3277,sthr=4294967295,q=-25"));
     // Above every score: said, in a short number.
     let out = dmap(&["stream", s(&scan), "--threshold", "1e300"]);
     assert_ok(&out);

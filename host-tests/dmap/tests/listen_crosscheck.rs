@@ -149,7 +149,7 @@ fn the_streams_as_written_pass_every_cross_check() {
 #[test]
 fn a_forged_object_field_is_named() {
     // O,id,row0,row1,col0,col1,area,peak,peak_row,peak_col,peak_mag,
-    // peak_power,centroid_row_q8,centroid_col_q8,channels
+    // peak_power,peak_spread,centroid_row_q8,centroid_col_q8,channels
     let forged = [
         (2, "row0", -1),
         (3, "row1", 1),
@@ -161,9 +161,10 @@ fn a_forged_object_field_is_named() {
         (7, "peak", -1),
         (10, "peak_mag", 1),
         (11, "peak_power", 1),
-        (12, "centroid_row_q8", 1),
-        (12, "centroid_row_q8", -1),
-        (13, "centroid_col_q8", 1),
+        (12, "peak_spread", 1),
+        (13, "centroid_row_q8", 1),
+        (13, "centroid_row_q8", -1),
+        (14, "centroid_col_q8", 1),
     ];
     for (name, args) in [("o-s", WITH_SCORES), ("o-d", DEFECT_LINES)] {
         let ls = stream(name, args);
@@ -255,10 +256,10 @@ fn a_forged_defect_line_is_named() {
     let k = index_of(&ls, "D,");
     let (row, col) = (field(&ls[k], 1), field(&ls[k], 2));
     let at = format!("D line of row {row} column {col}");
-    // D,row,col,mag,pmag,strength,flags
-    let strength = field(&ls[k], 5);
+    // D,row,col,mag,pmag,smag,strength,flags
+    let strength = field(&ls[k], 6);
     let mut v = ls.clone();
-    v[k] = with_field(&v[k], 5, &(strength + 1).to_string());
+    v[k] = with_field(&v[k], 6, &(strength + 1).to_string());
     let (_, json) = listen("d-strength", &v);
     let p = problems(&json);
     let want = format!(
@@ -284,9 +285,9 @@ fn a_forged_defect_line_is_named() {
         "{p:?}"
     );
     // Flags claiming the power channel too.
-    let flags = field(&ls[k], 6);
+    let flags = field(&ls[k], 7);
     let mut v = ls.clone();
-    v[k] = with_field(&v[k], 6, &(flags | 32).to_string());
+    v[k] = with_field(&v[k], 7, &(flags | 32).to_string());
     let (_, json) = listen("d-flags", &v);
     let p = problems(&json);
     assert!(
@@ -331,7 +332,7 @@ fn forged_rows_scores_and_totals_are_named() {
                 let chars = ls[i].split('*').next().unwrap().split(',').nth(3).unwrap();
                 chars
                     .as_bytes()
-                    .chunks(9)
+                    .chunks(protocol::SCORE_CHARS)
                     .any(|c| protocol::decode_score(c).unwrap().flags & 16 != 0)
             }
         })
@@ -339,10 +340,11 @@ fn forged_rows_scores_and_totals_are_named() {
     let chars = ls[sk].split('*').next().unwrap().split(',').nth(3).unwrap();
     let mut b = chars.as_bytes().to_vec();
     let at = b
-        .chunks(9)
+        .chunks(protocol::SCORE_CHARS)
         .position(|c| protocol::decode_score(c).unwrap().flags == 16)
         .unwrap();
-    b[at * 9] = b'A'; // flags 0
+    // The first digit holds flag bits 1 to 6 (flags 16: `I`).
+    b[at * protocol::SCORE_CHARS] = b'A'; // flags 0
     let mut v = ls.clone();
     v[sk] = with_field(&v[sk], 3, std::str::from_utf8(&b).unwrap());
     let (_, json) = listen("s-flags", &v);
@@ -403,7 +405,7 @@ fn dropped_score_lines_are_allowed_lost_ones_are_not() {
     let p = problems(&json);
     assert!(
         p.iter().any(|(_, kind, w)| kind == "missing"
-            && w == "1 of 14 score line(s) missing, but the end line counts 0 dropped"),
+            && w == "1 of 28 score line(s) missing, but the end line counts 0 dropped"),
         "{p:?}"
     );
 }

@@ -290,7 +290,7 @@ fn every_action_round_trips_and_sources_follow() {
     let s = ok(&out);
     assert!(
         s.contains(
-            "firmware fw-fake, command protocol 6, detector 15x15, capacity 300 columns x 1000 rows"
+            "firmware fw-fake, command protocol 7, detector 15x15, capacity 300 columns x 1000 rows"
         ),
         "{s}"
     );

@@ -472,9 +472,13 @@ fn bandwidth_figures_of_the_protocol_document() {
         "{:?}",
         per_type(b'R')
     );
-    // 2 902 bytes per row for three-digit row numbers, 26 fewer for one-digit ones.
-    assert_eq!(per_type(b'S').len(), rows * 13);
-    assert_eq!(per_type(b'S').iter().sum::<usize>(), rows * (2902 - 26));
+    // 17 lines of 18 positions (the last 12) per row, 12 characters a
+    // position, each line `S,` + row + `,` + col0 + `,` + positions +
+    // `*XXXX\n`: with a three-digit row 17 x 13 bytes of frame, col0's
+    // digits (0; 18 to 90; 108 to 288: 1 + 5 x 2 + 11 x 3 = 44) and
+    // 3 600 characters, 3 865 bytes; 34 fewer for one-digit rows.
+    assert_eq!(per_type(b'S').len(), rows * 17);
+    assert_eq!(per_type(b'S').iter().sum::<usize>(), rows * (3865 - 34));
     // A full line with a one-digit row and a three-digit col0: 2 bytes
     // less than with a three-digit row.
     assert_eq!(per_type(b'S').iter().max(), Some(&(232 - 2)));
@@ -501,7 +505,7 @@ fn bandwidth_figures_of_the_protocol_document() {
         ..Default::default()
     };
     let ls = row_lines(summary, &row, 16);
-    assert_eq!((ls[0].len(), ls[1].len()), (45, 40));
+    assert_eq!((ls[0].len(), ls[1].len()), (45, 42));
     // An object of rows 120-126, columns 40-47.
     let o = cvm_core::objects::Object {
         id: 3,
@@ -515,13 +519,14 @@ fn bandwidth_figures_of_the_protocol_document() {
         peak_col: 44,
         peak_mag: 1_234_567_890,
         peak_power: 4567,
+        peak_spread: 0,
         channels: cvm_core::flags::CVM_DEFECT | cvm_core::flags::POWER_DEFECT,
         centroid_row_q8: 31_565,
         centroid_col_q8: 11_335,
     };
     let mut sink = dmap::stream::VecSink::default();
     protocol::encode_object(&o, &mut sink);
-    assert_eq!(sink.0.len(), 71);
+    assert_eq!(sink.0.len(), 73);
 
     // The widest value of every field.
     let max = u32::MAX;
@@ -529,8 +534,9 @@ fn bandwidth_figures_of_the_protocol_document() {
         mag: max,
         strength: max,
         pmag: cvm_core::power::POWER_MAX as u16,
+        smag: cvm_core::spread::SPREAD_MAX,
         // Every flag a defect can carry (a defect always has data).
-        flags: 62,
+        flags: 126,
         ..Default::default()
     };
     let summary = cvm_core::RowSummary {
@@ -550,7 +556,7 @@ fn bandwidth_figures_of_the_protocol_document() {
     // The column is at most the row's last one; a row of 2^32 columns is
     // no row this encoder sees, so its width is counted by hand: 10 digits
     // for column 0's 1.
-    assert_eq!(ls[1].len() + 9, 60);
+    assert_eq!(ls[1].len() + 9, 67);
     let mut sink = dmap::stream::VecSink::default();
     protocol::encode_object(
         &cvm_core::objects::Object {
@@ -565,13 +571,14 @@ fn bandwidth_figures_of_the_protocol_document() {
             peak_col: max,
             peak_mag: max,
             peak_power: cvm_core::power::POWER_MAX as u16,
-            channels: cvm_core::flags::CVM_DEFECT | cvm_core::flags::POWER_DEFECT,
+            peak_spread: cvm_core::spread::SPREAD_MAX,
+            channels: cvm_core::flags::DEFECT,
             centroid_row_q8: u64::from(max) << 8,
             centroid_col_q8: u64::from(max) << 8,
         },
         &mut sink,
     );
-    assert_eq!(sink.0.len(), 154);
+    assert_eq!(sink.0.len(), 161);
     let mut sink = dmap::stream::VecSink::default();
     protocol::encode_end(
         &cvm_core::Totals {
@@ -609,6 +616,7 @@ fn bandwidth_figures_of_the_protocol_document() {
             full_scale: u16::MAX,
             threshold: max,
             power_threshold: max,
+            spread_threshold: max,
             q: -120,
             scores: true,
             max_defect_lines: u16::MAX,
@@ -623,12 +631,18 @@ fn bandwidth_figures_of_the_protocol_document() {
         },
         &mut sink,
     );
-    assert_eq!(sink.0.len(), 236);
+    assert_eq!(sink.0.len(), 236 + ",sthr=4294967295".len());
     // The score line of a row numbered 2^32 - 1 from a 10-digit col0.
-    let s_max = "S,".len() + 10 + 1 + 10 + 1 + 24 * protocol::SCORE_CHARS + "*XXXX\n".len();
+    let s_max = "S,".len()
+        + 10
+        + 1
+        + 10
+        + 1
+        + protocol::SCORES_PER_LINE * protocol::SCORE_CHARS
+        + "*XXXX\n".len();
     assert_eq!(s_max, 246);
     assert!(
-        [107, 60, 154, 253, 236, 246]
+        [107, 67, 161, 253, 252, 246]
             .iter()
             .all(|&n| n <= protocol::MAX_LINE)
     );
@@ -649,10 +663,14 @@ fn absurd_geometry_in_valid_lines_costs_no_memory() {
     // line claiming 4e9 rows: the decoder reports the gaps as ranges and
     // keeps only the scores that arrived.
     let mut dec = Decoder::new();
+    let header = format!(
+        "H,v=7,fw=x,j=3x3,cols=4000000000,k=P,b=0,w=uniform,norm=1,fs=65535,thr=1,pthr=3277,sthr=4294967295,q=20,scores=1,dcap=16,rst=por,boots=1,rows=4000000000,src={},store=none",
+        "d".repeat(cvm_core::settings::KEYS)
+    );
     for body in [
-        "H,v=5,fw=x,j=3x3,cols=4000000000,k=P,b=0,w=uniform,norm=1,fs=65535,thr=1,pthr=3277,q=20,scores=1,dcap=16,rst=por,boots=1",
+        header.as_str(),
         "R,2,0,-,0,-,0,0,1,0,0",
-        "S,2,3999999999,AAAAAAAAB",
+        "S,2,3999999999,AAAAAAAAAAAB",
         "E,rows=4000000000,frames=0,missing=0,dark=0,sat=0,defects=0,obj=0,unobj=0,rejected=0,extra=0,bad=0,clipped=0,misplaced=0,dropped=0,verdict=good",
     ] {
         dec.feed(&line_with_crc(body));
@@ -666,6 +684,7 @@ fn absurd_geometry_in_valid_lines_costs_no_memory() {
         cvm_core::protocol::ScoreValue {
             mag: 1,
             pmag: 0,
+            smag: 0,
             flags: 0
         }
     );
@@ -959,12 +978,12 @@ fn full_scale_reaches_the_header_and_the_scoring() {
     let s = &dec.scans[0];
     assert_eq!(
         (s.version, s.full_scale, s.max_defect_lines, s.boots),
-        (6, 4095, 3, 1)
+        (7, 4095, 3, 1)
     );
     assert_eq!(s.reset_cause, Some(cvm_core::protocol::ResetCause::PowerOn));
     assert_eq!(s.end.unwrap().totals.saturated as usize, saturated);
     let text = String::from_utf8_lossy(&out.stdout);
-    assert!(text.starts_with("H,v=6,"), "{text}");
+    assert!(text.starts_with("H,v=7,"), "{text}");
     assert!(text.lines().next().unwrap().contains(",fs=4095,"), "{text}");
     let listen = std::process::Command::new(exe)
         .args(["listen", "--input", "-"])

@@ -56,7 +56,7 @@ enum Expect {
 struct RowLines {
     summary: RowSummary,
     listed: u32,
-    scores: Vec<Option<(u32, u16, u8)>>,
+    scores: Vec<Option<(u32, u16, u32, u8)>>,
     defect_lines: u32,
 }
 
@@ -86,6 +86,7 @@ struct Run<'s> {
     cols: u32,
     threshold: u32,
     power_threshold: u32,
+    spread_threshold: u32,
     scores: bool,
     max_defects: u32,
     full_scale: u16,
@@ -294,6 +295,7 @@ impl Run<'_> {
                     col,
                     mag,
                     pmag,
+                    smag,
                     flags: fl,
                     ..
                 } => {
@@ -303,10 +305,15 @@ impl Run<'_> {
                     let fired = (
                         mag >= self.threshold,
                         u32::from(pmag) >= self.power_threshold,
+                        smag >= self.spread_threshold,
                     );
-                    assert!(fired.0 || fired.1, "a defect line below both thresholds");
+                    assert!(
+                        fired.0 || fired.1 || fired.2,
+                        "a defect line below every threshold"
+                    );
                     assert_eq!(fl & flags::CVM_DEFECT != 0, fired.0);
                     assert_eq!(fl & flags::POWER_DEFECT != 0, fired.1);
+                    assert_eq!(fl & flags::SPREAD_DEFECT != 0, fired.2);
                     assert!(fl & flags::NO_DATA == 0);
                     assert!(matches!(self.expect(row, col), Expect::Data(_)));
                 }
@@ -317,7 +324,7 @@ impl Run<'_> {
                     for (k, c) in chars.chunks(protocol::SCORE_CHARS).enumerate() {
                         let slot = &mut r.scores[col0 as usize + k];
                         assert!(slot.is_none(), "position sent twice");
-                        *slot = protocol::decode_score(c).map(|v| (v.mag, v.pmag, v.flags));
+                        *slot = protocol::decode_score(c).map(|v| (v.mag, v.pmag, v.smag, v.flags));
                     }
                 }
                 Line::Object(o) => {
@@ -330,7 +337,12 @@ impl Run<'_> {
                     assert!(o.col1 < self.cols && o.channels != 0);
                     assert!((o.row0..=o.row1).contains(&o.peak_row));
                     assert!((o.col0..=o.col1).contains(&o.peak_col));
-                    assert!(o.peak >= 1 << 16 || self.threshold == 0 || self.power_threshold == 0);
+                    assert!(
+                        o.peak >= 1 << 16
+                            || self.threshold == 0
+                            || self.power_threshold == 0
+                            || self.spread_threshold == 0
+                    );
                     self.model.objects += 1;
                     self.model.object_area += u64::from(o.area);
                 }
@@ -388,7 +400,7 @@ impl Run<'_> {
         let (mut dark, mut sat, mut defects, mut max, mut argmax) = (0, 0, 0, 0, None);
         for (c, v) in got.iter().enumerate() {
             let c = c as u32;
-            let (mag, pmag, fl) = v.unwrap_or_else(|| panic!("row {r} col {c} has no score"));
+            let (mag, pmag, smag, fl) = v.unwrap_or_else(|| panic!("row {r} col {c} has no score"));
             match self.expect(r, c) {
                 Expect::NoData => {
                     assert_eq!(
@@ -396,7 +408,7 @@ impl Run<'_> {
                         flags::NO_DATA,
                         "({r}, {c}) must be empty"
                     );
-                    assert_eq!((mag, pmag, fl & flags::DEFECT), (0, 0, 0));
+                    assert_eq!((mag, pmag, smag, fl & flags::DEFECT), (0, 0, 0, 0));
                     no_data += 1;
                 }
                 Expect::Data(want) => {
@@ -412,17 +424,25 @@ impl Run<'_> {
                     if alone {
                         assert_eq!(mag, 0, "a map without neighbours is its own neighbour");
                         assert_eq!(pmag, 0, "a map without neighbours is its own neighbour");
+                        assert_eq!(smag, 0, "a map without neighbours is its own neighbour");
                     }
                     assert!(u32::from(pmag) <= cvm_core::power::POWER_MAX);
+                    assert!(smag <= cvm_core::spread::SPREAD_MAX);
+                    // A channel that is off measures nothing.
+                    if self.spread_threshold == cvm_core::spread::SPREAD_OFF {
+                        assert_eq!(smag, 0, "({r}, {c}): the spread channel is off");
+                    }
                     let fired = (
                         mag >= self.threshold,
                         u32::from(pmag) >= self.power_threshold,
+                        smag >= self.spread_threshold,
                     );
                     assert_eq!(fl & flags::CVM_DEFECT != 0, fired.0, "({r}, {c})");
                     assert_eq!(fl & flags::POWER_DEFECT != 0, fired.1, "({r}, {c})");
+                    assert_eq!(fl & flags::SPREAD_DEFECT != 0, fired.2, "({r}, {c})");
                     dark += u32::from(fl & flags::DARK != 0);
                     sat += u32::from(fl & flags::SATURATED != 0);
-                    defects += u32::from(fired.0 || fired.1);
+                    defects += u32::from(fired.0 || fired.1 || fired.2);
                     if argmax.is_none() || mag > max {
                         (max, argmax) = (mag, Some(c));
                     }
@@ -516,10 +536,17 @@ fn run(u: &mut Unstructured) -> Result<()> {
         1 => u.int_in_range(0..=64)?,
         _ => u.int_in_range(0..=cvm_core::power::POWER_MAX + 1)?,
     };
+    // Spread thresholds across the channel's range, and off.
+    let spread_threshold = match u.int_in_range(0..=3)? {
+        0 => cvm_core::spread::SPREAD_OFF,
+        1 => u.int_in_range(0..=64)?,
+        _ => u.int_in_range(0..=cvm_core::spread::SPREAD_MAX + 1)?,
+    };
     let settings = Settings {
         cols,
         threshold,
         power_threshold,
+        spread_threshold,
         scores: u.ratio(7, 8)?,
         max_defect_lines_per_row: u.int_in_range(0..=4)?,
         firmware_version: "fuzz",
@@ -538,6 +565,7 @@ fn run(u: &mut Unstructured) -> Result<()> {
         cols,
         threshold,
         power_threshold,
+        spread_threshold,
         scores: settings.scores,
         max_defects: u32::from(settings.max_defect_lines_per_row),
         full_scale: cfg.full_scale,

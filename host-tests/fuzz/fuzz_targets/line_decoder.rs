@@ -82,10 +82,11 @@ fn totals(u: &mut Unstructured) -> Result<Totals> {
 
 /// A position as the engine can score it: without data nothing else; with
 /// data not both DARK and SATURATED, CLIPPED (with CVM_DEFECT) exactly at
-/// the top magnitude, a power magnitude of at most 46340, a defect's
+/// the top magnitude, a power magnitude of at most 46340, a spread
+/// magnitude of at most 92680, a defect's
 /// strength at least 65536.
 fn position(u: &mut Unstructured) -> Result<PositionScore> {
-    let mut flags: u8 = u.int_in_range(0..=63)?;
+    let mut flags: u8 = u.int_in_range(0..=127)?;
     if flags & flags::NO_DATA != 0 {
         return Ok(PositionScore {
             flags: flags::NO_DATA,
@@ -104,6 +105,7 @@ fn position(u: &mut Unstructured) -> Result<PositionScore> {
     Ok(PositionScore {
         mag,
         pmag: u.int_in_range(0..=POWER_MAX as u16)?,
+        smag: u.int_in_range(0..=cvm_core::spread::SPREAD_MAX)?,
         strength: if flags & flags::DEFECT != 0 {
             strength.max(1 << 16)
         } else {
@@ -145,6 +147,7 @@ fn round_trip(u: &mut Unstructured) -> Result<()> {
         full_scale: u.int_in_range(1..=u16::MAX)?,
         threshold,
         power_threshold: u.arbitrary()?,
+        spread_threshold: u.arbitrary()?,
         q: u.int_in_range(protocol::Q_MIN..=protocol::Q_MAX)?,
         scores: true,
         max_defect_lines: u.arbitrary()?,
@@ -247,6 +250,7 @@ fn round_trip(u: &mut Unstructured) -> Result<()> {
                     col,
                     mag: p.mag,
                     pmag: p.pmag,
+                    smag: p.smag,
                     strength: p.strength,
                     flags: p.flags
                 })
@@ -263,11 +267,12 @@ fn round_trip(u: &mut Unstructured) -> Result<()> {
             assert_eq!((row, col0), (summary.row, (k * SCORES_PER_LINE) as u32));
             assert_eq!(chars.len(), chunk.len() * SCORE_CHARS);
             for (c, p) in chars.chunks(SCORE_CHARS).zip(chunk) {
-                // Score lines carry the six defined flag bits.
+                // Score lines carry the seven defined flag bits.
                 let want = protocol::ScoreValue {
                     mag: p.mag,
                     pmag: p.pmag,
-                    flags: p.flags & 0x3F,
+                    smag: p.smag,
+                    flags: p.flags & 0x7F,
                 };
                 assert_eq!(protocol::decode_score(c), Some(want));
             }
@@ -300,7 +305,8 @@ fn round_trip(u: &mut Unstructured) -> Result<()> {
             let want = protocol::ScoreValue {
                 mag: p.mag,
                 pmag: p.pmag,
-                flags: p.flags & 0x3F,
+                smag: p.smag,
+                flags: p.flags & 0x7F,
             };
             assert_eq!(got.get(&(c as u32)), Some(&want));
         }

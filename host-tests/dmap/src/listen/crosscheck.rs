@@ -18,6 +18,7 @@ use std::collections::{BTreeMap, BTreeSet};
 struct Position {
     mag: u32,
     pmag: u16,
+    smag: u32,
     bits: u8,
     strength: u32,
 }
@@ -137,7 +138,7 @@ fn rows_against_scores(s: &ScanResult, e: &EndInfo) -> Vec<(usize, String)> {
             want.saturated += u32::from(v.flags & flags::SATURATED != 0);
             if v.flags & flags::DEFECT != 0 {
                 want.defects += 1;
-                defects.push((decide(v.mag, v.pmag, s.thr, s.pthr).1, c));
+                defects.push((decide(v.mag, v.pmag, v.smag, s.thresholds()).1, c));
             }
             if want.argmax.is_none() || v.mag > want.max {
                 (want.max, want.argmax) = (v.mag, Some(c));
@@ -204,6 +205,7 @@ fn defects_against_scores(s: &ScanResult) -> Vec<(usize, String)> {
         let fields = [
             ("mag", d.mag, v.mag),
             ("pmag", u32::from(d.pmag), u32::from(v.pmag)),
+            ("smag", d.smag, v.smag),
             ("flags", u32::from(d.flags), u32::from(v.flags)),
         ];
         let wrong: Vec<String> = fields
@@ -240,13 +242,14 @@ fn known_positions(s: &ScanResult, rows: u32) -> (BTreeMap<(u32, u32), Position>
             whole.insert(row);
             for (&c, v) in &s.scores[&row] {
                 if v.flags & flags::NO_DATA == 0 && v.flags & flags::DEFECT != 0 {
-                    let strength = decide(v.mag, v.pmag, s.thr, s.pthr).1;
+                    let strength = decide(v.mag, v.pmag, v.smag, s.thresholds()).1;
                     let bits = v.flags & flags::DEFECT;
                     known.insert(
                         (row, c),
                         Position {
                             mag: v.mag,
                             pmag: v.pmag,
+                            smag: v.smag,
                             bits,
                             strength,
                         },
@@ -261,6 +264,7 @@ fn known_positions(s: &ScanResult, rows: u32) -> (BTreeMap<(u32, u32), Position>
                     let p = Position {
                         mag: d.mag,
                         pmag: d.pmag,
+                        smag: d.smag,
                         bits: d.flags & flags::DEFECT,
                         strength: d.strength,
                     };
@@ -289,7 +293,7 @@ fn object_of(id: u32, cells: &[((u32, u32), Position)]) -> Object {
         o.channels |= p.bits;
         if o.area == 1 || p.strength > o.peak {
             (o.peak, o.peak_row, o.peak_col) = (p.strength, r, c);
-            (o.peak_mag, o.peak_power) = (p.mag, p.pmag);
+            (o.peak_mag, o.peak_power, o.peak_spread) = (p.mag, p.pmag, p.smag);
         }
         let weight = u128::from((p.strength >> 8).clamp(1, 1 << 24));
         w += weight;
@@ -341,6 +345,7 @@ fn object_diff(got: &Object, want: &Object) -> Vec<String> {
             ("peak_col", u64::from(o.peak_col)),
             ("peak_mag", u64::from(o.peak_mag)),
             ("peak_power", u64::from(o.peak_power)),
+            ("peak_spread", u64::from(o.peak_spread)),
             ("centroid_row_q8", o.centroid_row_q8),
             ("centroid_col_q8", o.centroid_col_q8),
             ("channels", u64::from(o.channels)),
@@ -431,6 +436,7 @@ fn objects_against_positions(s: &ScanResult, e: &EndInfo, line: usize) -> Vec<(u
                     peak: p.strength,
                     peak_mag: p.mag,
                     peak_power: p.pmag,
+                    peak_spread: p.smag,
                     channels: o.channels | p.bits,
                     ..*o
                 };

@@ -8,7 +8,7 @@ use super::scan::{Kind, LineError, MAX_IMAGE_POSITIONS, ScanResult};
 use cvm_core::protocol::{self, Line};
 
 /// The oldest protocol version whose streams this decoder reads.
-pub const OLDEST_VERSION: u32 = 5;
+pub const OLDEST_VERSION: u32 = 7;
 
 /// Scans one run decodes by default, and at most (`--max-scans`).
 pub const DEFAULT_MAX_SCANS: u32 = 64;
@@ -262,9 +262,10 @@ impl Decoder {
                 col,
                 mag,
                 pmag,
+                smag,
                 strength,
                 flags,
-            } => self.defect(row, col, mag, pmag, strength, flags),
+            } => self.defect(row, col, (mag, pmag, smag), strength, flags),
             Line::Scores { row, col0, chars } => self.scores(row, col0, chars),
             Line::End(e) => self.end(e),
         }

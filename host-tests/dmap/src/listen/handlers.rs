@@ -52,11 +52,14 @@ impl Decoder {
             normalise: h.normalise,
             power_threshold: (h.power_threshold <= cvm_core::power::POWER_MAX)
                 .then(|| cvm_core::power::to_units(h.power_threshold)),
+            spread_threshold: (h.spread_threshold <= cvm_core::spread::SPREAD_MAX)
+                .then(|| cvm_core::spread::to_units(h.spread_threshold)),
             ..ScanResult::default()
         };
         s.threshold = s.units(h.threshold);
         s.thr = h.threshold;
         s.pthr = h.power_threshold;
+        s.sthr = h.spread_threshold;
         s.header_rows = h.origin.map(|o| o.rows);
         if let Some(what) = header_fault(h) {
             s.problems.push(LineError {
@@ -65,7 +68,7 @@ impl Decoder {
                 what,
             });
         }
-        // Version 6 only added fields to the header: 5 reads the same.
+        // Version 7 changed the D, S and O lines: older scans do not parse.
         if !(OLDEST_VERSION..=protocol::VERSION).contains(&h.version) {
             s.problems.push(LineError {
                 line: self.line_no,
@@ -140,8 +143,7 @@ impl Decoder {
         &mut self,
         row: u32,
         col: u32,
-        mag: u32,
-        pmag: u16,
+        (mag, pmag, smag): (u32, u16, u32),
         strength: u32,
         flags: u8,
     ) {
@@ -164,10 +166,12 @@ impl Decoder {
             col,
             score,
             power: cvm_core::power::to_units(pmag as u32),
+            spread: cvm_core::spread::to_units(smag),
             strength,
             flags,
             mag,
             pmag,
+            smag,
             line: self.line_no,
         });
         let order = &mut s.order;

@@ -33,6 +33,7 @@ pub fn object_json(o: &Object, s: &ScanResult, pitch_um: Option<f64>) -> serde_j
         "peak_at": [o.peak_row, o.peak_col],
         "peak_magnitude": s.units(o.peak_mag),
         "peak_power": cvm_core::power::to_units(o.peak_power as u32),
+        "peak_spread": cvm_core::spread::to_units(o.peak_spread),
         "centroid": [q8(o.centroid_row_q8), q8(o.centroid_col_q8)],
         "channels": channel_names(o.channels),
     });
@@ -70,6 +71,7 @@ pub fn scan_json(s: &ScanResult, pitch_um: Option<f64>) -> serde_json::Value {
             "full_scale": s.full_scale,
             "threshold": s.threshold,
             "power_threshold": s.power_threshold,
+            "spread_threshold": s.spread_threshold,
             "q": s.q,
             "scores": s.scores_enabled,
             "max_defect_lines": s.max_defect_lines,

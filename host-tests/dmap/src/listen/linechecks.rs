@@ -19,8 +19,10 @@ fn ratio(v: u32, t: u32) -> u32 {
 }
 
 /// The decision bits and the strength of a position with data of
-/// magnitudes `mag` and `pmag` under the thresholds `thr` and `pthr`.
-pub(super) fn decide(mag: u32, pmag: u16, thr: u32, pthr: u32) -> (u8, u32) {
+/// magnitudes `mag`, `pmag` and `smag` under the thresholds `thr`, `pthr`
+/// and `sthr` (a spread channel that is off has `sthr` 4294967295, above
+/// every spread magnitude).
+pub(super) fn decide(mag: u32, pmag: u16, smag: u32, [thr, pthr, sthr]: [u32; 3]) -> (u8, u32) {
     let (mut bits, mut strength) = (0, 0);
     if mag >= thr {
         bits |= flags::CVM_DEFECT;
@@ -30,10 +32,14 @@ pub(super) fn decide(mag: u32, pmag: u16, thr: u32, pthr: u32) -> (u8, u32) {
         bits |= flags::POWER_DEFECT;
         strength = strength.max(ratio(u32::from(pmag), pthr));
     }
+    if smag >= sthr {
+        bits |= flags::SPREAD_DEFECT;
+        strength = strength.max(ratio(smag, sthr));
+    }
     (bits, strength)
 }
 
-/// `cvm+power`, `cvm`, `power` or `none`.
+/// The channels of `bits` joined by `+` (`cvm+power+spread`, `cvm`, ...), or `none`.
 pub(super) fn channels(bits: u8) -> String {
     match super::scan::channel_names(bits).join("+") {
         s if s.is_empty() => "none".to_string(),
@@ -110,16 +116,18 @@ pub(super) fn defect_fault(s: &ScanResult, d: &Defect) -> Vec<String> {
             d.flags, d.mag
         ));
     }
-    let (bits, strength) = decide(d.mag, d.pmag, s.thr, s.pthr);
+    let (bits, strength) = decide(d.mag, d.pmag, d.smag, s.thresholds());
     if bits != d.flags & flags::DEFECT {
         out.push(format!(
-            "{at}: flags {} say {}, but mag {} against thr {} and pmag {} against pthr {} make {}",
+            "{at}: flags {} say {}, but mag {} against thr {}, pmag {} against pthr {} and smag {} against sthr {} make {}",
             d.flags,
             channels(d.flags),
             d.mag,
             s.thr,
             d.pmag,
             s.pthr,
+            d.smag,
+            s.sthr,
             channels(bits)
         ));
     } else if strength != d.strength {
@@ -151,7 +159,7 @@ pub(super) fn scores_fault(s: &ScanResult, row: u32, col0: u32, chars: &[u8]) ->
         if v.flags & flags::NO_DATA != 0 {
             continue;
         }
-        let (bits, _) = decide(v.mag, v.pmag, s.thr, s.pthr);
+        let (bits, _) = decide(v.mag, v.pmag, v.smag, s.thresholds());
         if bits != v.flags & flags::DEFECT {
             wrong.0 += 1;
             wrong.1.get_or_insert((col0 as usize + k, v, bits));
@@ -159,13 +167,15 @@ pub(super) fn scores_fault(s: &ScanResult, row: u32, col0: u32, chars: &[u8]) ->
     }
     if let (n, Some((col, v, bits))) = wrong {
         out.push(format!(
-            "{at}: {n} position(s) whose flags contradict the thresholds, the first column {col}: flags {} say {}, but mag {} against thr {} and pmag {} against pthr {} make {}",
+            "{at}: {n} position(s) whose flags contradict the thresholds, the first column {col}: flags {} say {}, but mag {} against thr {}, pmag {} against pthr {} and smag {} against sthr {} make {}",
             v.flags,
             channels(v.flags),
             v.mag,
             s.thr,
             v.pmag,
             s.pthr,
+            v.smag,
+            s.sthr,
             channels(bits)
         ));
     }

@@ -109,10 +109,12 @@ pub struct Defect {
     /// `Q16` (65536 = at the threshold).
     pub strength: u32,
     pub flags: u8,
-    /// The magnitude and power magnitude as the line carries them
-    /// (`Q(q)`, `Q15`).
+    /// Spread magnitude, a share of the power (`smag / 2^16`).
+    pub spread: f64,
+    /// The magnitudes as the line carries them (`Q(q)`, `Q15`, `Q16`).
     pub mag: u32,
     pub pmag: u16,
+    pub smag: u32,
     /// Its line number in the stream.
     pub line: usize,
 }
@@ -122,7 +124,7 @@ pub fn strength_ratio(strength: u32) -> f64 {
     strength as f64 / 65536.0
 }
 
-/// `"cvm"`, `"power"`: the channels of a flag or `channels` value.
+/// `"cvm"`, `"power"`, `"spread"`: the channels of a flag or `channels` value.
 pub fn channel_names(bits: u8) -> Vec<&'static str> {
     let mut v = Vec::new();
     if bits & flags::CVM_DEFECT != 0 {
@@ -130,6 +132,9 @@ pub fn channel_names(bits: u8) -> Vec<&'static str> {
     }
     if bits & flags::POWER_DEFECT != 0 {
         v.push("power");
+    }
+    if bits & flags::SPREAD_DEFECT != 0 {
+        v.push("spread");
     }
     v
 }
@@ -174,14 +179,18 @@ pub struct ScanResult {
     pub q: i32,
     pub threshold: f64,
     /// The header's thresholds as the lines compare with them (`thr`, `Q(q)`;
-    /// `pthr`, `Q15`).
+    /// `pthr`, `Q15`; `sthr`, `Q16`, 4294967295 when off).
     pub thr: u32,
     pub pthr: u32,
+    pub sthr: u32,
     /// The header's `rows` (version 6 on).
     pub header_rows: Option<u32>,
     /// Power channel threshold as a contrast (`pthr / 2^15`); `None`: the
     /// channel is off (`pthr` above every power magnitude).
     pub power_threshold: Option<f64>,
+    /// Spread channel threshold as a share of the power (`sthr / 2^16`);
+    /// `None`: the channel is off.
+    pub spread_threshold: Option<f64>,
     /// `k`, `b`, `w` and `norm` of the header.
     pub kernels: char,
     pub kernel_size: u8,
@@ -249,6 +258,11 @@ pub(super) struct Order {
 }
 
 impl ScanResult {
+    /// `thr`, `pthr` and `sthr`, as [`super::linechecks::decide`] takes them.
+    pub fn thresholds(&self) -> [u32; 3] {
+        [self.thr, self.pthr, self.sthr]
+    }
+
     pub(super) fn add_problem(&mut self, e: LineError) {
         if self.problems.len() < MAX_PROBLEMS {
             self.problems.push(e);

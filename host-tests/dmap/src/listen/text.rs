@@ -38,7 +38,7 @@ fn short(v: f64) -> String {
 pub fn object_text(o: &Object, s: &ScanResult, pitch_um: Option<f64>) -> String {
     let size = ObjectSize::of(o);
     format!(
-        "object {}: rows {}-{}, cols {}-{}, area {}, extent {}, defect {}; peak {:.2}x threshold at row {} col {} (magnitude {}, power {}); centroid row {:.2} col {:.2}; channels {}",
+        "object {}: rows {}-{}, cols {}-{}, area {}, extent {}, defect {}; peak {:.2}x threshold at row {} col {} (magnitude {}, power {}, spread {}); centroid row {:.2} col {:.2}; channels {}",
         o.id,
         o.row0,
         o.row1,
@@ -52,6 +52,7 @@ pub fn object_text(o: &Object, s: &ScanResult, pitch_um: Option<f64>) -> String 
         o.peak_col,
         short(s.units(o.peak_mag)),
         short(cvm_core::power::to_units(o.peak_power as u32)),
+        short(cvm_core::spread::to_units(o.peak_spread)),
         q8(o.centroid_row_q8),
         q8(o.centroid_col_q8),
         channel_names(o.channels).join("+")
@@ -68,7 +69,7 @@ pub fn summary_text_with(dec: &Decoder, pitch_um: Option<f64>) -> String {
         let (with, without) = s.coverage();
         let _ = writeln!(
             o,
-            "scan {}: firmware {}, {}x{} maps, {} rows x {} cols, threshold {}, {}",
+            "scan {}: firmware {}, {}x{} maps, {} rows x {} cols, threshold {}, {}, {}",
             k + 1,
             s.firmware,
             s.geometry.0,
@@ -79,6 +80,10 @@ pub fn summary_text_with(dec: &Decoder, pitch_um: Option<f64>) -> String {
             match s.power_threshold {
                 Some(t) => format!("power threshold {} (contrast)", short(t)),
                 None => "power channel off".to_string(),
+            },
+            match s.spread_threshold {
+                Some(t) => format!("spread threshold {} (share of the power)", short(t)),
+                None => "spread channel off".to_string(),
             }
         );
         let _ = writeln!(
@@ -95,11 +100,12 @@ pub fn summary_text_with(dec: &Decoder, pitch_um: Option<f64>) -> String {
         for d in s.defects.iter().take(20) {
             let _ = writeln!(
                 o,
-                "    row {:4} col {:4} score {:.6} power {:.6} strength {:.2}x threshold, {}",
+                "    row {:4} col {:4} score {:.6} power {:.6} spread {:.6} strength {:.2}x threshold, {}",
                 d.row,
                 d.col,
                 d.score,
                 d.power,
+                d.spread,
                 strength_ratio(d.strength),
                 channel_names(d.flags).join("+")
             );

@@ -197,11 +197,11 @@ fn framing(g: &Lines, default: &[u8]) -> Vec<Vector> {
         bytes: b"hello\nOK\n\n".to_vec(),
     });
     out.push(damaged(
-        "version-7",
-        "A header of version 7: a problem of the scan, which is decoded as far as it goes",
+        "version-8",
+        "A header of version 8: a problem of the scan, which is decoded as far as it goes",
         g,
         |l| {
-            l.set_key(0, "v", "7");
+            l.set_key(0, "v", "8");
         },
     ));
     out

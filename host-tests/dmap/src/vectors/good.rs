@@ -63,6 +63,15 @@ fn one_deflected(r: u32, c: u32) -> Map {
     }
 }
 
+/// A haloed patch, rows 2-3, columns 10-12.
+fn haloed(r: u32, c: u32) -> Map {
+    if (2..=3).contains(&r) && (10..=12).contains(&c) {
+        Map::Haloed
+    } else {
+        Map::Clear
+    }
+}
+
 fn v(name: &str, about: &str, bytes: Vec<u8>) -> Vector {
     Vector {
         name: name.to_string(),
@@ -141,6 +150,18 @@ pub fn all() -> Result<Vec<Vector>> {
             stream(&Scene {
                 power_threshold: f64::INFINITY,
                 scores: true,
+                ..Scene::default()
+            })?,
+        ),
+        v(
+            "good-spread",
+            "sthr=3277 (0.05 of the power), thr at 0.2: a haloed patch (rows 2-3, columns 10-12; a quarter of the spot's light on the map's rim) found by the spread channel alone (flags 64); above it, at (1, 10), smag = 21638 - 7084 = 14554, the share outside the 3x3 core of a haloed map (2440 of 7390) less a clear one's (800 of 7400), in Q16",
+            stream(&Scene {
+                map: haloed,
+                threshold: 0.2,
+                spread_threshold: 0.05,
+                scores: true,
+                dcap: 4,
                 ..Scene::default()
             })?,
         ),
@@ -261,9 +282,9 @@ pub fn all() -> Result<Vec<Vector>> {
         with_replies(&default),
     ));
     out.push(v(
-        "good-version-5",
-        "A version 5 header (no rows, src, store): read like version 6",
-        version_5(&default),
+        "version-6",
+        "A version 6 header (no sthr) before version 7 lines: a problem of the scan (version 7 changed the D, S and O lines)",
+        version_6(&default),
     ));
     Ok(out)
 }
@@ -288,18 +309,14 @@ fn with_replies(stream: &[u8]) -> Vec<u8> {
     lines.bytes()
 }
 
-/// `stream` with its header written as version 5 wrote it.
-fn version_5(stream: &[u8]) -> Vec<u8> {
+/// `stream` with its header written as version 6 wrote it.
+fn version_6(stream: &[u8]) -> Vec<u8> {
     let mut lines = Lines::of(stream);
     let first = lines.0[0].clone();
     let Ok(cvm_core::protocol::Line::Header(h)) = cvm_core::protocol::parse(&first) else {
         return stream.to_vec();
     };
-    let old = HeaderInfo {
-        version: 5,
-        origin: None,
-        ..h
-    };
+    let old = HeaderInfo { version: 6, ..h };
     let mut sink = crate::stream::VecSink::default();
     encode_header(&old, &mut sink);
     lines.0[0] = sink.0;

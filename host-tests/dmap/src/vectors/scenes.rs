@@ -24,6 +24,10 @@ pub enum Map {
     /// The beam dimmed to 3/5 of its power, its shape unchanged (the power
     /// channel alone: normalised, the map is the clear one).
     Dimmed,
+    /// A quarter of the spot's light scattered into a halo over the
+    /// map's rim (the spread channel): the spot at 3/4, 115 on each of the
+    /// 16 cells outside the 3x3 core, the power within 0.2 %.
+    Haloed,
     /// No light at all (flag DARK).
     Dark,
     /// A sample at full scale (flag SATURATED).
@@ -51,6 +55,13 @@ fn frame(kind: Map, full_scale: u16) -> Vec<u16> {
     match kind {
         // Multiples of 50: 3/5 of each is exact, so the shape is kept.
         Map::Dimmed => f.iter_mut().for_each(|v| *v = *v / 5 * 3),
+        // The cone's samples are multiples of 200: 3/4 of each is exact.
+        Map::Haloed => {
+            for (i, v) in f.iter_mut().enumerate() {
+                let rim = matches!(i / J, 0 | 4) || matches!(i % J, 0 | 4);
+                *v = *v / 4 * 3 + if rim { 115 } else { 0 };
+            }
+        }
         Map::Dark => f.fill(0),
         Map::Saturated => f[J * J / 2] = full_scale,
         _ => {}
@@ -67,6 +78,8 @@ pub struct Scene {
     pub threshold: f64,
     /// Threshold of the power channel, a contrast (`inf`: off).
     pub power_threshold: f64,
+    /// Threshold of the spread channel, a share of the power (`inf`: off).
+    pub spread_threshold: f64,
     pub scores: bool,
     pub dcap: u16,
     pub full_scale: u16,
@@ -87,6 +100,7 @@ impl Default for Scene {
             map: two_defects,
             threshold: 0.05,
             power_threshold: 0.1,
+            spread_threshold: f64::INFINITY,
             scores: false,
             dcap: 0,
             full_scale: 4095,
@@ -139,11 +153,14 @@ impl LineSink for Dropping {
 }
 
 /// The scorer of every scene: 5x5 paper kernels, uniform weights,
-/// normalised maps, and `full_scale`.
+/// normalised maps, and `full_scale`; the spread channel's core 3x3
+/// (half-width 1), since the boards' 5x5 core would be the whole map.
 fn scorer(full_scale: u16) -> Result<Scorer> {
     let mut cfg = Config::paper(Geometry::new(J as u8, J as u8).map_err(|e| anyhow!("{e}"))?);
     cfg.full_scale = full_scale;
-    Scorer::new(&cfg).map_err(|e| anyhow!("{e}"))
+    Ok(Scorer::new(&cfg)
+        .map_err(|e| anyhow!("{e}"))?
+        .with_spread_half(1))
 }
 
 /// The settings of `scene`, with `edit` applied (the board's start, the
@@ -156,6 +173,7 @@ pub fn settings(scene: &Scene, scorer: &Scorer) -> Settings {
         cvm_core::power::threshold_from_units(scene.power_threshold),
         "0.1.0",
     );
+    s.spread_threshold = cvm_core::spread::threshold_from_units(scene.spread_threshold);
     s.scores = scene.scores;
     s.max_defect_lines_per_row = scene.dcap;
     s
