@@ -344,15 +344,15 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
         for (i, r) in refs.iter().enumerate() {
             let o = statistics(&merged(&refs, Some(i)), &exact)?;
             let reach = |m: &[u32], t: u32| m.iter().filter(|&&x| x >= t).count();
-            loo.push((
+            loo.push([
                 (o.cvm.threshold, reach(&r.cvm, o.cvm.threshold)),
                 (o.power.threshold, reach(&r.power, o.power.threshold)),
                 (o.spread.threshold, reach(&r.spread, o.spread.threshold)),
-            ));
+            ]);
         }
     }
     let mut warnings = Vec::new();
-    for (r, &((t, n), (pt, pn), (st_, sn))) in refs.iter().zip(&loo) {
+    for (r, &[(t, n), (pt, pn), (st_, sn)]) in refs.iter().zip(&loo) {
         let others = fmt_num(scorer.score_to_units(t));
         warnings.extend(checks::outlier_warning(&r.path, "CVM", n, &others));
         let others = fmt_num(power::to_units(pt));

@@ -20,6 +20,9 @@ pub const RULE_TEXT: &str = "per channel, thr = Q_p + ceil(k * 1.4826 * MAD) + 1
 /// The tail rule as the file states it.
 pub const TAIL_RULE_TEXT: &str = "per channel, over the channel's magnitudes of every position with data of the S references (integers: cvm in Q(q), power in Q15, spread in Q16), each magnitude taken as the representative of its histogram bin (as for the spread rule) capped at the exact maximum: the tail starts at u, the top of the bin of nearest rank min(ceil((1 - f) n), n - 10) (at least 1) capped at the maximum; N_u magnitudes lie above u with excess sum E, scale s = E / N_u; thr = max(ceil(u + s ln(N_u / (rate S))), max + 1) (u when the log is <= 0), with log2 in Q24 by repeated squaring and ln 2 in Q32; rate and f exact as rate_ppm/10^6 and tail_ppm/10^6; the expected false positions per part at thr are (N_u / S) exp(-(thr - u) / s); a power thr above 46340 or a spread thr above 92680 is recorded as 4294967295, off; defective when a channel's magnitude >= its thr";
 
+/// A threshold and how many positions reach it.
+pub type Reach = (u32, usize);
+
 /// One reference's part of the file.
 pub struct Reference<'a> {
     pub path: &'a Path,
@@ -30,7 +33,7 @@ pub struct Reference<'a> {
     /// With more than one reference: per channel, the other references'
     /// threshold and how many of its positions reach it.
     /// (CVM, power, spread).
-    pub others: Option<((u32, usize), (u32, usize), (u32, usize))>,
+    pub others: Option<[Reach; 3]>,
 }
 
 /// A channel's statistics in its units (`to_units`) and as integers.
@@ -140,7 +143,7 @@ pub fn document(
             v["cols"] = json!(r.cols);
             v["power"] = channel(&r.stats.power, &power::to_units);
             v["spread"] = channel(&r.stats.spread, &spread::to_units);
-            if let Some(((t, n), (pt, pn), (sp, sn))) = r.others {
+            if let Some([(t, n), (pt, pn), (sp, sn)]) = r.others {
                 v["others_threshold"] = json!(units(t));
                 v["at_or_above_others_threshold"] = json!(n);
                 v["power"]["others_threshold"] = json!(power::to_units(pt));
