@@ -520,6 +520,8 @@ fn run(u: &mut Unstructured) -> Result<()> {
         cols,
         threshold,
         power_threshold,
+        // Off: the reference decisions below are the CVM and power channels'.
+        spread_threshold: cvm_core::spread::SPREAD_OFF,
         scores: u.ratio(7, 8)?,
         max_defect_lines_per_row: u.int_in_range(0..=4)?,
         firmware_version: "fuzz",
