@@ -134,7 +134,7 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
         })
     }
 
-    /// Hands the pipeline a calibrator's storage (about 18 KB: a board
+    /// Hands the pipeline a calibrator's storage (about 24 KB: a board
     /// places it in the RAM bank it chooses). From then on every scan's
     /// begin, finished rows and end go to it, and it takes them while
     /// armed ([`Calibrator::arm`]): from the begin of the next scan,

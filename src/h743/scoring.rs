@@ -84,7 +84,7 @@ static NEAR: Noload<[i32; NEAR_WORDS]> = Noload::new();
 #[unsafe(link_section = ".dtcm")]
 static DRIVER: Noload<ScanDriver<'static, MAX_COLS>> = Noload::new();
 
-/// The command channel's calibrator (18 KB of histograms), in AXI SRAM:
+/// The command channel's calibrator (24 KB of histograms), in AXI SRAM:
 /// it takes each finished row only while a calibration runs.
 static CALIBRATOR: ConstStaticCell<Calibrator> = ConstStaticCell::new(Calibrator::new());
 

@@ -323,6 +323,16 @@ fn every_action_round_trips_and_sources_follow() {
         s,
         "thr = 100 (changed, not saved)\nscores = 1 (changed, not saved)\nready = low (changed, not saved)\n"
     );
+    // The spread threshold: any 32-bit value, like pthr; a sign or a word
+    // is refused before anything is sent.
+    let s = ok(&fake.dmap(&["set", "sthr=6554"]));
+    assert_eq!(s, "sthr = 6554 (changed, not saved)\n");
+    assert_eq!(
+        ok(&fake.dmap(&["get", "sthr"])),
+        "sthr = 6554 (changed, not saved)\n"
+    );
+    let out = fake.dmap(&["set", "sthr=off"]);
+    assert!(!out.status.success());
     let s = ok(&fake.dmap(&["get", "thr"]));
     assert_eq!(s, "thr = 100 (changed, not saved)\n");
     assert_eq!(ok(&fake.dmap(&["save"])), "settings saved to flash\n");
