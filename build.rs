@@ -61,15 +61,17 @@ fn main() {
 /// configuration of the scan it runs. See docs/firmware.md.
 /// Keys: j1, j2, cols, rows, kernels (paper|square), b, weights
 /// (uniform|unit), normalise, threshold, pthr (the power channel's
-/// threshold, a contrast; `inf` turns it off), scores, max_defect_lines,
+/// threshold, a contrast; `inf` turns it off), sthr (the spread channel's,
+/// a share of the power; `inf`, the default, turns it off), scores, max_defect_lines,
 /// fs (full scale), fw (the version in the header), reject (part|row:
 /// REJECT's mode), pulse_us (its pulse width; 0 in part mode: held),
 /// row_delay (row mode: rows between the closing row and the pulse).
 ///
 /// `CVM_H743_CALIBRATION` names a calibration file (`dmap calibrate`): its
-/// two thresholds are compiled in, after checking that it was made for
-/// this very configuration (geometry, kernels, weights, normalisation,
-/// full scale); `threshold` and `pthr` may then not be given.
+/// thresholds are compiled in (the spread channel's from version 5; off
+/// before), after checking that it was made for this very configuration
+/// (geometry, kernels, weights, normalisation, full scale); `threshold`,
+/// `pthr` and `sthr` may then not be given.
 fn h743_scan(spec: &str, calibration: Option<&std::path::Path>) -> Result<String, String> {
     let mut j1 = 15u8;
     let mut j2 = 15u8;
@@ -81,6 +83,7 @@ fn h743_scan(spec: &str, calibration: Option<&std::path::Path>) -> Result<String
     let mut normalise = true;
     let mut threshold = 0.5f64;
     let mut pthr = 0.1f64;
+    let mut sthr = f64::INFINITY;
     let mut scores = true;
     let mut max_defect_lines = 0u16;
     let mut full_scale = u16::MAX;
@@ -114,6 +117,7 @@ fn h743_scan(spec: &str, calibration: Option<&std::path::Path>) -> Result<String
             "normalise" => normalise = flag(k, v)?,
             "threshold" => threshold = num(k, v)?,
             "pthr" => pthr = num(k, v)?,
+            "sthr" => sthr = num(k, v)?,
             "scores" => scores = flag(k, v)?,
             "max_defect_lines" => max_defect_lines = num(k, v)?,
             "fs" => full_scale = num(k, v)?,
@@ -139,12 +143,14 @@ fn h743_scan(spec: &str, calibration: Option<&std::path::Path>) -> Result<String
         return Err("cols and rows must be at least 1".into());
     }
     if let Some(path) = calibration {
-        if spec
-            .split_whitespace()
-            .any(|p| p.starts_with("threshold=") || p.starts_with("pthr="))
-        {
+        if spec.split_whitespace().any(|p| {
+            ["threshold=", "pthr=", "sthr="]
+                .iter()
+                .any(|k| p.starts_with(k))
+        }) {
             return Err(
-                "threshold and pthr come from CVM_H743_CALIBRATION; do not give them too".into(),
+                "threshold, pthr and sthr come from CVM_H743_CALIBRATION; do not give them too"
+                    .into(),
             );
         }
         let resolved_b = match (kernels.as_str(), b) {
@@ -161,13 +167,16 @@ fn h743_scan(spec: &str, calibration: Option<&std::path::Path>) -> Result<String
             "normalise": normalise,
             "full_scale": full_scale,
         });
-        (threshold, pthr) = calibration_thresholds(path, &config)?;
+        (threshold, pthr, sthr) = calibration_thresholds(path, &config)?;
     }
     if !threshold.is_finite() || threshold < 0.0 {
         return Err(format!("threshold={threshold}: must be finite and >= 0"));
     }
     if pthr.is_nan() || pthr < 0.0 {
         return Err(format!("pthr={pthr}: must be >= 0 (inf: off)"));
+    }
+    if sthr.is_nan() || sthr < 0.0 {
+        return Err(format!("sthr={sthr}: must be >= 0 (inf: off)"));
     }
     // What the ELF was built for, in a section that is not loaded (no
     // flash): `dmap twin --elf` reads it and refuses a run it does not fit.
@@ -177,7 +186,7 @@ fn h743_scan(spec: &str, calibration: Option<&std::path::Path>) -> Result<String
         (_, None) => j1.max(j2) - 1,
     };
     let built_for = format!(
-        "j1={j1} j2={j2} cols={cols} rows={rows} kernels={kernels} b={section_b} weights={weights} normalise={normalise} threshold={threshold:?} pthr={pthr:?} scores={scores} max_defect_lines={max_defect_lines} fs={full_scale}"
+        "j1={j1} j2={j2} cols={cols} rows={rows} kernels={kernels} b={section_b} weights={weights} normalise={normalise} threshold={threshold:?} pthr={pthr:?} sthr={sthr:?} scores={scores} max_defect_lines={max_defect_lines} fs={full_scale}"
     );
     let kernels = match (kernels.as_str(), b) {
         ("paper", b) => format!("Kernels::Paper {{ bmax: {} }}", b.unwrap_or(0)),
@@ -202,6 +211,12 @@ fn h743_scan(spec: &str, calibration: Option<&std::path::Path>) -> Result<String
         format!("{pthr:?}")
     };
     let _ = writeln!(s, "pub const POWER_THRESHOLD_UNITS: f64 = {pthr};");
+    let sthr = if sthr.is_infinite() {
+        "f64::INFINITY".to_string()
+    } else {
+        format!("{sthr:?}")
+    };
+    let _ = writeln!(s, "pub const SPREAD_THRESHOLD_UNITS: f64 = {sthr};");
     let _ = writeln!(s, "pub const SCORES: bool = {scores};");
     let _ = writeln!(
         s,
@@ -222,14 +237,15 @@ fn h743_scan(spec: &str, calibration: Option<&std::path::Path>) -> Result<String
     Ok(s)
 }
 
-/// The CVM and power thresholds (distance units, contrast) of a
-/// calibration file, refused unless it is a `dmap calibrate` file of
-/// version 2, 3 or 4 (the same thresholds; 3 is the streaming rule's, 4
-/// adds the tail fit and the rule's name) made for `config`.
+/// The CVM, power and spread thresholds (distance units, contrast, share
+/// of the power) of a calibration file, refused unless it is a `dmap
+/// calibrate` file of version 2 to 5 (the same thresholds; 3 is the
+/// streaming rule's, 4 adds the tail fit and the rule's name, 5 the spread
+/// channel, off in the earlier ones) made for `config`.
 fn calibration_thresholds(
     path: &std::path::Path,
     config: &serde_json::Value,
-) -> Result<(f64, f64), String> {
+) -> Result<(f64, f64, f64), String> {
     let p = path.display();
     let text = std::fs::read_to_string(path).map_err(|e| format!("{p}: {e}"))?;
     let v: serde_json::Value =
@@ -237,9 +253,10 @@ fn calibration_thresholds(
     if v["format"] != "dmap-calibration" {
         return Err(format!("{p}: not a dmap calibration file"));
     }
-    if !(v["version"] == 2 || v["version"] == 3 || v["version"] == 4) {
+    let version = v["version"].as_u64().unwrap_or(0);
+    if !(2..=5).contains(&version) {
         return Err(format!(
-            "{p}: calibration file version {} (this firmware reads 2 to 4; run dmap calibrate again)",
+            "{p}: calibration file version {} (this firmware reads 2 to 5; run dmap calibrate again)",
             v["version"]
         ));
     }
@@ -262,5 +279,11 @@ fn calibration_thresholds(
                 format!("{p}: channels.{channel}.threshold missing or not a number >= 0")
             })
     };
-    Ok((units("cvm")?, units("power")?))
+    // Before version 5 the file has no spread channel: off.
+    let spread = if version >= 5 {
+        units("spread")?
+    } else {
+        f64::INFINITY
+    };
+    Ok((units("cvm")?, units("power")?, spread))
 }

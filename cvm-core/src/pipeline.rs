@@ -3,11 +3,12 @@
 //! `dmap stream` and both firmware boards drive exactly this type, which is
 //! what makes their output byte-identical.
 
-use crate::calibration::Calibrator;
+use crate::calibration::{Calibrator, Progress};
 use crate::objects::{MAX_OBJECTS, Object, Objects};
 use crate::protocol::{HeaderInfo, LineSink, encode_end, encode_header, encode_object, encode_row};
 use crate::scorer::Scorer;
 pub use crate::settings::{Outputs, Settings};
+use crate::spread::{SPREAD_MAX, SPREAD_OFF};
 use crate::stream::{Engine, EngineError, Position, PushOutcome, RowView, Totals};
 use crate::verdict::{self, Ahead, Verdict};
 
@@ -81,6 +82,23 @@ pub struct Pipeline<'a, const MAX_COLS: usize> {
     calibrator: Option<&'a mut Calibrator>,
 }
 
+/// The spread threshold the engine scans with for a setting of `t`: a
+/// setting above [`SPREAD_MAX`] is off, and the engine then measures
+/// nothing ([`SPREAD_OFF`]), unless the scan is taken by a calibration
+/// (`calibrating`), which needs the spread magnitudes whatever the
+/// setting: the engine then measures them against a threshold no
+/// magnitude reaches (`SPREAD_OFF - 1`), so that the scan's defects,
+/// objects and verdict stay those of the channel off.
+const fn engine_spread(t: u32, calibrating: bool) -> u32 {
+    if t <= SPREAD_MAX {
+        t
+    } else if calibrating {
+        SPREAD_OFF - 1
+    } else {
+        SPREAD_OFF
+    }
+}
+
 impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
     pub fn new(
         scorer: &'a Scorer,
@@ -104,7 +122,7 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
         let (cols, threshold) = (settings.cols, settings.threshold);
         let mut engine = Engine::with_near(scorer, cols, threshold, row_a, row_b, near)?;
         engine.set_power_threshold(settings.power_threshold);
-        engine.set_spread_threshold(settings.spread_threshold);
+        engine.set_spread_threshold(engine_spread(settings.spread_threshold, false));
         engine.set_rows(settings.rows);
         Ok(Pipeline {
             engine,
@@ -117,7 +135,7 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
         })
     }
 
-    /// Hands the pipeline a calibrator's storage (about 18 KB: a board
+    /// Hands the pipeline a calibrator's storage (about 24 KB: a board
     /// places it in the RAM bank it chooses). From then on every scan's
     /// begin, finished rows and end go to it, and it takes them while
     /// armed ([`Calibrator::arm`]): from the begin of the next scan,
@@ -160,7 +178,8 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
     pub fn configure(&mut self, settings: Settings) -> Result<(), EngineError> {
         self.engine.reconfigure(settings.cols, settings.threshold)?;
         self.engine.set_power_threshold(settings.power_threshold);
-        self.engine.set_spread_threshold(settings.spread_threshold);
+        self.engine
+            .set_spread_threshold(engine_spread(settings.spread_threshold, false));
         self.engine.set_rows(settings.rows);
         self.settings = settings;
         Ok(())
@@ -177,13 +196,20 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
         core::mem::take(&mut self.closures.untaken)
     }
 
-    /// Starts a scan: the header line.
+    /// Starts a scan: the header line. A scan an attached calibrator
+    /// takes has its spread measured even with the channel off (the
+    /// calibration sets the spread threshold too); its decisions stay
+    /// those of the channel off.
     pub fn begin(&mut self, sink: &mut impl LineSink) {
         self.closures = Closures::default();
         self.closed.len = 0;
+        let mut taking = false;
         if let Some(c) = self.calibrator.as_deref_mut() {
             c.scan_begins();
+            taking = matches!(c.progress(), Progress::Running { .. });
         }
+        self.engine
+            .set_spread_threshold(engine_spread(self.settings.spread_threshold, taking));
         let h = HeaderInfo::new(self.engine.scorer(), &self.settings);
         encode_header(&h, sink);
     }

@@ -94,7 +94,7 @@ pub struct Settings {
 }
 
 /// Runtime settings a command channel may get and set (`command::Key`).
-pub const KEYS: usize = 15;
+pub const KEYS: usize = 16;
 
 impl Settings {
     /// Settings of `cols` x `rows` scans with these thresholds, everything

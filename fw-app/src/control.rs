@@ -280,8 +280,8 @@ impl Control {
         };
     }
 
-    /// The calibration finished: its thresholds are the next scan's (not
-    /// saved), and the reply carries the `calibrate` request's id.
+    /// The calibration finished: its three thresholds are the next scan's
+    /// (not saved), and the reply carries the `calibrate` request's id.
     pub fn calibrated(&mut self, c: &Calibration, sink: &mut impl LineSink) {
         let Some(run) = self.calibration.take() else {
             return;
@@ -289,8 +289,10 @@ impl Control {
         let mut s = self.next;
         s.threshold = c.threshold;
         s.power_threshold = c.power_threshold;
+        s.spread_threshold = c.spread_threshold;
         s.sources[Key::Threshold.index()] = Source::Changed;
         s.sources[Key::PowerThreshold.index()] = Source::Changed;
+        s.sources[Key::SpreadThreshold.index()] = Source::Changed;
         self.change(s);
         encode_reply(Some(run.id), &Reply::Calibrated(*c), sink);
     }

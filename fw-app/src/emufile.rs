@@ -21,7 +21,8 @@
 //! | 40 | 24 | firmware version text, zero padded |
 //! | 64 | 128+128 | separable weights `w1[16]`, `w2[16]` (f64; zero otherwise) |
 //! | 320 | 8 | power threshold, a contrast (f64; infinite = the channel off) |
-//! | 328 | | frames: `J1*J2` samples each, little-endian `u16`, raster order, until end of file |
+//! | 328 | 8 | spread threshold, a share of the power (f64; infinite = the channel off) |
+//! | 336 | | frames: `J1*J2` samples each, little-endian `u16`, raster order, until end of file |
 //!
 //! The board synthesises LINE_SYNC on every `cols`-th beam, as a scanner
 //! would drive it.
@@ -30,7 +31,7 @@ use cvm_core::config::{Config, Geometry, Kernels, MAX_J, Weights};
 use cvm_core::protocol::MAX_FW;
 
 pub const MAGIC: [u8; 8] = *b"CVMSCAN3";
-pub const HEADER_LEN: usize = 328;
+pub const HEADER_LEN: usize = 336;
 
 /// Everything the header says.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -41,6 +42,8 @@ pub struct ScanHeader {
     pub threshold_units: f64,
     /// Power channel threshold, a contrast (`cvm_core::power`).
     pub power_threshold_units: f64,
+    /// Spread channel threshold, a share of the power (`cvm_core::spread`).
+    pub spread_threshold_units: f64,
     pub scores: bool,
     pub max_defect_lines_per_row: u16,
     pub version_len: u8,
@@ -175,6 +178,7 @@ impl ScanHeader {
             rows,
             threshold_units: f64_at(b, 28),
             power_threshold_units: f64_at(b, 320),
+            spread_threshold_units: f64_at(b, 328),
             scores,
             max_defect_lines_per_row: u16_at(b, 36),
             version_len,
@@ -217,6 +221,7 @@ impl ScanHeader {
         b[28..36].copy_from_slice(&self.threshold_units.to_le_bytes());
         b[36..38].copy_from_slice(&self.max_defect_lines_per_row.to_le_bytes());
         b[320..328].copy_from_slice(&self.power_threshold_units.to_le_bytes());
+        b[328..336].copy_from_slice(&self.spread_threshold_units.to_le_bytes());
         b[38] = self.version_len;
         b[40..40 + MAX_FW].copy_from_slice(&self.version);
         b

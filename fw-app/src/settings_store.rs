@@ -130,16 +130,27 @@ impl<S: NorFlash> SettingsStore<S> {
     pub async fn save(&mut self, tag: &Tag, values: &Values) -> Result<(), StoreError> {
         let mut rec = [0u8; RECORD_LEN];
         record::encode(tag, values, &mut rec).map_err(|_| StoreError::Internal)?;
-        match self.map.store_item(&mut self.buf, &(), &&rec[..]).await {
+        self.save_bytes(&rec).await
+    }
+
+    /// Stores `rec` as the record whatever it holds, then reads it back:
+    /// [`SettingsStore::save`]'s write, and what tests use to leave the
+    /// record of another build or layout (at most the work buffer's
+    /// length).
+    pub async fn save_bytes(&mut self, rec: &[u8]) -> Result<(), StoreError> {
+        if rec.len() > BUF {
+            return Err(StoreError::Internal);
+        }
+        match self.map.store_item(&mut self.buf, &(), &rec).await {
             Ok(()) => {}
             Err(Error::Corrupted { .. }) => {
                 self.map.erase_all().await?;
-                self.map.store_item(&mut self.buf, &(), &&rec[..]).await?;
+                self.map.store_item(&mut self.buf, &(), &rec).await?;
             }
             Err(e) => return Err(e.into()),
         }
         match self.map.fetch_item::<&[u8]>(&mut self.buf, &()).await? {
-            Some(back) if back == &rec[..] => Ok(()),
+            Some(back) if back == rec => Ok(()),
             _ => Err(StoreError::Verify),
         }
     }

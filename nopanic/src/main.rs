@@ -125,7 +125,8 @@ pub extern "C" fn _start() -> ! {
         cols: black_box(300),
         threshold: black_box(1 << 20),
         power_threshold: black_box(3277),
-        spread_threshold: black_box(2000),
+        // Any value: off, measured only, or deciding.
+        spread_threshold: black_box(6554),
         scores: black_box(true),
         max_defect_lines_per_row: black_box(8),
         firmware_version: "nopanic",

@@ -166,7 +166,7 @@ fn scan_driver(header: &ScanHeader) -> ScanDriver<'static, MAX_COLS> {
         cols: header.cols,
         threshold: scorer.threshold_from_units(header.threshold_units),
         power_threshold: cvm_core::power::threshold_from_units(header.power_threshold_units),
-        spread_threshold: cvm_core::spread::SPREAD_OFF,
+        spread_threshold: cvm_core::spread::threshold_from_units(header.spread_threshold_units),
         scores: header.scores,
         max_defect_lines_per_row: header.max_defect_lines_per_row,
         firmware_version,

@@ -18,7 +18,8 @@ use static_cell::ConstStaticCell;
 use super::memory::Noload;
 use crate::config::h743::{
     COLS, CORE, FIRMWARE_VERSION, FRAME_BUFFERS, FRAME_SAMPLES, MAX_COLS, MAX_DEFECT_LINES_PER_ROW,
-    OUTPUTS, POWER_THRESHOLD_UNITS, QUEUE_BYTES, ROWS, SCORES, THRESHOLD_UNITS,
+    OUTPUTS, POWER_THRESHOLD_UNITS, QUEUE_BYTES, ROWS, SCORES, SPREAD_THRESHOLD_UNITS,
+    THRESHOLD_UNITS,
 };
 use crate::frames::SampleBuffers;
 
@@ -83,7 +84,7 @@ static NEAR: Noload<[i32; NEAR_WORDS]> = Noload::new();
 #[unsafe(link_section = ".dtcm")]
 static DRIVER: Noload<ScanDriver<'static, MAX_COLS>> = Noload::new();
 
-/// The command channel's calibrator (18 KB of histograms), in AXI SRAM:
+/// The command channel's calibrator (24 KB of histograms), in AXI SRAM:
 /// it takes each finished row only while a calibration runs.
 static CALIBRATOR: ConstStaticCell<Calibrator> = ConstStaticCell::new(Calibrator::new());
 
@@ -97,8 +98,7 @@ pub fn compiled_settings(cause: ResetCause, boots: u32) -> Settings {
         cols: COLS as u32,
         threshold: TABLES.threshold_from_units(THRESHOLD_UNITS),
         power_threshold: cvm_core::power::threshold_from_units(POWER_THRESHOLD_UNITS),
-        // Off until the build-time configuration and the settings record carry it.
-        spread_threshold: cvm_core::spread::SPREAD_OFF,
+        spread_threshold: cvm_core::spread::threshold_from_units(SPREAD_THRESHOLD_UNITS),
         scores: SCORES,
         max_defect_lines_per_row: MAX_DEFECT_LINES_PER_ROW,
         firmware_version: FIRMWARE_VERSION,

@@ -15,8 +15,9 @@
 //!
 //! The spread rule: per channel, over the magnitudes of every position with data of every
 //! reference scan (the CVM gradient magnitudes `mag` in the scorer's
-//! `Q(q)` format, and the power magnitudes `pmag` in `Q15`,
-//! [`crate::power`]; dark, saturated, clipped and border positions
+//! `Q(q)` format, the power magnitudes `pmag` in `Q15`,
+//! [`crate::power`], and the spread magnitudes `smag` in `Q16`,
+//! [`crate::spread`]; dark, saturated, clipped and border positions
 //! included, positions without a frame left out):
 //!
 //! ```text
@@ -34,9 +35,16 @@
 //!   `ceil(n / 2)`), the MAD the lower median of their absolute deviations
 //!   from it;
 //! - `k = K / 1000`, `p = P / 10^6` and 1.4826 `= 14826 / 10^4` are exact
-//!   rationals ([`rule`]), the sum saturates at `u32::MAX`, and a power
+//!   rationals ([`rule`]), the sum saturates at `u32::MAX`, a power
 //!   threshold above [`power::POWER_MAX`] (reachable only next to a dark
-//!   map) becomes [`power::POWER_OFF`]: the channel is off.
+//!   map) becomes [`power::POWER_OFF`] and a spread threshold above
+//!   [`spread::SPREAD_MAX`] becomes [`spread::SPREAD_OFF`]: the channel
+//!   is off.
+//!
+//! The spread magnitudes are measured only while the engine's spread
+//! channel is on; the pipeline measures them (without deciding anything)
+//! during every scan a calibration takes, so that a calibration with the
+//! channel off still sets its threshold ([`crate::Pipeline::begin`]).
 //!
 //! A position is defective when a channel's magnitude reaches its `thr`.
 //! This replaces the rule of exact medians over all magnitudes, which
@@ -47,9 +55,10 @@
 //! # Memory and cost
 //!
 //! A [`Calibrator`] is [`CALIBRATOR_BYTES`] bytes (13 312 for the CVM
-//! channel's 3 328 bins, 5 120 for the power channel's 1 280, and a few
-//! words), whatever the scan size or the number of scans; a position costs
-//! two bin lookups (a count-leading-zeros and shifts) and increments, and
+//! channel's 3 328 bins, 5 120 for the power channel's 1 280, 5 632 for
+//! the spread channel's 1 408, and a few words), whatever the scan size or
+//! the number of scans; a position costs three bin lookups (a
+//! count-leading-zeros and shifts) and increments, and
 //! [`Calibrator::finish`] one pass over the bins.
 
 pub mod histogram;
@@ -59,6 +68,7 @@ pub mod tail;
 use crate::command::Calibration;
 use crate::flags;
 use crate::power;
+use crate::spread;
 use crate::stream::PositionScore;
 use histogram::{Histogram, bins};
 pub use rule::{Channel, Rule};
@@ -68,6 +78,9 @@ pub const CVM_BINS: usize = bins(32);
 /// Bins of the power channel: magnitudes below `2^16` (at most
 /// [`power::POWER_MAX`]).
 pub const POWER_BINS: usize = bins(16);
+/// Bins of the spread channel: magnitudes below `2^17` (at most
+/// [`spread::SPREAD_MAX`]).
+pub const SPREAD_BINS: usize = bins(17);
 /// Size of a [`Calibrator`].
 pub const CALIBRATOR_BYTES: usize = core::mem::size_of::<Calibrator>();
 
@@ -90,7 +103,7 @@ impl core::fmt::Display for CalibrationError {
     }
 }
 
-/// Both channels' statistics and thresholds.
+/// The three channels' statistics and thresholds.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Statistics {
     /// Scans taken.
@@ -99,6 +112,9 @@ pub struct Statistics {
     /// The power channel; its `threshold` is already [`power::POWER_OFF`]
     /// when above [`power::POWER_MAX`].
     pub power: Channel,
+    /// The spread channel; its `threshold` is already
+    /// [`spread::SPREAD_OFF`] when above [`spread::SPREAD_MAX`].
+    pub spread: Channel,
 }
 
 impl From<Statistics> for Calibration {
@@ -112,6 +128,9 @@ impl From<Statistics> for Calibration {
             mad: s.cvm.mad,
             power_median: s.power.median,
             power_mad: s.power.mad,
+            spread_threshold: s.spread.threshold,
+            spread_median: s.spread.median,
+            spread_mad: s.spread.mad,
         }
     }
 }
@@ -131,12 +150,13 @@ pub enum Progress {
     Done { taken: u16 },
 }
 
-/// The histograms of both channels, and the state of a calibration on
+/// The histograms of the three channels, and the state of a calibration on
 /// live scans.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Calibrator {
     cvm: Histogram<CVM_BINS>,
     power: Histogram<POWER_BINS>,
+    spread: Histogram<SPREAD_BINS>,
     scans: u16,
     progress: Progress,
 }
@@ -152,6 +172,7 @@ impl Calibrator {
         Calibrator {
             cvm: Histogram::new(),
             power: Histogram::new(),
+            spread: Histogram::new(),
             scans: 0,
             progress: Progress::Idle,
         }
@@ -161,21 +182,25 @@ impl Calibrator {
     pub fn clear(&mut self) {
         self.cvm.clear();
         self.power.clear();
+        self.spread.clear();
         self.scans = 0;
     }
 
     /// Takes one position's magnitudes.
     #[inline]
-    pub fn add(&mut self, mag: u32, pmag: u16) {
+    pub fn add(&mut self, mag: u32, pmag: u16, smag: u32) {
         self.cvm.add(mag);
         self.power.add(pmag as u32);
+        // At most SPREAD_MAX from the engine; a larger value would only
+        // land in the top bin, never out of the histogram.
+        self.spread.add(smag.min(spread::SPREAD_MAX));
     }
 
     /// Takes every position of `scores` that has data.
     pub fn add_row(&mut self, scores: &[PositionScore]) {
         for s in scores {
             if s.flags & flags::NO_DATA == 0 {
-                self.add(s.mag, s.pmag);
+                self.add(s.mag, s.pmag, s.smag);
             }
         }
     }
@@ -189,6 +214,7 @@ impl Calibrator {
     pub fn merge(&mut self, other: &Calibrator) {
         self.cvm.merge(&other.cvm);
         self.power.merge(&other.power);
+        self.spread.merge(&other.spread);
         self.scans = self.scans.saturating_add(other.scans);
     }
 
@@ -212,14 +238,20 @@ impl Calibrator {
         &self.power
     }
 
-    /// Both channels' statistics and thresholds under `rule`.
+    /// The spread channel's histogram.
+    pub fn spread(&self) -> &Histogram<SPREAD_BINS> {
+        &self.spread
+    }
+
+    /// The three channels' statistics and thresholds under `rule`.
     pub fn statistics(&self, rule: &Rule) -> Result<Statistics, CalibrationError> {
-        if self.cvm.lost() || self.power.lost() {
+        if self.cvm.lost() || self.power.lost() || self.spread.lost() {
             return Err(CalibrationError::TooManyPositions);
         }
-        let (Some(cvm), Some(mut power)) = (
+        let (Some(cvm), Some(mut power), Some(mut spread)) = (
             rule::channel(&self.cvm, rule, self.scans),
             rule::channel(&self.power, rule, self.scans),
+            rule::channel(&self.spread, rule, self.scans),
         ) else {
             return Err(CalibrationError::NoPositions);
         };
@@ -229,10 +261,16 @@ impl Calibrator {
             power.rate_ppb = power.rate_ppb.map(|_| 0);
             power.min_strength = u32::MAX;
         }
+        if spread.threshold > spread::SPREAD_MAX {
+            spread.threshold = spread::SPREAD_OFF;
+            spread.rate_ppb = spread.rate_ppb.map(|_| 0);
+            spread.min_strength = u32::MAX;
+        }
         Ok(Statistics {
             scans: self.scans,
             cvm,
             power,
+            spread,
         })
     }
 

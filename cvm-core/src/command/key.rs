@@ -34,6 +34,10 @@ pub enum Key {
     /// Power threshold, as the header's `pthr` (any 32-bit value; above
     /// 46340 the power channel is off).
     PowerThreshold,
+    /// Spread threshold (`Q16`, as [`Settings::spread_threshold`]; any
+    /// 32-bit value, like `pthr`: above 92680, `spread::SPREAD_MAX`, the
+    /// spread channel is off).
+    SpreadThreshold,
     /// Per-position score lines (`0` or `1`).
     Scores,
     /// Defect lines per row (`0..=max_dcap`).
@@ -79,6 +83,7 @@ impl Key {
         Key::Rows,
         Key::Threshold,
         Key::PowerThreshold,
+        Key::SpreadThreshold,
         Key::Scores,
         Key::DefectCap,
         Key::MinArea,
@@ -99,6 +104,7 @@ impl Key {
             Key::Rows => "rows",
             Key::Threshold => "thr",
             Key::PowerThreshold => "pthr",
+            Key::SpreadThreshold => "sthr",
             Key::Scores => "scores",
             Key::DefectCap => "dcap",
             Key::MinArea => "area",
@@ -199,6 +205,7 @@ impl Key {
             Key::Rows => s.rows,
             Key::Threshold => s.threshold,
             Key::PowerThreshold => s.power_threshold,
+            Key::SpreadThreshold => s.spread_threshold,
             Key::Scores => s.scores as u32,
             Key::DefectCap => s.max_defect_lines_per_row as u32,
             Key::MinArea => o.min_area,
@@ -222,6 +229,7 @@ impl Key {
             Key::Rows if v >= 1 => s.rows = v,
             Key::Threshold => s.threshold = v,
             Key::PowerThreshold => s.power_threshold = v,
+            Key::SpreadThreshold => s.spread_threshold = v,
             Key::Scores if v <= 1 => s.scores = v == 1,
             Key::DefectCap => match u16::try_from(v) {
                 Ok(v) => s.max_defect_lines_per_row = v,

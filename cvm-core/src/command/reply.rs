@@ -9,9 +9,10 @@ use super::wire::{FrameError, REPLY, checked_body, kv, parse_u32, split_once};
 use crate::protocol::{LineBuf, LineSink, ParseError, Priority};
 use crate::settings::Source;
 
-/// What a finished calibration found: both thresholds and the statistics
-/// behind them, in the units of the header's `thr` (magnitudes) and
-/// `pthr` (power magnitudes). [`crate::calibration::Calibrator::finish`]
+/// What a finished calibration found: the three channels' thresholds and
+/// the statistics behind them, in the units of the header's `thr`
+/// (magnitudes), `pthr` (power magnitudes, `Q15`) and of the `sthr`
+/// setting (spread magnitudes, `Q16`). [`crate::calibration::Calibrator::finish`]
 /// makes it, on the board and in `dmap calibrate` alike.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Calibration {
@@ -25,6 +26,9 @@ pub struct Calibration {
     /// The same on the power magnitudes, or `POWER_OFF` when above every
     /// power magnitude.
     pub power_threshold: u32,
+    /// The same on the spread magnitudes, or `SPREAD_OFF` when above
+    /// every spread magnitude.
+    pub spread_threshold: u32,
     /// Median and median absolute deviation of the magnitudes, each the
     /// lower median of the magnitudes' histogram bins (exact below 256,
     /// else the middle of a bin under 0.8 % wide; see
@@ -34,6 +38,9 @@ pub struct Calibration {
     /// The same of the power magnitudes.
     pub power_median: u32,
     pub power_mad: u32,
+    /// The same of the spread magnitudes.
+    pub spread_median: u32,
+    pub spread_mad: u32,
 }
 
 /// A reply, decoded.
@@ -51,7 +58,7 @@ pub enum Reply<'s> {
     },
     /// `ok,calibrate,<n>`: the next n scans calibrate.
     Calibrating(u16),
-    /// `ok,calibrated,scans=..,positions=..,thr=..,pthr=..,med=..,mad=..,pmed=..,pmad=..`,
+    /// `ok,calibrated,scans=..,positions=..,thr=..,pthr=..,sthr=..,med=..,mad=..,pmed=..,pmad=..,smed=..,smad=..`,
     /// once the last of them has ended; carries the `calibrate` request's id.
     Calibrated(Calibration),
     /// `ok,save`: written to flash.
@@ -101,10 +108,13 @@ pub fn encode_reply(id: Option<u32>, r: &Reply, sink: &mut impl LineSink) {
             l.kv_u64(b"positions", c.positions as u64);
             l.kv_u64(b"thr", c.threshold as u64);
             l.kv_u64(b"pthr", c.power_threshold as u64);
+            l.kv_u64(b"sthr", c.spread_threshold as u64);
             l.kv_u64(b"med", c.median as u64);
             l.kv_u64(b"mad", c.mad as u64);
             l.kv_u64(b"pmed", c.power_median as u64);
             l.kv_u64(b"pmad", c.power_mad as u64);
+            l.kv_u64(b"smed", c.spread_median as u64);
+            l.kv_u64(b"smad", c.spread_mad as u64);
         }
         Reply::Saved => l.field(b"save"),
         Reply::Defaults => l.field(b"defaults"),
@@ -175,10 +185,13 @@ fn parse_ok<'s, I: Iterator<Item = &'s [u8]>>(f: &mut I) -> Result<Reply<'s>, Pa
                 positions: field("positions")?,
                 threshold: field("thr")?,
                 power_threshold: field("pthr")?,
+                spread_threshold: field("sthr")?,
                 median: field("med")?,
                 mad: field("mad")?,
                 power_median: field("pmed")?,
                 power_mad: field("pmad")?,
+                spread_median: field("smed")?,
+                spread_mad: field("smad")?,
             })
         }
         kv_field => {

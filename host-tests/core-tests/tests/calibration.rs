@@ -9,11 +9,13 @@ use cvm_core::Position;
 use cvm_core::calibration::histogram::{MANTISSA_BITS, bin_of, bin_range, bins};
 use cvm_core::calibration::{
     CALIBRATOR_BYTES, CVM_BINS, CalibrationError, Calibrator, Channel, POWER_BINS, Progress, Rule,
+    SPREAD_BINS,
 };
 use cvm_core::pipeline::{Pipeline, Settings};
 use cvm_core::power::{POWER_MAX, POWER_OFF};
 use cvm_core::protocol::{LineSink, Priority, ResetCause};
-use cvm_core_tests::{random_scan, rng, run_engine_with};
+use cvm_core::spread::{SPREAD_MAX, SPREAD_OFF};
+use cvm_core_tests::{random_scan, rng, run_engine_thresholds};
 use proptest::prelude::*;
 
 /// The documented quantisation, written from the definition: below
@@ -86,9 +88,13 @@ fn channel_ref(values: &[u32], rule: &Rule) -> Channel {
 }
 
 fn feed(cvm: &[u32], power: &[u16]) -> Calibrator {
+    feed3(cvm, power, &vec![0; cvm.len()])
+}
+
+fn feed3(cvm: &[u32], power: &[u16], spread: &[u32]) -> Calibrator {
     let mut c = Box::new(Calibrator::new());
-    for (&m, &p) in cvm.iter().zip(power) {
-        c.add(m, p);
+    for ((&m, &p), &s) in cvm.iter().zip(power).zip(spread) {
+        c.add(m, p, s);
     }
     *c
 }
@@ -177,10 +183,33 @@ fn power_threshold_above_every_magnitude_is_off() {
 }
 
 #[test]
+fn spread_threshold_above_every_magnitude_is_off() {
+    // Spread magnitudes 0 and 90000: median 0, MAD 0; thr 90001 stays
+    // (at most SPREAD_MAX = 92680).
+    let c = feed3(&[5, 5], &[0, 0], &[0, 90000]);
+    let r = c.finish(&Rule::SPREAD).unwrap();
+    assert_eq!(
+        (r.spread_threshold, r.spread_median, r.spread_mad),
+        (90001, 0, 0)
+    );
+    // The largest magnitude itself: thr SPREAD_MAX + 1 is off.
+    let c = feed3(&[5, 5], &[0, 0], &[SPREAD_MAX, 0]);
+    let s = c.statistics(&Rule::SPREAD).unwrap();
+    assert_eq!(s.spread.threshold, SPREAD_OFF);
+    assert_eq!(s.spread.min_strength, u32::MAX);
+    assert_eq!(s.cvm.threshold, 6);
+    // A value past SPREAD_MAX (the engine never gives one) counts as
+    // SPREAD_MAX, never as a lost position.
+    let c = feed3(&[5], &[0], &[u32::MAX]);
+    let s = c.statistics(&Rule::SPREAD).unwrap();
+    assert_eq!((s.spread.max, s.spread.threshold), (SPREAD_MAX, SPREAD_OFF));
+}
+
+#[test]
 fn nothing_taken_and_too_many_positions_are_errors() {
     let mut c = Box::new(Calibrator::new());
     assert_eq!(c.finish(&Rule::DEFAULT), Err(CalibrationError::NoPositions));
-    c.add(7, 1);
+    c.add(7, 1, 3);
     // Doubling by merging a copy: 2^31 positions after 31 merges, the 32nd
     // would make 2^32.
     for _ in 0..31 {
@@ -200,13 +229,18 @@ fn nothing_taken_and_too_many_positions_are_errors() {
 
 #[test]
 fn memory_is_bounded() {
-    let counts = 4 * (CVM_BINS + POWER_BINS);
+    let counts = 4 * (CVM_BINS + POWER_BINS + SPREAD_BINS);
     assert_eq!(CALIBRATOR_BYTES, core::mem::size_of::<Calibrator>());
     assert!(
-        CALIBRATOR_BYTES >= counts && CALIBRATOR_BYTES <= counts + 32,
+        // Besides the counts: each histogram's few counters, the scans and
+        // the progress.
+        CALIBRATOR_BYTES >= counts && CALIBRATOR_BYTES <= counts + 48,
         "{CALIBRATOR_BYTES}"
     );
-    assert_eq!((CVM_BINS, POWER_BINS), (3328, 1280));
+    // 26, 10 and 11 octaves of 128 bins above the 256 exact values:
+    // 32-, 16- and 17-bit magnitudes (SPREAD_MAX = 92680 < 2^17).
+    assert_eq!((CVM_BINS, POWER_BINS, SPREAD_BINS), (3328, 1280, 1408));
+    const { assert!(SPREAD_MAX < 1 << 17) };
 }
 
 /// Magnitudes with many ties, tiny and huge ones.
@@ -237,12 +271,17 @@ proptest! {
 
     #[test]
     fn calibrator_follows_the_rule(
-        pairs in prop::collection::vec((values(), 0u16..=POWER_MAX as u16), 1..400),
+        triples in prop::collection::vec(
+            (values(), 0u16..=POWER_MAX as u16, prop_oneof![0u32..300, 0u32..=SPREAD_MAX]),
+            1..400,
+        ),
         rule in rules(),
         split in 0usize..400,
     ) {
-        let (cvm, power): (Vec<u32>, Vec<u16>) = pairs.iter().copied().unzip();
-        let s = feed(&cvm, &power).statistics(&rule).unwrap();
+        let cvm: Vec<u32> = triples.iter().map(|t| t.0).collect();
+        let power: Vec<u16> = triples.iter().map(|t| t.1).collect();
+        let spr: Vec<u32> = triples.iter().map(|t| t.2).collect();
+        let s = feed3(&cvm, &power, &spr).statistics(&rule).unwrap();
         prop_assert_eq!(spread(&s.cvm), spread(&channel_ref(&cvm, &rule)));
         let p32: Vec<u32> = power.iter().map(|&p| p as u32).collect();
         let mut pref = channel_ref(&p32, &rule);
@@ -251,13 +290,20 @@ proptest! {
             pref.min_strength = u32::MAX;
         }
         prop_assert_eq!(spread(&s.power), spread(&pref));
+        let mut sref = channel_ref(&spr, &rule);
+        if sref.threshold > SPREAD_MAX {
+            sref.threshold = SPREAD_OFF;
+            sref.min_strength = u32::MAX;
+        }
+        prop_assert_eq!(spread(&s.spread), spread(&sref));
         // Taken in two parts and merged, or in another order: the same.
         let k = split.min(cvm.len());
-        let mut a = feed(&cvm[..k], &power[..k]);
-        a.merge(&feed(&cvm[k..], &power[k..]));
+        let mut a = feed3(&cvm[..k], &power[..k], &spr[..k]);
+        a.merge(&feed3(&cvm[k..], &power[k..], &spr[k..]));
         prop_assert_eq!(a.statistics(&rule).unwrap(), s);
-        let (rc, rp): (Vec<u32>, Vec<u16>) = pairs.iter().rev().copied().unzip();
-        prop_assert_eq!(feed(&rc, &rp).statistics(&rule).unwrap(), s);
+        let rev = |v: &[u32]| v.iter().rev().copied().collect::<Vec<u32>>();
+        let rp: Vec<u16> = power.iter().rev().copied().collect();
+        prop_assert_eq!(feed3(&rev(&cvm), &rp, &rev(&spr)).statistics(&rule).unwrap(), s);
     }
 
     #[test]
@@ -360,10 +406,12 @@ fn the_pipeline_hook_takes_the_armed_scans_positions() {
     let got = p.calibrator().unwrap().finish(&Rule::DEFAULT).unwrap();
 
     // The same positions fed directly: the engine's rows of scans 1 and 2
-    // (positions without data left out).
+    // (positions without data left out), the spread measured (a threshold
+    // above SPREAD_MAX, not SPREAD_OFF) though the settings have it off.
     let mut direct = Box::new(Calibrator::new());
     for frames in &scans[1..3] {
-        let (rows_out, _) = run_engine_with(&scorer, cols, 1, POWER_OFF, frames);
+        let (rows_out, _) =
+            run_engine_thresholds(&scorer, cols, [1, POWER_OFF, SPREAD_MAX + 1], frames);
         for (_, scores) in &rows_out {
             direct.add_row(scores);
         }
@@ -385,10 +433,134 @@ fn the_pipeline_hook_takes_the_armed_scans_positions() {
         .flat_map(|(_, f)| f.clone().unwrap())
         .collect();
     let mut batch = Box::new(Calibrator::new());
-    batch.add_row(&dmap::fixed::score_scan(&scorer, rows, cols, &data));
+    let mut scores = dmap::fixed::score_scan(&scorer, rows, cols, &data);
+    dmap::fixed::add_spread(&scorer, rows, cols, &data, &mut scores);
+    batch.add_row(&scores);
     batch.end_scan();
     assert_eq!(
         p.calibrator().unwrap().finish(&Rule::DEFAULT),
         batch.finish(&Rule::DEFAULT)
     );
+}
+
+/// The documented bins (docs/experiments.md), 2^7 per octave above 255:
+/// (top, middle) of `v`'s bin.
+fn bin_top_mid(v: u32) -> (u64, u64) {
+    let (_, hi, mid) = bin_ref(v);
+    (hi, mid)
+}
+
+/// The tail rule's threshold on `values` from `scans` scans, in f64
+/// (`cvm_reference::exp_tail`), for a rate of 1e-3 per part and the top
+/// 1 % fitted (`Rule::DEFAULT`), and the fit's scale.
+fn tail_threshold_f64(values: &[u32], scans: usize) -> (f64, f64) {
+    let n = values.len();
+    let mut sorted = values.to_vec();
+    sorted.sort_unstable();
+    let max = *sorted.last().unwrap() as u64;
+    let rank = (99 * n).div_ceil(100).min(n.saturating_sub(10)).max(1);
+    let start = bin_top_mid(sorted[rank - 1]).0.min(max);
+    let reps: Vec<f64> = values
+        .iter()
+        .map(|&x| bin_top_mid(x).1.min(max) as f64)
+        .collect();
+    let fit = cvm_reference::exp_tail(&reps, start as f64);
+    (
+        fit.threshold(scans, 1e-3).ceil().max(max as f64 + 1.0),
+        fit.scale,
+    )
+}
+
+/// Live scans through the pipeline: a calibration with the spread channel
+/// off measures the spread all the same and sets the same spread threshold
+/// as one with the channel on; the tail rule's threshold recomputed in f64
+/// from the magnitudes agrees; and the calibrated scans decide as with the
+/// channel off (the spread is measured, not applied).
+#[test]
+fn a_calibration_with_the_spread_channel_off_still_sets_its_threshold() {
+    let mut r = rng(77);
+    let (rows, cols, j) = (12usize, 20usize, 5usize);
+    let scorer = dmap::options::ScoringArgs::default().scorer(j, j).unwrap();
+    let settings = |spread_threshold| Settings {
+        cols: cols as u32,
+        threshold: scorer.threshold_from_units(0.5),
+        power_threshold: 3277,
+        spread_threshold,
+        scores: false,
+        max_defect_lines_per_row: 0,
+        firmware_version: "calibration-test",
+        reset_cause: ResetCause::PowerOn,
+        boots: 1,
+        rows: rows as u32,
+        outputs: cvm_core::settings::Outputs::DEFAULT,
+        sources: [cvm_core::settings::Source::Default; cvm_core::settings::KEYS],
+        store: cvm_core::settings::Store::Empty,
+    };
+    let data: Vec<Vec<u16>> = (0..3)
+        .map(|_| random_scan(&mut r, rows, cols, j, j))
+        .collect();
+    let words = cvm_core::stream::row_words_for(cols, scorer.config());
+    let calibrate = |sthr: u32| {
+        let (mut a, mut b) = (vec![0i32; words], vec![0i32; words]);
+        let mut cal = Box::new(Calibrator::new());
+        let mut p = Box::new(Pipeline::<64>::new(&scorer, settings(sthr), &mut a, &mut b).unwrap());
+        p.attach_calibrator(&mut cal);
+        p.calibrator_mut().unwrap().arm(data.len() as u16);
+        let mut defects = Vec::new();
+        for scan in &data {
+            p.begin(&mut Discard);
+            for (pos, f) in beams(scan, cols, j * j, &[]) {
+                p.push(pos, &f.unwrap(), &mut Discard);
+            }
+            defects.push(p.finish(0, &mut Discard).defects);
+        }
+        assert_eq!(
+            p.calibrator().unwrap().progress(),
+            Progress::Done { taken: 3 }
+        );
+        // After the calibration the setting is back: with the channel off,
+        // nothing is measured.
+        let back = p.settings().spread_threshold;
+        (
+            p.calibrator().unwrap().finish(&Rule::DEFAULT).unwrap(),
+            defects,
+            back,
+        )
+    };
+    let (off, off_defects, back) = calibrate(SPREAD_OFF);
+    assert_eq!(back, SPREAD_OFF);
+    let (on, _, _) = calibrate(6554);
+    assert_eq!(off, on, "the channel off or on, the same calibration");
+    assert!(off.spread_median > 0 || off.spread_mad > 0, "{off:?}");
+    assert!(off.spread_threshold <= SPREAD_MAX, "{off:?}");
+    // Not calibrating, the same scans with the channel off: the same defects.
+    let (mut a, mut b) = (vec![0i32; words], vec![0i32; words]);
+    let mut p =
+        Box::new(Pipeline::<64>::new(&scorer, settings(SPREAD_OFF), &mut a, &mut b).unwrap());
+    let plain: Vec<u32> = data
+        .iter()
+        .map(|scan| {
+            p.begin(&mut Discard);
+            for (pos, f) in beams(scan, cols, j * j, &[]) {
+                p.push(pos, &f.unwrap(), &mut Discard);
+            }
+            p.finish(0, &mut Discard).defects
+        })
+        .collect();
+    assert_eq!(plain, off_defects);
+    // The tail rule in f64 on the spread magnitudes (the batch scorer's).
+    let mut smag = Vec::new();
+    for scan in &data {
+        let mut s = dmap::fixed::score_scan(&scorer, rows, cols, scan);
+        dmap::fixed::add_spread(&scorer, rows, cols, scan, &mut s);
+        smag.extend(s.iter().map(|x| x.smag));
+    }
+    let (want, scale) = tail_threshold_f64(&smag, data.len());
+    let want = if want > SPREAD_MAX as f64 {
+        SPREAD_OFF as f64
+    } else {
+        want
+    };
+    let got = off.spread_threshold as f64;
+    assert!((got - want).abs() <= 1.0 + 1e-6 * scale, "{got} vs {want}");
 }

@@ -130,13 +130,16 @@ fn replies_are_written_as_specified() {
         mad: 120,
         power_median: 500,
         power_mad: 60,
+        spread_threshold: 6554,
+        spread_median: 700,
+        spread_mad: 90,
     };
     let cases: Vec<(Option<u32>, Reply, &str)> = vec![
         (
             Some(1),
             Reply::Status(status_example()),
             "A,1,ok,status,pv=7,fw=0.1.0,j=15x15,cap=300x1000,store=ok,rst=por,boots=3,\
-             last=2/14/1/obj,keys=15",
+             last=2/14/1/obj,keys=16",
         ),
         (
             Some(42),
@@ -169,7 +172,8 @@ fn replies_are_written_as_specified() {
         (
             Some(9),
             Reply::Calibrated(cal),
-            "A,9,ok,calibrated,scans=5,positions=1500,thr=838861,pthr=3277,med=1000,mad=120,pmed=500,pmad=60",
+            "A,9,ok,calibrated,scans=5,positions=1500,thr=838861,pthr=3277,sthr=6554,med=1000,mad=120,pmed=500,pmad=60,\
+             smed=700,smad=90",
         ),
         (Some(10), Reply::Saved, "A,10,ok,save"),
         (Some(11), Reply::Defaults, "A,11,ok,defaults"),
@@ -250,6 +254,9 @@ fn every_refusal_of_a_request() {
         ("C,5,set,dcap=17", Some(5), range(0, 16)),
         ("C,5,set,thr=4294967296", Some(5), range(0, u32::MAX)),
         ("C,5,set,pthr=99999999999", Some(5), range(0, u32::MAX)),
+        ("C,5,set,sthr=4294967296", Some(5), range(0, u32::MAX)),
+        ("C,5,set,sthr=off", Some(5), Refusal::WrongType),
+        ("C,5,set,sthr=-1", Some(5), Refusal::WrongType),
         ("C,5,calibrate,0", Some(5), range(1, 100)),
         ("C,5,calibrate,101", Some(5), range(1, 100)),
         ("C,5,calibrate,70000", Some(5), range(1, 100)),
@@ -338,7 +345,7 @@ fn keys_read_and_write_the_settings_value() {
     let mut s = Settings::new(300, 200, 4194304, 3277, "t");
     // Each key reads its own field: a distinct value in each, checked
     // against the field, not against the key's own code.
-    let values: [u32; KEYS] = [9, 8, 7, 6, 1, 16, 5, 4, 3, 2, 1, 1000, 11, 0, 0];
+    let values: [u32; KEYS] = [9, 8, 7, 6, 12, 1, 16, 5, 4, 3, 2, 1, 1000, 11, 0, 0];
     for (k, v) in Key::ALL.into_iter().zip(values) {
         assert!(k.set(&mut s, v), "{}", k.name());
     }
@@ -347,6 +354,7 @@ fn keys_read_and_write_the_settings_value() {
         (s.cols, s.rows, s.threshold, s.power_threshold, s.scores),
         (9, 8, 7, 6, true)
     );
+    assert_eq!(s.spread_threshold, 12);
     assert_eq!(s.max_defect_lines_per_row, 16);
     assert_eq!(
         (o.min_area, o.min_strength, o.max_missing, o.max_misplaced),
@@ -372,9 +380,24 @@ fn keys_read_and_write_the_settings_value() {
     assert_eq!(
         names,
         [
-            "cols", "rows", "thr", "pthr", "scores", "dcap", "area", "peak", "miss", "misp",
-            "mode", "pulse", "delay", "ready", "reject"
+            "cols", "rows", "thr", "pthr", "sthr", "scores", "dcap", "area", "peak", "miss",
+            "misp", "mode", "pulse", "delay", "ready", "reject"
         ]
+    );
+    // The spread threshold takes any 32-bit value, as pthr does: above
+    // SPREAD_MAX the channel is off, SPREAD_OFF (the default) included.
+    assert_eq!(Key::SpreadThreshold.range(&CAP), (0, u32::MAX));
+    assert_eq!(
+        Key::SpreadThreshold.parse_value(b"92680", &CAP),
+        Ok(cvm_core::spread::SPREAD_MAX)
+    );
+    assert_eq!(
+        Key::SpreadThreshold.parse_value(b"4294967295", &CAP),
+        Ok(cvm_core::spread::SPREAD_OFF)
+    );
+    assert_eq!(
+        Key::SpreadThreshold.get(&Settings::new(1, 1, 0, 0, "t")),
+        cvm_core::spread::SPREAD_OFF
     );
     for (i, k) in Key::ALL.into_iter().enumerate() {
         assert_eq!(Key::from_name(k.name().as_bytes()), Some(k));
@@ -440,6 +463,9 @@ fn the_longest_status_fits_a_line() {
         mad: u32::MAX,
         power_median: u32::MAX,
         power_mad: u32::MAX,
+        spread_threshold: u32::MAX,
+        spread_median: u32::MAX,
+        spread_mad: u32::MAX,
     };
     assert!(reply_line(Some(u32::MAX), &Reply::Calibrated(c)).len() <= MAX_LINE);
     // Every value reply: the longest key with the longest value.
@@ -618,7 +644,7 @@ proptest! {
         id in any::<u32>(),
         key in key(), v in any::<u32>(), src in source(),
         n in 1..=MAX_CALIBRATION_SCANS,
-        cal in prop::array::uniform7(any::<u32>()),
+        cal in prop::array::uniform10(any::<u32>()),
         why in refusal(),
         st in status("0.1.0-rc.1+g3af9"),
     ) {
@@ -627,6 +653,7 @@ proptest! {
         let c = Calibration {
             scans: n, positions: cal[0], threshold: cal[1], power_threshold: cal[2],
             median: cal[3], mad: cal[4], power_median: cal[5], power_mad: cal[6],
+            spread_threshold: cal[7], spread_median: cal[8], spread_mad: cal[9],
         };
         let replies = [
             Reply::Status(st),

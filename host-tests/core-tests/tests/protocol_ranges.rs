@@ -31,7 +31,7 @@ fn header_with(key: &str, value: &str) -> Vec<u8> {
         ("rst", "por".into()),
         ("boots", "1".into()),
         ("rows", "300".into()),
-        ("src", "d".repeat(15)),
+        ("src", "d".repeat(16)),
         ("store", "none".into()),
     ];
     let body: Vec<String> = fields

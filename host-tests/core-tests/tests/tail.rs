@@ -16,7 +16,7 @@ const Q24: f64 = (1u64 << 24) as f64;
 fn feed(cvm: &[u32], scans: u16) -> Calibrator {
     let mut c = Box::new(Calibrator::new());
     for &m in cvm {
-        c.add(m, 0);
+        c.add(m, 0, 0);
     }
     for _ in 0..scans {
         c.end_scan();
@@ -238,7 +238,7 @@ fn more_reference_scans_converge_on_the_true_threshold() {
     for scans in 1..=64u16 {
         for _ in 0..per_part {
             let u: f64 = r.random_range(1e-12..1.0);
-            c.add((base - scale * u.ln()) as u32, 0);
+            c.add((base - scale * u.ln()) as u32, 0, 0);
         }
         c.end_scan();
         if [2, 8, 64].contains(&scans) {

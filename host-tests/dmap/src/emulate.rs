@@ -123,6 +123,7 @@ pub fn board_file(path: &Path, scan: &Scan, run: &RunSettings) -> Result<Vec<u8>
         rows: scan.rows as u32,
         threshold_units: run.threshold_units,
         power_threshold_units: run.power_threshold_units,
+        spread_threshold_units: run.spread_threshold_units,
         scores: settings.scores,
         max_defect_lines_per_row: settings.max_defect_lines_per_row,
         version_len: version.len() as u8,

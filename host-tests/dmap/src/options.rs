@@ -64,14 +64,20 @@ pub struct OutputArgs {
     /// neighbours' powers (default 0.1; inf turns the channel off)
     #[arg(long, value_name = "C")]
     pub power_threshold: Option<f64>,
+    /// Threshold of the spread channel: the change of the light's share outside the maps'
+    /// core box between the two neighbours (docs/method.md §8; default inf: the channel off,
+    /// nothing measured)
+    #[arg(long, value_name = "S")]
+    pub spread_threshold: Option<f64>,
     /// List up to this many defective positions per row as D lines, the strongest (the row
     /// line has the full count; default 0: the object lines describe the defects)
     #[arg(long, default_value_t = 0)]
     pub max_defect_lines: u16,
-    /// Both channels' thresholds from a calibration file (`dmap calibrate`), the same
-    /// integers as the calibration's; refused unless these scoring options are the ones
-    /// it was made for
-    #[arg(long, value_name = "CAL.json", conflicts_with_all = ["threshold", "power_threshold"])]
+    /// The channels' thresholds from a calibration file (`dmap calibrate`), the same
+    /// integers as the calibration's (the spread channel off for a file before version 5);
+    /// refused unless these scoring options are the ones it was made for
+    #[arg(long, value_name = "CAL.json",
+          conflicts_with_all = ["threshold", "power_threshold", "spread_threshold"])]
     pub calibration: Option<PathBuf>,
     /// Full scale of the detector: a sample at or above it flags its map saturated
     /// (header `fs`; 4095 for a 12-bit ADC)
@@ -85,6 +91,7 @@ impl Default for OutputArgs {
         OutputArgs {
             threshold: None,
             power_threshold: None,
+            spread_threshold: None,
             scores: false,
             max_defect_lines: 0,
             calibration: None,

@@ -8,7 +8,7 @@
 //!
 //! Where each value comes from, first match wins:
 //! * thresholds: the calibration file (clap refuses it beside
-//!   `--threshold` or `--power-threshold`), the option, the default (none
+//!   `--threshold`, `--power-threshold` or `--spread-threshold`), the option, the default (none
 //!   for the CVM channel of `--raw` maps, whose distances have no scale);
 //! * the configuration: the scoring options and `--full-scale`, which a
 //!   calibration file must match field for field;
@@ -45,6 +45,9 @@ pub struct RunSettings {
     pub threshold_units: f64,
     /// The power threshold as a contrast, likewise.
     pub power_threshold_units: f64,
+    /// The spread threshold as a share of the power, likewise (infinite:
+    /// off).
+    pub spread_threshold_units: f64,
     /// What the user should know about the configuration and the scan's
     /// shape; printed after the run's output.
     pub warnings: Vec<String>,
@@ -79,12 +82,16 @@ pub fn resolve(
         Some(c) => c.power_threshold,
         None => power_threshold_units(output.power_threshold)?,
     };
+    let spread_threshold_units = match &calibration {
+        Some(c) => c.spread_threshold,
+        None => spread_threshold_units(output.spread_threshold)?,
+    };
     let settings = pipeline_settings(
         &scorer,
         output,
         (rows, cols),
         threshold_units,
-        power_threshold_units,
+        (power_threshold_units, spread_threshold_units),
     );
     let mut warnings = scoring.warnings(j1, j2)?;
     warnings.extend(threshold_warnings(&scorer, threshold_units));
@@ -95,6 +102,7 @@ pub fn resolve(
         settings,
         threshold_units,
         power_threshold_units,
+        spread_threshold_units,
         warnings,
     })
 }
@@ -151,6 +159,19 @@ fn power_threshold_units(given: Option<f64>) -> Result<f64> {
     Ok(t)
 }
 
+/// The spread threshold as a share of the power: the one given, or off
+/// (infinite) by default.
+fn spread_threshold_units(given: Option<f64>) -> Result<f64> {
+    let t = given.unwrap_or(f64::INFINITY);
+    if t.is_nan() || t < 0.0 {
+        bail!(
+            "--spread-threshold must be a non-negative share of the power (inf: off), got {}",
+            fmt_num(t)
+        );
+    }
+    Ok(t)
+}
+
 fn check_cols(cols: usize) -> Result<()> {
     if cols == 0 || cols > MAX_COLS {
         bail!("scan has {cols} columns; the pipeline supports 1..={MAX_COLS}");
@@ -165,13 +186,13 @@ fn pipeline_settings(
     output: &OutputArgs,
     (rows, cols): (usize, usize),
     threshold_units: f64,
-    power_threshold_units: f64,
+    (power_threshold_units, spread_threshold_units): (f64, f64),
 ) -> Settings {
     Settings {
         cols: cols as u32,
         threshold: scorer.threshold_from_units(threshold_units),
         power_threshold: cvm_core::power::threshold_from_units(power_threshold_units),
-        spread_threshold: cvm_core::spread::SPREAD_OFF,
+        spread_threshold: cvm_core::spread::threshold_from_units(spread_threshold_units),
         scores: output.scores,
         max_defect_lines_per_row: output.max_defect_lines,
         firmware_version: cvm_core::VERSION,
@@ -224,11 +245,23 @@ impl OutputArgs {
             );
         }
         check_cols(cols)?;
-        let power = match &self.calibration {
-            Some(path) => Calibration::load(path)?.power_threshold,
-            None => power_threshold_units(self.power_threshold)?,
+        let (power, spread) = match &self.calibration {
+            Some(path) => {
+                let c = Calibration::load(path)?;
+                (c.power_threshold, c.spread_threshold)
+            }
+            None => (
+                power_threshold_units(self.power_threshold)?,
+                spread_threshold_units(self.spread_threshold)?,
+            ),
         };
-        Ok(pipeline_settings(scorer, self, (rows, cols), t, power))
+        Ok(pipeline_settings(
+            scorer,
+            self,
+            (rows, cols),
+            t,
+            (power, spread),
+        ))
     }
 }
 

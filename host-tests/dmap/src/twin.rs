@@ -138,7 +138,7 @@ pub fn h743_config(h: &ScanHeader) -> Result<String> {
     // The version the host announces, so that the header compares byte for
     // byte with `dmap stream`'s.
     Ok(format!(
-        "j1={} j2={} cols={} rows={} kernels={kernels} b={b} weights={weights} normalise={} threshold={:?} pthr={:?} scores={} max_defect_lines={} fs={} fw={fw}",
+        "j1={} j2={} cols={} rows={} kernels={kernels} b={b} weights={weights} normalise={} threshold={:?} pthr={:?} sthr={:?} scores={} max_defect_lines={} fs={} fw={fw}",
         g.j1,
         g.j2,
         h.cols,
@@ -146,6 +146,7 @@ pub fn h743_config(h: &ScanHeader) -> Result<String> {
         h.config.normalise,
         h.threshold_units,
         h.power_threshold_units,
+        h.spread_threshold_units,
         h.scores,
         h.max_defect_lines_per_row,
         h.config.full_scale,

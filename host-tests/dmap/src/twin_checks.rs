@@ -146,6 +146,7 @@ fn check_config(path: &Path, built: &str, config: &str) -> Result<()> {
                 "kernels" | "b" | "weights" | "normalise" => "the scoring options",
                 "threshold" => "--threshold or --calibration",
                 "pthr" => "--power-threshold or --calibration",
+                "sthr" => "--spread-threshold or --calibration",
                 "scores" => "--scores",
                 "max_defect_lines" => "--max-defect-lines",
                 "fs" => "--full-scale",

@@ -112,6 +112,15 @@ fn streamed_power(scan: &Path) -> Vec<f64> {
     v
 }
 
+/// The spread magnitudes (`Q16`) of a `rows x cols` scan of `j x j` maps,
+/// in the firmware's arithmetic.
+fn spread_magnitudes(data: &[u16], rows: usize, cols: usize, j: usize) -> Vec<f64> {
+    let scorer = dmap::options::ScoringArgs::default().scorer(j, j).unwrap();
+    let mut scores = dmap::fixed::score_scan(&scorer, rows, cols, data);
+    dmap::fixed::add_spread(&scorer, rows, cols, data, &mut scores);
+    scores.iter().map(|x| f64::from(x.smag)).collect()
+}
+
 /// The documented rule (docs/experiments.md, "Calibration") on integer
 /// magnitudes `m`, with p = 1 and `k = k_milli / 1000`, from its text:
 /// each magnitude taken as its bin's representative (itself below 2^8;
@@ -251,7 +260,26 @@ fn threshold_follows_the_documented_rule() {
             own.iter().filter(|&&x| x >= t).count()
         );
     }
-    assert_eq!(v["version"], 4);
+    // The spread channel: the same rule on the Q16 spread magnitudes the
+    // firmware's arithmetic gives (dmap::fixed, checked against the
+    // streaming engine in core-tests/spread.rs).
+    let mut sm = spread_magnitudes(&d1, 7, 9, 5);
+    sm.extend(spread_magnitudes(&d2, 6, 9, 5));
+    let (smax, smedian, smad, want_sthr) = rule(&sm, 2500);
+    let want_sthr = if want_sthr > 92680.0 {
+        u32::MAX as f64
+    } else {
+        want_sthr
+    };
+    let sch = &v["channels"]["spread"];
+    assert_eq!(sch["q"], 16);
+    assert_eq!(sch["thr"].as_f64().unwrap(), want_sthr);
+    assert_eq!(sch["threshold"].as_f64().unwrap(), want_sthr / 65536.0);
+    for (k, want) in [("max", smax), ("median", smedian), ("mad", smad)] {
+        assert_eq!(sch["integers"][k].as_f64().unwrap(), want, "spread {k}");
+    }
+    assert!(smax > 0.0, "the references have a spread");
+    assert_eq!(v["version"], 5);
     assert_eq!(v["rule"]["name"], "spread");
     assert_eq!(v["scans"], 2);
     assert_eq!(v["references"].as_array().unwrap().len(), 2);
@@ -307,6 +335,12 @@ fn calibration_streams_the_same_bytes_as_its_threshold() {
         let t = format!("{t:?}");
         let pthr = v["channels"]["power"]["thr"].as_u64().unwrap();
         let pt = format!("{:?}", pthr as f64 / 32768.0);
+        let sthr = v["channels"]["spread"]["thr"].as_u64().unwrap();
+        let st = if sthr > 92680 {
+            "inf".to_string()
+        } else {
+            format!("{:?}", sthr as f64 / 65536.0)
+        };
         let run = |how: &[&str]| {
             let mut a = vec!["stream", s(&scan), "--scores"];
             a.extend(&extra);
@@ -316,7 +350,14 @@ fn calibration_streams_the_same_bytes_as_its_threshold() {
             out.stdout
         };
         let by_file = run(&["--calibration", s(&cal)]);
-        let by_value = run(&["--threshold", &t, "--power-threshold", &pt]);
+        let by_value = run(&[
+            "--threshold",
+            &t,
+            "--power-threshold",
+            &pt,
+            "--spread-threshold",
+            &st,
+        ]);
         assert_eq!(by_file, by_value, "{name}");
         assert!(
             header(&by_file).contains(&format!(",pthr={pthr},")),
@@ -374,8 +415,8 @@ fn calibration_refuses_other_configurations_and_bad_input() {
         &dmap(&["stream", s(&r3), "--calibration", s(&cal)]),
         "j1: calibrated 5, this run 3",
     );
-    // Both a threshold and a calibration, for either channel.
-    for opt in ["--threshold", "--power-threshold"] {
+    // Both a threshold and a calibration, for any channel.
+    for opt in ["--threshold", "--power-threshold", "--spread-threshold"] {
         let out = dmap(&["stream", s(&r), "--calibration", s(&cal), opt, "1"]);
         assert_eq!(out.status.code(), Some(2), "{opt}");
     }

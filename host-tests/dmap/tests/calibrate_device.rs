@@ -1,7 +1,9 @@
 //! The board's calibration and `dmap calibrate` give the same result: N
 //! simulated defect-free scans streamed through one pipeline with a
 //! calibrator attached and armed for N scans (what the board does on
-//! `calibrate N`), against `dmap calibrate` of the same N scan files.
+//! `calibrate N`), against `dmap calibrate` of the same N scan files. The
+//! board calibrates with its spread channel off (the compiled default) and
+//! on: the same three thresholds, the spread one included.
 
 use std::path::PathBuf;
 
@@ -40,12 +42,17 @@ fn part(preset: &[&str], seed: u32) -> (PathBuf, Vec<u16>, usize, usize, usize) 
 
 /// The scans through one pipeline armed for all of them: the result the
 /// board reports, checked to take exactly those scans.
-fn on_the_board(scorer: &Scorer, rows: usize, cols: usize, scans: &[Vec<u16>]) -> Calibration {
+fn on_the_board(
+    scorer: &Scorer,
+    (rows, cols): (usize, usize),
+    spread_threshold: u32,
+    scans: &[Vec<u16>],
+) -> Calibration {
     let settings = Settings {
         cols: cols as u32,
         threshold: scorer.threshold_from_units(0.1),
         power_threshold: 3277,
-        spread_threshold: cvm_core::spread::SPREAD_OFF,
+        spread_threshold,
         scores: true,
         max_defect_lines_per_row: 4,
         firmware_version: "calibrate-device-test",
@@ -109,7 +116,13 @@ fn n_scans_on_the_board_and_dmap_calibrate_agree() {
         let (_, _, rows, cols, j) = parts[0];
         let scorer = dmap::options::ScoringArgs::default().scorer(j, j).unwrap();
         let scans: Vec<Vec<u16>> = parts.iter().map(|p| p.1.clone()).collect();
-        let board = on_the_board(&scorer, rows, cols, &scans);
+        let off = cvm_core::spread::SPREAD_OFF;
+        let board = on_the_board(&scorer, (rows, cols), off, &scans);
+        assert_eq!(
+            on_the_board(&scorer, (rows, cols), 3000, &scans),
+            board,
+            "{preset:?}: the spread channel on or off, the same calibration"
+        );
         let cal = tmp(&format!("{}.json", preset.join("-")));
         let mut args = vec!["calibrate"];
         args.extend(parts.iter().map(|p| s(&p.0)));
@@ -124,6 +137,12 @@ fn n_scans_on_the_board_and_dmap_calibrate_agree() {
         // the references' maximum.
         assert!(board.power_threshold < cvm_core::power::POWER_MAX);
         assert!(board.mad > 0 && board.power_mad > 0, "{board:?}");
+        // The spread measured though the board's channel was off.
+        assert!(board.spread_mad > 0, "{board:?}");
+        assert!(
+            board.spread_threshold <= cvm_core::spread::SPREAD_MAX,
+            "{board:?}"
+        );
         let max = v["channels"]["cvm"]["integers"]["max"].as_u64().unwrap();
         assert!(u64::from(board.threshold) > max);
         // The file applied by dmap stream puts the board's integers in the

@@ -54,6 +54,47 @@ fn magnitudes(refs: &[&Path], q: i32) -> Vec<u64> {
     m
 }
 
+/// The spread magnitudes (`Q16`) of `refs` in the firmware's arithmetic
+/// (`dmap::fixed`, the batch the engine is checked against).
+fn spread_magnitudes(refs: &[&Path]) -> Vec<u64> {
+    let mut m = Vec::new();
+    for r in refs {
+        let scan = dmap::npy::ScanFile::open(r).unwrap();
+        let g = &scan.geometry;
+        let (j1, j2) = (g.j1(), g.j2());
+        let scorer = dmap::options::ScoringArgs::default()
+            .scorer(j1, j2)
+            .unwrap();
+        let n = j1 * j2;
+        let mut data = vec![0u16; scan.maps() * n];
+        let mut scratch = Vec::new();
+        scan.maps_u16(0, &mut data, &mut scratch).unwrap();
+        let mut scores = dmap::fixed::score_scan(&scorer, scan.rows, scan.cols, &data);
+        dmap::fixed::add_spread(&scorer, scan.rows, scan.cols, &data, &mut scores);
+        m.extend(scores.iter().map(|x| u64::from(x.smag)));
+    }
+    m
+}
+
+/// The tail rule's threshold in f64 on integer magnitudes `m` of `scans`
+/// scans, the top `f` fitted, one false position in 1000 parts; and the
+/// fit's scale.
+fn tail_threshold(m: &[u64], scans: usize, f: f64) -> (f64, f64) {
+    let n = m.len();
+    let max = *m.iter().max().unwrap();
+    let mut sorted = m.to_vec();
+    sorted.sort_unstable();
+    let rank = ((1.0 - f) * n as f64).ceil() as usize;
+    let rank = rank.min(n - 10).max(1);
+    let start = bin(sorted[rank - 1]).0.min(max);
+    let reps: Vec<f64> = m.iter().map(|&x| bin(x).1.min(max) as f64).collect();
+    let fit = cvm_reference::exp_tail(&reps, start as f64);
+    (
+        fit.threshold(scans, 1e-3).ceil().max(max as f64 + 1.0),
+        fit.scale,
+    )
+}
+
 #[test]
 fn tail_rule_meets_its_target_by_the_f64_formulas() {
     let (r1, r2) = (tmp("r1.npy"), tmp("r2.npy"));
@@ -73,7 +114,7 @@ fn tail_rule_meets_its_target_by_the_f64_formulas() {
     ]);
     ok(&out);
     let v = json(&cal);
-    assert_eq!(v["version"], 4);
+    assert_eq!(v["version"], 5);
     assert_eq!(v["rule"]["name"], "tail");
     assert_eq!(
         (
@@ -125,6 +166,30 @@ fn tail_rule_meets_its_target_by_the_f64_formulas() {
         "{err}"
     );
     assert!(err.contains("power: "), "{err}");
+    assert!(err.contains("spread: "), "{err}");
+    // The spread channel: the same rule on the Q16 spread magnitudes.
+    let sm = spread_magnitudes(&[&r1, &r2]);
+    let sch = &v["channels"]["spread"];
+    assert_eq!(sch["q"], 16);
+    let (want, scale) = tail_threshold(&sm, 2, 0.05);
+    let sthr = sch["thr"].as_f64().unwrap();
+    if want > 92680.0 {
+        assert_eq!(sthr, u32::MAX as f64);
+    } else {
+        assert!(
+            (sthr - want).abs() <= 1.0 + 1e-6 * scale,
+            "{sthr} vs {want}"
+        );
+        let median = sch["integers"]["median"].as_f64().unwrap();
+        assert_eq!(
+            sch["min_strength"].as_f64(),
+            Some((sthr - median) / 65536.0)
+        );
+        assert!(
+            err.contains("spread: estimated false positions per part"),
+            "{err}"
+        );
+    }
     // No reference position reaches it, and a stricter target never
     // lowers it.
     assert!(thr > max as f64);
@@ -168,7 +233,7 @@ fn spread_rule_reports_the_fit_too_and_the_options_stay_apart() {
     let v = json(&cal);
     assert_eq!(v["rule"]["name"], "spread");
     assert_eq!(v["rule"]["k_milli"], 2000);
-    for c in ["cvm", "power"] {
+    for c in ["cvm", "power", "spread"] {
         assert!(
             v["channels"][c]["tail"]["integers"]["positions"].is_u64(),
             "{c}"
@@ -255,11 +320,11 @@ fn version_3_files_are_still_applied() {
     let header = text.lines().next().unwrap();
     assert!(header.contains(&format!(",thr={thr},")), "{header}");
     assert!(header.contains(&format!(",pthr={pthr},")), "{header}");
-    v["version"] = serde_json::json!(5);
-    let v5 = tmp("v5.json");
-    std::fs::write(&v5, v.to_string()).unwrap();
+    v["version"] = serde_json::json!(6);
+    let v6 = tmp("v6.json");
+    std::fs::write(&v6, v.to_string()).unwrap();
     one_line_error(
-        &dmap(&["stream", s(&r), "--calibration", s(&v5)]),
-        "this dmap reads 2 to 4",
+        &dmap(&["stream", s(&r), "--calibration", s(&v6)]),
+        "this dmap reads 2 to 5",
     );
 }

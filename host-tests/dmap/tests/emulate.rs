@@ -92,6 +92,25 @@ fn emulated_firmware_matches_host_pipeline_paper_9x9() {
     compare("paper9", 9, 9, 23, 9, &["--max-defect-lines", "4"]);
 }
 
+/// The spread channel on: its threshold reaches the emulated board through
+/// the scan file's header and decides there as on the host.
+#[test]
+fn emulated_firmware_matches_host_pipeline_with_the_spread_channel() {
+    let sthr = ["--spread-threshold", "0.002", "--max-defect-lines", "4"];
+    compare("spread9", 9, 9, 23, 9, &sthr);
+    // And the threshold is not idle: it changes the scan's lines.
+    let dir = std::env::temp_dir().join(format!("dmap-emulate-test-{}-sthr", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let scan = dir.join("scan.npy");
+    write_scan(&scan, 9, 9, 23, 9, 23 * 31 + 9);
+    let scan = scan.to_str().unwrap();
+    let base = [scan, "--threshold", "0.05", "--max-defect-lines", "4"];
+    let off = dmap(&[&["stream"], &base[..]].concat());
+    let on = dmap(&[&["stream"], &base[..], &sthr[..2]].concat());
+    let _ = std::fs::remove_dir_all(&dir);
+    assert_ne!(off, on, "the spread threshold changed nothing");
+}
+
 #[test]
 fn emulated_firmware_matches_host_pipeline_square_raw_15x15() {
     compare("square15", 15, 15, 17, 7, &["--kernels", "square", "--raw"]);

@@ -34,6 +34,9 @@ const CAL: Calibration = Calibration {
     mad: 123_456,
     power_median: 800,
     power_mad: 99,
+    spread_threshold: 9876,
+    spread_median: 1500,
+    spread_mad: 321,
 };
 
 fn compiled() -> Settings {
@@ -301,8 +304,8 @@ fn every_action_round_trips_and_sources_follow() {
     assert_eq!(
         names,
         [
-            "cols", "rows", "thr", "pthr", "scores", "dcap", "area", "peak", "miss", "misp",
-            "mode", "pulse", "delay", "ready", "reject"
+            "cols", "rows", "thr", "pthr", "sthr", "scores", "dcap", "area", "peak", "miss",
+            "misp", "mode", "pulse", "delay", "ready", "reject"
         ]
     );
     assert!(t.iter().all(|r| r.2 == "compiled default"), "{s}");
@@ -310,6 +313,8 @@ fn every_action_round_trips_and_sources_follow() {
     assert_eq!(row(&t, "rows").0, "200");
     assert_eq!(row(&t, "thr").0, THR.to_string());
     assert_eq!(row(&t, "pthr").0, PTHR.to_string());
+    // The spread channel compiled off.
+    assert_eq!(row(&t, "sthr").0, u32::MAX.to_string());
     assert_eq!(row(&t, "scores").0, "0");
     assert_eq!(row(&t, "mode").0, "part");
 
@@ -318,6 +323,16 @@ fn every_action_round_trips_and_sources_follow() {
         s,
         "thr = 100 (changed, not saved)\nscores = 1 (changed, not saved)\nready = low (changed, not saved)\n"
     );
+    // The spread threshold: any 32-bit value, like pthr; a sign or a word
+    // is refused before anything is sent.
+    let s = ok(&fake.dmap(&["set", "sthr=6554"]));
+    assert_eq!(s, "sthr = 6554 (changed, not saved)\n");
+    assert_eq!(
+        ok(&fake.dmap(&["get", "sthr"])),
+        "sthr = 6554 (changed, not saved)\n"
+    );
+    let out = fake.dmap(&["set", "sthr=off"]);
+    assert!(!out.status.success());
     let s = ok(&fake.dmap(&["get", "thr"]));
     assert_eq!(s, "thr = 100 (changed, not saved)\n");
     assert_eq!(ok(&fake.dmap(&["save"])), "settings saved to flash\n");
@@ -402,7 +417,10 @@ fn bad_keys_and_values_are_refused_before_anything_is_sent() {
         assert_eq!(err.lines().count(), 1, "{err}");
     }
     let err = text(&fake.dmap(&["get", "x"]).stderr);
-    assert!(err.contains("cols, rows, thr, pthr, scores, dcap"), "{err}");
+    assert!(
+        err.contains("cols, rows, thr, pthr, sthr, scores, dcap"),
+        "{err}"
+    );
     assert_eq!(fake.requests(), Vec::<String>::new());
 }
 
@@ -481,7 +499,8 @@ fn calibrate_waits_for_the_result() {
         "calibrated on 3 scans (2700 positions with data)\n\
          thr  =    5123456  magnitudes: median 1000000, MAD 123456\n\
          pthr =       4321  power magnitudes: median 800, MAD 99\n\
-         both in effect from the next scan (changed, not saved: save keeps them)\n"
+         sthr =       9876  spread magnitudes: median 1500, MAD 321\n\
+         all three in effect from the next scan (changed, not saved: save keeps them)\n"
     );
     assert!(
         text(&out.stderr).contains("the sensor calibrates on its next 3 scans"),
@@ -505,6 +524,10 @@ fn calibrate_waits_for_the_result() {
     assert_eq!(
         row(&t, "pthr"),
         ("4321".into(), "changed, not saved".into())
+    );
+    assert_eq!(
+        row(&t, "sthr"),
+        ("9876".into(), "changed, not saved".into())
     );
 
     // A result that takes longer than the scans may: the calibrate timeout.

@@ -146,6 +146,25 @@ fn twin_matches_stream_paper_9x9_scores() {
     compare(9, 9, &FAULT_OPTS);
 }
 
+/// The spread channel on: `dmap twin` compiles its threshold in
+/// (`CVM_H743_SCAN` `sthr`) and the H743 decides with it as the host does.
+#[test]
+fn twin_matches_stream_with_the_spread_channel() {
+    compare(
+        9,
+        9,
+        &[
+            "--scores",
+            "--threshold",
+            "0.05",
+            "--spread-threshold",
+            "0.002",
+            "--max-defect-lines",
+            "4",
+        ],
+    );
+}
+
 /// The release firmware's default geometry, whose row and column passes
 /// (generated assembly for 15 cells) no other twin test runs.
 #[test]
@@ -605,9 +624,11 @@ fn twin_firmware_with_a_compiled_in_calibration_file() {
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("normalise"), "{err}");
-    // And the thresholds may not be given twice.
-    let out = build(&format!("{spec} threshold=0.3"));
-    assert!(!out.status.success());
-    assert!(String::from_utf8_lossy(&out.stderr).contains("do not give them too"));
+    // And the thresholds may not be given twice, the spread one included.
+    for twice in ["threshold=0.3", "sthr=0.1"] {
+        let out = build(&format!("{spec} {twice}"));
+        assert!(!out.status.success());
+        assert!(String::from_utf8_lossy(&out.stderr).contains("do not give them too"));
+    }
     drop(lock);
 }

@@ -226,6 +226,13 @@ fn calibrate_5_on_the_board_equals_dmap_calibrate_and_scores_the_next_part_with_
         serde_json::from_str(&std::fs::read_to_string(&cal).unwrap()).unwrap();
     assert_eq!(board, calibration_of_file(&v));
     assert_eq!(board.positions, (5 * ROWS * COLS) as u32);
+    // The spread measured with the board's channel off (compiled), and
+    // its threshold set: the next part decides with it, as `dmap stream
+    // --calibration` does (the lines compared below).
+    assert!(
+        board.spread_threshold <= cvm_core::spread::SPREAD_MAX,
+        "{board:?}"
+    );
     // The parts before the calibration ended: compiled thresholds.
     for (k, p) in parts[..6].iter().enumerate() {
         assert_eq!(got[k], stream(p, &[]), "part {k}");
@@ -240,7 +247,10 @@ fn calibrate_5_on_the_board_equals_dmap_calibrate_and_scores_the_next_part_with_
     );
     let origin = h.origin.expect("a version 6 header");
     for k in Key::ALL {
-        let calibrated = matches!(k, Key::Threshold | Key::PowerThreshold);
+        let calibrated = matches!(
+            k,
+            Key::Threshold | Key::PowerThreshold | Key::SpreadThreshold
+        );
         let want_src = if calibrated {
             Source::Changed
         } else {

@@ -81,6 +81,8 @@ fn values(thr: f64, pthr: f64, scores: bool, dcap: u16) -> Values {
         Key::Rows => ROWS as u32,
         Key::Threshold => scorer.threshold_from_units(thr),
         Key::PowerThreshold => cvm_core::power::threshold_from_units(pthr),
+        // `dmap stream`'s default: the spread channel off.
+        Key::SpreadThreshold => cvm_core::spread::SPREAD_OFF,
         Key::Scores => scores as u32,
         Key::DefectCap => dcap as u32,
         Key::MinArea

@@ -21,6 +21,7 @@ fn values(n: u32) -> Values {
         Key::Rows => 200,
         Key::Threshold => 1_000_000 + n,
         Key::PowerThreshold => 9831,
+        Key::SpreadThreshold => 6554,
         Key::Scores | Key::ReadyLevel | Key::RejectLevel => 1,
         Key::DefectCap => 4,
         Key::MinArea

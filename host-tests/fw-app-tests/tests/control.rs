@@ -81,7 +81,25 @@ fn status_lists_every_setting_with_its_source() {
         (Store::Empty, ResetCause::Watchdog, 4)
     );
     assert_eq!((st.last.scans, st.last.verdict), (0, None));
-    let want = [300, 200, 4_194_304, 3277, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1, 1];
+    // The spread channel compiled off (sthr = u32::MAX).
+    let want = [
+        300,
+        200,
+        4_194_304,
+        3277,
+        u32::MAX,
+        0,
+        0,
+        0,
+        0,
+        0,
+        0,
+        0,
+        0,
+        0,
+        1,
+        1,
+    ];
     for ((k, v), got) in Key::ALL.into_iter().zip(want).zip(&r[1..]) {
         assert_eq!(*got, value(k, v, Source::Default), "{}", k.name());
     }
@@ -169,12 +187,18 @@ fn save_makes_every_value_flash_and_defaults_brings_the_compiled_ones_back() {
 
 #[test]
 fn a_loaded_record_is_used_unless_it_does_not_fit() {
-    let mut values = [300, 50, 7, 8, 1, 2, 3, 4, 5, 6, 1, 100, 2, 0, 1];
+    let mut values = [300, 50, 7, 8, 9, 1, 2, 3, 4, 5, 6, 1, 100, 2, 0, 1];
     let c = control(Store::Loaded, Some(values));
     let s = c.settings();
     assert_eq!(
-        (s.cols, s.rows, s.threshold, s.power_threshold),
-        (300, 50, 7, 8)
+        (
+            s.cols,
+            s.rows,
+            s.threshold,
+            s.power_threshold,
+            s.spread_threshold
+        ),
+        (300, 50, 7, 8, 9)
     );
     assert!(s.scores);
     assert!(s.sources.iter().all(|&x| x == Source::Flash));
@@ -200,7 +224,7 @@ fn a_loaded_record_is_used_unless_it_does_not_fit() {
 }
 
 #[test]
-fn calibration_is_armed_once_then_sets_both_thresholds() {
+fn calibration_is_armed_once_then_sets_the_three_thresholds() {
     let mut c = control(Store::Empty, None);
     let (r, _) = ask(&mut c, 9, Request::Calibrate(5));
     assert_eq!(r, [Reply::Calibrating(5)]);
@@ -221,13 +245,21 @@ fn calibration_is_armed_once_then_sets_both_thresholds() {
         mad: 2,
         power_median: 30,
         power_mad: 4,
+        spread_threshold: 890,
+        spread_median: 50,
+        spread_mad: 6,
     };
     let mut out = Lines::default();
     c.calibrated(&cal, &mut out);
     assert_eq!(replies(out, Some(9)), [Reply::Calibrated(cal)]);
     let s = c.take_changed().unwrap();
-    assert_eq!((s.threshold, s.power_threshold), (1234, 567));
+    assert_eq!(
+        (s.threshold, s.power_threshold, s.spread_threshold),
+        (1234, 567, 890)
+    );
     assert_eq!(s.sources[Key::Threshold.index()], Source::Changed);
+    assert_eq!(s.sources[Key::PowerThreshold.index()], Source::Changed);
+    assert_eq!(s.sources[Key::SpreadThreshold.index()], Source::Changed);
     assert_eq!(s.sources[Key::Cols.index()], Source::Default);
 }
 

@@ -550,6 +550,7 @@ fn scan_file_header_round_trips_and_rejects_garbage() {
         rows: 17,
         threshold_units: 0.125,
         power_threshold_units: 0.0625,
+        spread_threshold_units: 0.1875,
         scores: true,
         max_defect_lines_per_row: 16,
         version_len: 4,
@@ -575,6 +576,13 @@ fn scan_file_header_round_trips_and_rejects_garbage() {
     bad[20..24].copy_from_slice(&0u32.to_le_bytes());
     assert_eq!(ScanHeader::parse(&bad), Err(HeaderError::Columns));
     assert_eq!(ScanHeader::parse(&bytes[..100]), Err(HeaderError::Short));
+    // The spread threshold at bytes 328..336 (the table in emufile.rs).
+    assert_eq!(bytes[328..336], 0.1875f64.to_le_bytes());
+    // A header of the length before the spread threshold (328) is refused,
+    // not read with its first frame's samples as the threshold.
+    let mut old = bytes;
+    old[8..10].copy_from_slice(&328u16.to_le_bytes());
+    assert_eq!(ScanHeader::parse(&old), Err(HeaderError::Length));
 }
 
 /// What every fault must leave intact: each DRDY edge became one beam, each

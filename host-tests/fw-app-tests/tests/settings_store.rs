@@ -95,6 +95,73 @@ fn a_record_of_another_build_is_foreign() {
     assert_eq!(load_h743(&b), (Store::Loaded, Some(values(4))));
 }
 
+/// CRC-32/ISO-HDLC (the zlib CRC), bit by bit: reflected polynomial
+/// 0xEDB88320, initial and final XOR 0xFFFFFFFF.
+fn crc32(data: &[u8]) -> u32 {
+    let mut c = !0u32;
+    for &b in data {
+        c ^= u32::from(b);
+        for _ in 0..8 {
+            c = if c & 1 != 0 {
+                (c >> 1) ^ 0xEDB8_8320
+            } else {
+                c >> 1
+            };
+        }
+    }
+    !c
+}
+
+/// The tag of a build of this configuration before the spread threshold
+/// (settings layout 1, fifteen keys), written from the record module's
+/// documented layout: layout version, CRC-32 of the keys' names each
+/// followed by `,`, the key count, then the configuration bytes, which are
+/// this build's.
+fn tag_before_sthr() -> Tag {
+    tag_of_keys(&[
+        "cols", "rows", "thr", "pthr", "scores", "dcap", "area", "peak", "miss", "misp", "mode",
+        "pulse", "delay", "ready", "reject",
+    ])
+}
+
+/// This configuration's tag for a layout-1 build with the keys `names`.
+fn tag_of_keys(names: &[&str]) -> Tag {
+    let list: String = names.iter().map(|k| format!("{k},")).collect();
+    let mut t = *tag().as_bytes();
+    t[0..2].copy_from_slice(&1u16.to_le_bytes());
+    t[2..6].copy_from_slice(&crc32(list.as_bytes()).to_le_bytes());
+    t[6] = names.len() as u8;
+    Tag::from_bytes(t)
+}
+
+#[test]
+fn a_record_of_the_layout_before_the_spread_threshold_is_foreign() {
+    // The reference rebuilds this build's own tag from its key list, so
+    // it follows the documented layout.
+    let names: Vec<&str> = Key::ALL.iter().map(|k| k.name()).collect();
+    assert_eq!(tag_of_keys(&names), tag());
+    let old = tag_before_sthr();
+    assert_ne!(old, tag());
+    assert_eq!(old.values(), 15);
+    // The old image: fifteen distinct values, nothing of this build's.
+    let vals: [u32; 15] = core::array::from_fn(|i| 100 + i as u32);
+    let mut rec = [0u8; 256];
+    let n = encode(&old, &vals, &mut rec).unwrap();
+    assert_eq!(n, encoded_len(15));
+    let b = Bank::erased();
+    block_on(bank::h743_store(&b).save_bytes(&rec[..n])).unwrap();
+    // Read by this build: made for another layout, ignored, not misread
+    // (its pthr would land in sthr, its scores in pthr, ...).
+    assert_eq!(load_h743(&b), (Store::Foreign, None));
+    // The keys' digest alone tells the layouts apart, even at one count.
+    let mut same_count = *old.as_bytes();
+    same_count[6] = VALUES as u8;
+    assert_ne!(Tag::from_bytes(same_count), tag());
+    // A save of this build's record replaces the old one.
+    block_on(bank::h743_store(&b).save(&tag(), &values(6))).unwrap();
+    assert_eq!(load_h743(&b), (Store::Loaded, Some(values(6))));
+}
+
 #[test]
 fn a_half_programmed_word_reads_as_poison_and_the_old_record_stays() {
     let b = Bank::erased();

@@ -6,10 +6,10 @@ use std::io::Read;
 use std::path::Path;
 
 use anyhow::{Context, Result, anyhow, bail};
-use cvm_core::{Config, Kernels, Scorer, Weights, power};
+use cvm_core::{Config, Kernels, Scorer, Weights, power, spread};
 use serde_json::{Value, json};
 
-use crate::calibrate::rule::power_thr;
+use crate::calibrate::rule::{power_thr, spread_thr};
 use crate::fmt::fmt_num;
 
 /// Identifies a calibration file.
@@ -20,10 +20,12 @@ pub const FORMAT: &str = "dmap-calibration";
 /// histogram's bins, `channels.*.integers`); version 4 names the rule that
 /// set them (`rule.name`: `spread` or `tail`) and adds per channel the
 /// tail fit, the estimated false positions per part and the smallest
-/// detected rise (`tail`, `false_positions_per_part`, `min_strength`). A
-/// reader takes versions 2 to 4: a threshold is applied the same way
-/// whichever rule made it, only the statistics beside it differ.
-pub const VERSION: u64 = 4;
+/// detected rise (`tail`, `false_positions_per_part`, `min_strength`);
+/// version 5 adds the spread channel (`channels.spread`, `Q16`). A
+/// reader takes versions 2 to 5: a threshold is applied the same way
+/// whichever rule made it, only the statistics beside it differ; a file
+/// before version 5 leaves the spread channel off.
+pub const VERSION: u64 = 5;
 /// The oldest version a reader takes.
 pub const OLDEST_VERSION: u64 = 2;
 
@@ -81,6 +83,11 @@ pub struct Calibration {
     /// (at most [`power::POWER_MAX`], or [`power::POWER_OFF`]).
     pub power_threshold: f64,
     pub pthr: u32,
+    /// The spread channel's threshold, a share of the power and its `Q16`
+    /// integer (at most [`spread::SPREAD_MAX`], or [`spread::SPREAD_OFF`],
+    /// which a file before version 5 gives).
+    pub spread_threshold: f64,
+    pub sthr: u32,
 }
 
 /// The most a calibration file is read of: one is about 2 KB, and a
@@ -203,6 +210,11 @@ impl Calibration {
             );
         }
         debug_assert_eq!(power::threshold_from_units(pexact), pthr);
+        let sthr = if v["version"].as_u64().is_some_and(|n| n >= 5) {
+            spread_channel(&p, &v["channels"]["spread"])?
+        } else {
+            spread::SPREAD_OFF
+        };
         Ok(Calibration {
             config: v["config"].clone(),
             threshold,
@@ -210,6 +222,8 @@ impl Calibration {
             q,
             power_threshold: pexact,
             pthr,
+            spread_threshold: spread::to_units(sthr),
+            sthr,
         })
     }
 
@@ -240,6 +254,42 @@ impl Calibration {
     }
 }
 
+/// The spread channel's `Q16` threshold of a version 5 file's
+/// `channels.spread` (`p` names the file in messages): the integer, its
+/// format, and the share it must equal exactly.
+fn spread_channel(p: &impl std::fmt::Display, ch: &Value) -> Result<u32> {
+    let units = ch["threshold"]
+        .as_f64()
+        .filter(|t| t.is_finite() && *t >= 0.0)
+        .ok_or_else(|| anyhow!("{p}: channels.spread.threshold missing or not a number >= 0"))?;
+    let sthr = ch["thr"]
+        .as_u64()
+        .and_then(|t| u32::try_from(t).ok())
+        .filter(|&t| spread_thr(t) == t)
+        .ok_or_else(|| {
+            anyhow!(
+                "{p}: channels.spread.thr missing or not a spread threshold (0..={} or {} for off)",
+                spread::SPREAD_MAX,
+                spread::SPREAD_OFF
+            )
+        })?;
+    if ch["q"] != spread::SPREAD_FRAC {
+        bail!(
+            "{p}: channels.spread.q must be {} (Q16 shares)",
+            spread::SPREAD_FRAC
+        );
+    }
+    let exact = spread::to_units(sthr);
+    if (exact - units).abs() > 1e-12 * exact.max(f64::MIN_POSITIVE) {
+        bail!(
+            "{p}: spread threshold {} is not the integer {sthr} in Q16 ({})",
+            fmt_num(units),
+            fmt_num(exact)
+        );
+    }
+    Ok(sthr)
+}
+
 /// The threshold `dmap eval --calibration` applies: the CVM channel of a
 /// calibration made on scans, or that of one made on precomputed scores.
 pub fn eval_threshold(path: &Path) -> Result<f64> {
@@ -255,6 +305,64 @@ pub fn eval_threshold(path: &Path) -> Result<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A file of `version` with the given spread channel (none: absent).
+    fn doc(version: u64, spread: Option<Value>) -> Value {
+        let mut v = json!({
+            "format": FORMAT,
+            "version": version,
+            "config": {"j1": 5, "j2": 5},
+            "channels": {
+                "cvm": {"threshold": 0.5, "thr": 1u32 << 20, "q": 21},
+                "power": {"threshold": 3277.0 / 32768.0, "thr": 3277, "q": 15},
+            },
+        });
+        if let Some(sp) = spread {
+            v["channels"]["spread"] = sp;
+        }
+        v
+    }
+
+    fn load(v: Value) -> Result<Calibration> {
+        Calibration::from_json(Path::new("cal.json"), v)
+    }
+
+    #[test]
+    fn the_spread_channel_from_version_5_and_off_before() {
+        let sp = json!({"threshold": 6554.0 / 65536.0, "thr": 6554, "q": 16});
+        let c = load(doc(5, Some(sp.clone()))).unwrap();
+        assert_eq!((c.sthr, c.spread_threshold), (6554, 6554.0 / 65536.0));
+        // Before version 5: off, whatever the file holds.
+        for version in [2, 3, 4] {
+            let c = load(doc(version, Some(sp.clone()))).unwrap();
+            assert_eq!(c.sthr, spread::SPREAD_OFF, "{version}");
+            assert_eq!(
+                spread::threshold_from_units(c.spread_threshold),
+                spread::SPREAD_OFF
+            );
+        }
+        // Off is a threshold; a missing, tampered or other-format one is refused.
+        let off = json!({"threshold": spread::to_units(u32::MAX), "thr": u32::MAX, "q": 16});
+        assert_eq!(load(doc(5, Some(off))).unwrap().sthr, spread::SPREAD_OFF);
+        for (sp, needle) in [
+            (None, "channels.spread.threshold missing"),
+            (
+                Some(json!({"threshold": 1.0, "thr": 92681, "q": 16})),
+                "not a spread threshold",
+            ),
+            (
+                Some(json!({"threshold": 100.5 / 65536.0, "thr": 100, "q": 16})),
+                "is not the integer 100 in Q16",
+            ),
+            (
+                Some(json!({"threshold": 100.0 / 65536.0, "thr": 100, "q": 15})),
+                "channels.spread.q must be 16",
+            ),
+        ] {
+            let e = load(doc(5, sp)).unwrap_err().to_string();
+            assert!(e.contains(needle), "{e}");
+        }
+    }
 
     #[test]
     fn differences_name_the_fields() {

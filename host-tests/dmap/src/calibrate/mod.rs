@@ -70,7 +70,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, anyhow, bail};
 use clap::Args;
 use cvm_core::calibration::{Calibrator, Rule as CoreRule, Statistics};
-use cvm_core::{Config, PositionScore, Scorer, flags, power};
+use cvm_core::{Config, PositionScore, Scorer, flags, power, spread};
 use serde_json::json;
 
 use crate::fmt::fmt_num;
@@ -141,6 +141,11 @@ impl Scored {
         self.with_data().map(|s| u32::from(s.pmag)).collect()
     }
 
+    /// The spread magnitudes (`Q16`) of the positions with data.
+    pub fn spread(&self) -> Vec<u32> {
+        self.with_data().map(|s| s.smag).collect()
+    }
+
     fn with_data(&self) -> impl Iterator<Item = &PositionScore> {
         self.scores.iter().filter(|s| s.flags & flags::NO_DATA == 0)
     }
@@ -169,10 +174,11 @@ pub fn score(scorer: &Scorer, scan: &ScanFile) -> Result<Scored> {
         .min()
         .zip(data.iter().max())
         .map(|(&lowest, &highest)| checks::SampleRange { lowest, highest });
-    Ok(Scored {
-        scores: crate::fixed::score_scan(scorer, scan.rows, scan.cols, &data),
-        samples,
-    })
+    let mut scores = crate::fixed::score_scan(scorer, scan.rows, scan.cols, &data);
+    // Measured whatever the scan's spread setting, as the board measures
+    // it during a calibration.
+    crate::fixed::add_spread(scorer, scan.rows, scan.cols, &data, &mut scores);
+    Ok(Scored { scores, samples })
 }
 
 /// `dmap calibrate --scores`: the rule on precomputed gradient images.
@@ -236,6 +242,7 @@ struct Reference {
     cols: usize,
     cvm: Vec<u32>,
     power: Vec<u32>,
+    spread: Vec<u32>,
     cal: Calibrator,
 }
 
@@ -298,6 +305,7 @@ fn references(a: &CalibrateArgs) -> Result<(Vec<Reference>, Config, Scorer)> {
             rows: scan.rows,
             cols: scan.cols,
             power: scored.power(),
+            spread: scored.spread(),
             cal: scored.calibrator(),
             cvm,
         });
@@ -336,18 +344,21 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
         for (i, r) in refs.iter().enumerate() {
             let o = statistics(&merged(&refs, Some(i)), &exact)?;
             let reach = |m: &[u32], t: u32| m.iter().filter(|&&x| x >= t).count();
-            loo.push((
+            loo.push([
                 (o.cvm.threshold, reach(&r.cvm, o.cvm.threshold)),
                 (o.power.threshold, reach(&r.power, o.power.threshold)),
-            ));
+                (o.spread.threshold, reach(&r.spread, o.spread.threshold)),
+            ]);
         }
     }
     let mut warnings = Vec::new();
-    for (r, &((t, n), (pt, pn))) in refs.iter().zip(&loo) {
+    for (r, &[(t, n), (pt, pn), (st_, sn)]) in refs.iter().zip(&loo) {
         let others = fmt_num(scorer.score_to_units(t));
         warnings.extend(checks::outlier_warning(&r.path, "CVM", n, &others));
         let others = fmt_num(power::to_units(pt));
         warnings.extend(checks::outlier_warning(&r.path, "power", pn, &others));
+        let others = fmt_num(spread::to_units(st_));
+        warnings.extend(checks::outlier_warning(&r.path, "spread", sn, &others));
     }
     let (thr, pthr) = (st.cvm.threshold, st.power.threshold);
     if thr == u32::MAX {
@@ -362,6 +373,11 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
     if pthr == power::POWER_OFF {
         warnings.push(
             "the power channel is off: its threshold is above every power magnitude (a reference with a dark neighbour, or a rule too strict)".into(),
+        );
+    }
+    if st.spread.threshold == spread::SPREAD_OFF {
+        warnings.push(
+            "the spread channel is off: its threshold is above every spread magnitude (a rule too strict)".into(),
         );
     }
     let per_ref: Vec<report::Reference> = refs

@@ -7,7 +7,7 @@ use std::path::Path;
 use anyhow::Result;
 use cvm_core::calibration::histogram::MANTISSA_BITS;
 use cvm_core::calibration::{Channel, Rule as CoreRule, Statistics};
-use cvm_core::{Config, Scorer, power};
+use cvm_core::{Config, Scorer, power, spread};
 use serde_json::{Value, json};
 
 use super::file::{FORMAT, VERSION, config_json};
@@ -15,10 +15,13 @@ use super::rule::Rule;
 use crate::fmt::fmt_num;
 
 /// The spread rule as the file states it.
-pub const RULE_TEXT: &str = "per channel, thr = Q_p + ceil(k * 1.4826 * MAD) + 1 over the channel's magnitudes of every position with data of every reference (integers: cvm in Q(q), power in Q15), each magnitude taken as the representative of its histogram bin (exact below 2^(m+1), else 2^m bins per octave, the middle of the bin rounded up); median and MAD the lower medians (rank ceil(n/2)) of the representatives and of their distances from the median; Q_p the top of the bin of nearest rank ceil(p n), at most the exact maximum (the maximum for p = 1); k and p exact as k_milli/1000 and quantile_ppm/10^6; a power thr above 46340 is recorded as 4294967295, off; defective when a channel's magnitude >= its thr";
+pub const RULE_TEXT: &str = "per channel, thr = Q_p + ceil(k * 1.4826 * MAD) + 1 over the channel's magnitudes of every position with data of every reference (integers: cvm in Q(q), power in Q15, spread in Q16), each magnitude taken as the representative of its histogram bin (exact below 2^(m+1), else 2^m bins per octave, the middle of the bin rounded up); median and MAD the lower medians (rank ceil(n/2)) of the representatives and of their distances from the median; Q_p the top of the bin of nearest rank ceil(p n), at most the exact maximum (the maximum for p = 1); k and p exact as k_milli/1000 and quantile_ppm/10^6; a power thr above 46340 or a spread thr above 92680 is recorded as 4294967295, off; defective when a channel's magnitude >= its thr";
 
 /// The tail rule as the file states it.
-pub const TAIL_RULE_TEXT: &str = "per channel, over the channel's magnitudes of every position with data of the S references (integers: cvm in Q(q), power in Q15), each magnitude taken as the representative of its histogram bin (as for the spread rule) capped at the exact maximum: the tail starts at u, the top of the bin of nearest rank min(ceil((1 - f) n), n - 10) (at least 1) capped at the maximum; N_u magnitudes lie above u with excess sum E, scale s = E / N_u; thr = max(ceil(u + s ln(N_u / (rate S))), max + 1) (u when the log is <= 0), with log2 in Q24 by repeated squaring and ln 2 in Q32; rate and f exact as rate_ppm/10^6 and tail_ppm/10^6; the expected false positions per part at thr are (N_u / S) exp(-(thr - u) / s); a power thr above 46340 is recorded as 4294967295, off; defective when a channel's magnitude >= its thr";
+pub const TAIL_RULE_TEXT: &str = "per channel, over the channel's magnitudes of every position with data of the S references (integers: cvm in Q(q), power in Q15, spread in Q16), each magnitude taken as the representative of its histogram bin (as for the spread rule) capped at the exact maximum: the tail starts at u, the top of the bin of nearest rank min(ceil((1 - f) n), n - 10) (at least 1) capped at the maximum; N_u magnitudes lie above u with excess sum E, scale s = E / N_u; thr = max(ceil(u + s ln(N_u / (rate S))), max + 1) (u when the log is <= 0), with log2 in Q24 by repeated squaring and ln 2 in Q32; rate and f exact as rate_ppm/10^6 and tail_ppm/10^6; the expected false positions per part at thr are (N_u / S) exp(-(thr - u) / s); a power thr above 46340 or a spread thr above 92680 is recorded as 4294967295, off; defective when a channel's magnitude >= its thr";
+
+/// A threshold and how many positions reach it.
+pub type Reach = (u32, usize);
 
 /// One reference's part of the file.
 pub struct Reference<'a> {
@@ -29,7 +32,8 @@ pub struct Reference<'a> {
     pub stats: Statistics,
     /// With more than one reference: per channel, the other references'
     /// threshold and how many of its positions reach it.
-    pub others: Option<((u32, usize), (u32, usize))>,
+    /// (CVM, power, spread).
+    pub others: Option<[Reach; 3]>,
 }
 
 /// A channel's statistics in its units (`to_units`) and as integers.
@@ -121,6 +125,15 @@ pub fn document(
     pow["threshold"] = json!(power::to_units(pthr));
     pow["thr"] = json!(pthr);
     pow["q"] = json!(power::POWER_FRAC);
+    let sthr = st.spread.threshold;
+    let off = sthr == spread::SPREAD_OFF;
+    let mut spr = with(
+        channel(&st.spread, &spread::to_units),
+        tail(&st.spread, &spread::to_units, off),
+    );
+    spr["threshold"] = json!(spread::to_units(sthr));
+    spr["thr"] = json!(sthr);
+    spr["q"] = json!(spread::SPREAD_FRAC);
     let references: Vec<Value> = refs
         .iter()
         .map(|r| {
@@ -129,11 +142,14 @@ pub fn document(
             v["rows"] = json!(r.rows);
             v["cols"] = json!(r.cols);
             v["power"] = channel(&r.stats.power, &power::to_units);
-            if let Some(((t, n), (pt, pn))) = r.others {
+            v["spread"] = channel(&r.stats.spread, &spread::to_units);
+            if let Some([(t, n), (pt, pn), (sp, sn)]) = r.others {
                 v["others_threshold"] = json!(units(t));
                 v["at_or_above_others_threshold"] = json!(n);
                 v["power"]["others_threshold"] = json!(power::to_units(pt));
                 v["power"]["at_or_above_others_threshold"] = json!(pn);
+                v["spread"]["others_threshold"] = json!(spread::to_units(sp));
+                v["spread"]["at_or_above_others_threshold"] = json!(sn);
             }
             v
         })
@@ -144,7 +160,7 @@ pub fn document(
         "config": config_json(config)?,
         "rule": rule_json(rule, exact),
         "scans": st.scans,
-        "channels": {"cvm": cvm, "power": pow},
+        "channels": {"cvm": cvm, "power": pow, "spread": spr},
         "references": references,
     }))
 }
@@ -171,15 +187,17 @@ fn estimate(c: &Channel, to_units: &dyn Fn(u32) -> String, off: bool) -> String 
     )
 }
 
-/// The summary: both channels' statistics and thresholds, then per channel
+/// The summary: the three channels' statistics and thresholds, then per channel
 /// the estimated false-reject rate and the smallest detected rise.
 pub fn summary(scorer: &Scorer, st: &Statistics, refs: usize) -> String {
     let units = |v: u32| fmt_num(scorer.score_to_units(v));
     let punits = |v: u32| fmt_num(power::to_units(v));
-    let (c, p) = (&st.cvm, &st.power);
+    let sunits = |v: u32| fmt_num(spread::to_units(v));
+    let (c, p, sp) = (&st.cvm, &st.power, &st.spread);
     let off = p.threshold == power::POWER_OFF;
+    let soff = sp.threshold == spread::SPREAD_OFF;
     format!(
-        "dmap calibrate: {} positions of {refs} reference(s): max {}, median {}, MAD {} -> threshold {} (integer {} in Q({})); power: max {}, median {}, MAD {} -> threshold {}\nCVM: {}\npower: {}",
+        "dmap calibrate: {} positions of {refs} reference(s): max {}, median {}, MAD {} -> threshold {} (integer {} in Q({})); power: max {}, median {}, MAD {} -> threshold {}; spread: max {}, median {}, MAD {} -> threshold {}\nCVM: {}\npower: {}\nspread: {}",
         c.positions,
         units(c.max),
         units(c.median),
@@ -195,7 +213,16 @@ pub fn summary(scorer: &Scorer, st: &Statistics, refs: usize) -> String {
         } else {
             format!("{} (integer {} in Q15)", punits(p.threshold), p.threshold)
         },
+        sunits(sp.max),
+        sunits(sp.median),
+        sunits(sp.mad),
+        if soff {
+            "off (above every spread magnitude)".to_string()
+        } else {
+            format!("{} (integer {} in Q16)", sunits(sp.threshold), sp.threshold)
+        },
         estimate(c, &units, false),
         estimate(p, &punits, off),
+        estimate(sp, &sunits, soff),
     )
 }

@@ -8,7 +8,7 @@ use clap::ValueEnum;
 use cvm_core::calibration::Rule as CoreRule;
 use cvm_core::calibration::rule::{DEFAULT_RATE_PPM, DEFAULT_TAIL_PPM, K_DEN, P_DEN};
 use cvm_core::calibration::tail::RATE_DEN;
-use cvm_core::power;
+use cvm_core::{power, spread};
 
 use crate::fmt::fmt_num;
 
@@ -199,6 +199,16 @@ pub fn power_thr(thr: u32) -> u32 {
     }
 }
 
+/// The spread channel's threshold from the rule's: itself when a
+/// magnitude can reach it, else [`spread::SPREAD_OFF`].
+pub fn spread_thr(thr: u32) -> u32 {
+    if thr <= spread::SPREAD_MAX {
+        thr
+    } else {
+        spread::SPREAD_OFF
+    }
+}
+
 /// `--scores`: a rule in f64 on precomputed magnitudes `m` (not empty),
 /// for `dmap eval` only and not the board's: the nearest-rank quantile plus
 /// `k * 1.4826 * MAD` with exact medians (mean of the middle two), and at
@@ -334,6 +344,17 @@ mod tests {
         };
         let e = implied(both).unwrap_err().to_string();
         assert!(e.contains("give the parameters of one"), "{e}");
+    }
+
+    #[test]
+    fn spread_threshold_above_every_magnitude_is_off() {
+        assert_eq!(spread_thr(0), 0);
+        assert_eq!(spread_thr(spread::SPREAD_MAX), spread::SPREAD_MAX);
+        assert_eq!(spread_thr(spread::SPREAD_MAX + 1), spread::SPREAD_OFF);
+        // Each converts to a share of the power and back exactly.
+        for t in [0, 1, 6554, spread::SPREAD_MAX, spread::SPREAD_OFF] {
+            assert_eq!(spread::threshold_from_units(spread::to_units(t)), t);
+        }
     }
 
     #[test]

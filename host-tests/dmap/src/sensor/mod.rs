@@ -34,6 +34,7 @@ Settings (KEY; the board refuses a value outside its own range with that range):
   rows    rows of a scan, 1 .. the capacity's rows
   thr     magnitude threshold, an integer as the H line's thr (0..4294967295)
   pthr    power threshold, as the H line's pthr (above 46340 the power channel is off)
+  sthr    spread threshold, Q16 (above 92680 the spread channel is off; calibrate sets it)
   scores  per-position score lines (S): 0 or 1
   dcap    defect lines (D) per row, 0 .. the firmware's largest
   area    smallest object (positions) that rejects its part

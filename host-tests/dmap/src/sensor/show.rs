@@ -134,7 +134,8 @@ pub fn text(done: &[Done]) -> String {
                 "calibrated on {} scans ({} positions with data)\n\
                  thr  = {:>10}  magnitudes: median {}, MAD {}\n\
                  pthr = {:>10}  power magnitudes: median {}, MAD {}\n\
-                 both in effect from the next scan (changed, not saved: save keeps them)\n",
+                 sthr = {:>10}  spread magnitudes: median {}, MAD {}\n\
+                 all three in effect from the next scan (changed, not saved: save keeps them)\n",
                 c.scans,
                 c.positions,
                 c.threshold,
@@ -142,7 +143,10 @@ pub fn text(done: &[Done]) -> String {
                 c.mad,
                 c.power_threshold,
                 c.power_median,
-                c.power_mad
+                c.power_mad,
+                c.spread_threshold,
+                c.spread_median,
+                c.spread_mad
             ),
             Done::Saved { .. } => "settings saved to flash\n".to_string(),
             Done::Defaults { .. } => {
@@ -200,6 +204,7 @@ fn done_json(d: &Done) -> Value {
             "id": id, "reply": "calibrated", "scans": c.scans, "positions": c.positions,
             "thr": c.threshold, "pthr": c.power_threshold, "med": c.median, "mad": c.mad,
             "pmed": c.power_median, "pmad": c.power_mad,
+            "sthr": c.spread_threshold, "smed": c.spread_median, "smad": c.spread_mad,
         }),
         Done::Saved { id } => json!({"id": id, "reply": "save"}),
         Done::Defaults { id } => json!({"id": id, "reply": "defaults"}),

@@ -131,7 +131,7 @@ fn said(r: &Reply<'_>, compact: bool) -> String {
         ),
         Reply::Calibrating(n) => format!("calibrating on the next {n} scans"),
         Reply::Calibrated(c) => format!(
-            "calibrated on {} scans ({} positions): thr={} (median {}, MAD {}), pthr={} (median {}, MAD {})",
+            "calibrated on {} scans ({} positions): thr={} (median {}, MAD {}), pthr={} (median {}, MAD {}), sthr={} (median {}, MAD {})",
             c.scans,
             c.positions,
             c.threshold,
@@ -139,7 +139,10 @@ fn said(r: &Reply<'_>, compact: bool) -> String {
             c.mad,
             c.power_threshold,
             c.power_median,
-            c.power_mad
+            c.power_mad,
+            c.spread_threshold,
+            c.spread_median,
+            c.spread_mad
         ),
         Reply::Saved => "saved".into(),
         Reply::Defaults => "compiled values from the next scan".into(),

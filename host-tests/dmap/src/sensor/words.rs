@@ -25,8 +25,8 @@ pub enum Action {
     /// the settings record in flash, why and how often the board started,
     /// the last scan, and every setting with its value and source
     Status,
-    /// One setting's value and source (KEY: cols rows thr pthr scores dcap
-    /// area peak miss misp mode pulse delay ready reject)
+    /// One setting's value and source (KEY: cols rows thr pthr sthr scores
+    /// dcap area peak miss misp mode pulse delay ready reject)
     Get {
         #[arg(value_name = "KEY")]
         key: String,

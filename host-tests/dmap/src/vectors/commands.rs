@@ -167,6 +167,9 @@ fn replies() -> Vec<Value> {
         mad: 300000,
         power_median: 800,
         power_mad: 200,
+        spread_threshold: 9830,
+        spread_median: 1311,
+        spread_mad: 655,
     };
     let value = Reply::Value {
         key: Key::Threshold,

@@ -135,6 +135,9 @@ pub fn calibration_of_file(v: &serde_json::Value) -> cvm_core::command::Calibrat
         mad: int("cvm", "mad"),
         power_median: int("power", "median"),
         power_mad: int("power", "mad"),
+        spread_threshold: thr("spread"),
+        spread_median: int("spread", "median"),
+        spread_mad: int("spread", "mad"),
     }
 }
 
