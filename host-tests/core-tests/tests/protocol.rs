@@ -601,14 +601,13 @@ fn flags_are_the_documented_bits() {
         ("CLIPPED", flags::CLIPPED),
         ("CVM_DEFECT", flags::CVM_DEFECT),
         ("POWER_DEFECT", flags::POWER_DEFECT),
+        ("SPREAD_DEFECT", flags::SPREAD_DEFECT),
     ];
     assert_eq!(rows.len(), ours.len(), "{rows:?}");
     for ((bit, value, name), (our_name, our_value)) in rows.iter().zip(ours) {
         assert_eq!((name.as_str(), *value), (our_name, 1 << bit), "{rows:?}");
         assert_eq!(u32::from(our_value), *value, "{name}");
     }
-    // The spread channel's bit is not in the lines' table yet: no line
-    // carries it while the channel is off.
     assert_eq!(flags::SPREAD_DEFECT, 1 << 6);
     assert_eq!(
         flags::DEFECT,

@@ -25,6 +25,7 @@ fn header_with(key: &str, value: &str) -> Vec<u8> {
         ("fs", "65535".into()),
         ("thr", "4194304".into()),
         ("pthr", "3277".into()),
+        ("sthr", "4294967295".into()),
         ("q", "23".into()),
         ("scores", "0".into()),
         ("dcap", "0".into()),
@@ -112,6 +113,8 @@ fn header_fields_out_of_range_are_refused() {
         ("fw", fw24.as_str()),
         ("w", "separable"),
         ("norm", "0"),
+        ("sthr", "0"),
+        ("sthr", "92680"),
     ] {
         assert!(
             matches!(
@@ -126,30 +129,42 @@ fn header_fields_out_of_range_are_refused() {
 
 #[test]
 fn row_defect_and_object_fields_out_of_range_are_refused() {
+    // D,row,col,mag,pmag,smag,strength,flags and
+    // O,id,row0,row1,col0,col1,area,peak,peak_row,peak_col,peak_mag,
+    // peak_power,peak_spread,centroid_row_q8,centroid_col_q8,channels
     let refused = [
         ("R,7,5035553,141,46341,142,3,3,1,1,1", "pmax: 0 to 46340"),
-        ("D,7,142,1200000,46341,99993,32", "pmag: 0 to 46340"),
-        ("D,7,142,1200000,5000,65535,32", "strength: at least 65536"),
-        ("D,7,142,1200000,5000,99993,0", "flags: "),
-        ("D,7,142,1200000,5000,99993,4", "flags: "),
-        ("D,7,142,1200000,5000,99993,17", "flags: "),
-        ("D,7,142,1200000,5000,99993,22", "flags: "),
-        ("D,7,142,1200000,5000,99993,80", "flags: "),
+        ("D,7,142,1200000,46341,0,99993,32", "pmag: 0 to 46340"),
+        ("D,7,142,1200000,5000,92681,99993,32", "smag: 0 to 92680"),
         (
-            "O,0,6,8,139,143,0,99993,7,142,1200000,5000,1801,36157,48",
+            "D,7,142,1200000,5000,0,65535,32",
+            "strength: at least 65536",
+        ),
+        ("D,7,142,1200000,5000,0,99993,0", "flags: "),
+        ("D,7,142,1200000,5000,0,99993,4", "flags: "),
+        ("D,7,142,1200000,5000,0,99993,17", "flags: "),
+        ("D,7,142,1200000,5000,0,99993,22", "flags: "),
+        ("D,7,142,1200000,5000,0,99993,128", "flags: "),
+        ("D,7,142,1200000,5000,0,99993,144", "flags: "),
+        (
+            "O,0,6,8,139,143,0,99993,7,142,1200000,5000,0,1801,36157,48",
             "area: at least 1",
         ),
         (
-            "O,0,6,8,139,143,11,65535,7,142,1200000,5000,1801,36157,48",
+            "O,0,6,8,139,143,11,65535,7,142,1200000,5000,0,1801,36157,48",
             "peak: at least 65536",
         ),
         (
-            "O,0,6,8,139,143,11,99993,7,142,1200000,46341,1801,36157,48",
+            "O,0,6,8,139,143,11,99993,7,142,1200000,46341,0,1801,36157,48",
             "peak_power: 0 to 46340",
         ),
         (
-            "O,0,6,8,139,143,11,99993,7,142,1200000,5000,1801,36157,0",
-            "channels: 16, 32 or 48",
+            "O,0,6,8,139,143,11,99993,7,142,1200000,5000,92681,1801,36157,64",
+            "peak_spread: 0 to 92680",
+        ),
+        (
+            "O,0,6,8,139,143,11,99993,7,142,1200000,5000,0,1801,36157,0",
+            "channels: a sum of 16, 32 and 64",
         ),
     ];
     for (body, what) in refused {
@@ -159,22 +174,29 @@ fn row_defect_and_object_fields_out_of_range_are_refused() {
     for body in [
         "R,7,5035553,141,46340,142,3,3,1,1,1",
         "R,7,0,-,0,-,0,0,300,0,0",
-        "D,7,142,1200000,46340,65536,32",
-        "D,7,141,5035553,1800,78680,20",
-        "D,7,141,4294967295,1800,78680,58",
-        "O,0,6,8,139,143,1,65536,7,142,1200000,46340,1801,36157,16",
+        "D,7,142,1200000,46340,0,65536,32",
+        "D,7,141,5035553,1800,0,78680,20",
+        "D,7,141,4294967295,1800,0,78680,58",
+        "D,7,140,1200000,5000,92680,99993,64",
+        "D,7,140,4294967295,46340,92680,99993,122",
+        "O,0,6,8,139,143,1,65536,7,142,1200000,46340,0,1801,36157,16",
+        "O,0,6,8,139,143,1,65536,7,142,1200000,46340,92680,1801,36157,112",
     ] {
         assert!(protocol::parse(&sealed(body)).is_ok(), "{body}");
     }
 }
 
-/// One position of an `S` line: 9 base-64 digits of
-/// `flags · 2^48 + pmag · 2^32 + mag`, written here from the document.
-fn position(flags: u64, pmag: u64, mag: u64) -> String {
+/// One position of an `S` line: 12 base-64 digits of
+/// `flags · 2^65 + smag · 2^48 + pmag · 2^32 + mag`, written here from the
+/// document (in a `u128`).
+fn position(flags: u64, smag: u64, pmag: u64, mag: u64) -> String {
     const B64: &[u8] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789-_";
-    let v = (flags << 48) | (pmag << 32) | mag;
-    (0..9)
-        .map(|i| B64[((v >> (6 * (8 - i))) & 63) as usize] as char)
+    let v = (u128::from(flags) << 65)
+        | (u128::from(smag) << 48)
+        | (u128::from(pmag) << 32)
+        | u128::from(mag);
+    (0..12)
+        .map(|i| B64[((v >> (6 * (11 - i))) & 63) as usize] as char)
         .collect()
 }
 
@@ -182,44 +204,60 @@ fn position(flags: u64, pmag: u64, mag: u64) -> String {
 fn score_positions_out_of_range_are_refused() {
     let max = u64::from(u32::MAX);
     let refused = [
-        (1, 0, 1),      // no data, yet a magnitude
-        (1, 1, 0),      // no data, yet a power magnitude
-        (3, 0, 0),      // no data and dark
-        (17, 0, 0),     // no data and a defect
-        (0, 46341, 0),  // power above its largest value
-        (6, 0, 0),      // dark and saturated
-        (8 | 16, 0, 5), // clipped below the top
-        (16, 0, max),   // the top, not clipped
-        (8, 0, max),    // clipped, not a distance defect
+        (1, 0, 0, 1),      // no data, yet a magnitude
+        (1, 0, 1, 0),      // no data, yet a power magnitude
+        (1, 1, 0, 0),      // no data, yet a spread magnitude
+        (3, 0, 0, 0),      // no data and dark
+        (17, 0, 0, 0),     // no data and a defect
+        (0, 0, 46341, 0),  // power above its largest value
+        (0, 92681, 0, 0),  // spread above its largest value
+        (0, 131071, 0, 0), // the largest 17-bit spread
+        (6, 0, 0, 0),      // dark and saturated
+        (8 | 16, 0, 0, 5), // clipped below the top
+        (16, 0, 0, max),   // the top, not clipped
+        (8, 0, 0, max),    // clipped, not a distance defect
     ];
-    for (flags, pmag, mag) in refused {
-        let body = format!("S,0,0,{}{}", position(0, 0, 7), position(flags, pmag, mag));
+    for (flags, smag, pmag, mag) in refused {
+        let body = format!(
+            "S,0,0,{}{}",
+            position(0, 0, 0, 7),
+            position(flags, smag, pmag, mag)
+        );
         let got = range_error(&sealed(&body));
         assert!(
             got.is_some_and(|w| w.starts_with("a position of an S line")),
-            "{flags} {pmag} {mag}: {got:?}"
+            "{flags} {smag} {pmag} {mag}: {got:?}"
         );
     }
-    for (flags, pmag, mag) in [
-        (1, 0, 0),
-        (2, 46340, 0),
-        (4 | 32, 3000, 9),
-        (8 | 16, 0, max),
-        (8 | 16 | 32 | 2, 46340, max),
+    for (flags, smag, pmag, mag) in [
+        (1, 0, 0, 0),
+        (2, 0, 46340, 0),
+        (4 | 32, 0, 3000, 9),
+        (64, 92680, 0, 0),
+        (8 | 16, 0, 0, max),
+        (8 | 16 | 32 | 64 | 2, 92680, 46340, max),
     ] {
-        let body = format!("S,0,0,{}", position(flags, pmag, mag));
+        let body = format!("S,0,0,{}", position(flags, smag, pmag, mag));
         let line = sealed(&body);
         let Ok(Line::Scores { chars, .. }) = protocol::parse(&line) else {
-            panic!("{flags} {pmag} {mag}");
+            panic!("{flags} {smag} {pmag} {mag}");
         };
         let v = protocol::decode_score(chars).unwrap();
         assert_eq!(
-            (u64::from(v.flags), u64::from(v.pmag), u64::from(v.mag)),
-            (flags, pmag, mag)
+            (
+                u64::from(v.flags),
+                u64::from(v.smag),
+                u64::from(v.pmag),
+                u64::from(v.mag)
+            ),
+            (flags, smag, pmag, mag)
         );
     }
     // The document's examples.
-    assert_eq!(position(0, 0, 1), "AAAAAAAAB");
-    assert_eq!(position(0, 100, 120000), "AAGQAAdTA");
-    assert_eq!(position(20, 1800, 5035553), "UBwgATNYh");
+    assert_eq!(position(0, 0, 0, 1), "AAAAAAAAAAAB");
+    assert_eq!(position(0, 0, 100, 120000), "AAAAAGQAAdTA");
+    assert_eq!(position(20, 0, 1800, 5035553), "KAAABwgATNYh");
+    // The spread defect of the vector good-spread: flags 64 and smag
+    // 14554 make the top 24 bits 8 403 162 = 32, 3, 35, 26 in base 64.
+    assert_eq!(position(64, 14554, 22, 5984663), "gDjaABYAW1GX");
 }

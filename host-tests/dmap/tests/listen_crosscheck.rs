@@ -202,7 +202,7 @@ fn a_forged_object_field_is_named() {
         );
         // Channels: the power channel added to the distance's object.
         let mut v = ls.clone();
-        v[k] = with_field(&v[k], 14, "48");
+        v[k] = with_field(&v[k], 15, "48");
         let (_, json) = listen(&format!("{name}-channels"), &v);
         assert!(
             problems(&json)

@@ -541,9 +541,9 @@ fn misplaced_and_impossible_object_lines_are_reported() {
         ("peak-outside", 8, "0", "object 0: peak at row 0 column"),
         (
             "no-channel",
-            14,
+            15,
             "0",
-            "field outside its range: channels: 16, 32 or 48",
+            "field outside its range: channels: a sum of 16, 32 and 64",
         ),
         ("past-cols", 5, "30", "object 0: columns"),
     ] {

@@ -890,7 +890,7 @@ fn out_of_order_lines_are_reported() {
     // A D line moved after its row's S lines, and one dropped.
     let mut v = ls.clone();
     let dl = v.remove(first);
-    let s_last = idx(&|l| starts(l, &format!("S,{row_with_two},24,")));
+    let s_last = idx(&|l| starts(l, &format!("S,{row_with_two},18,")));
     v.insert(s_last, dl);
     let d = feed(&v);
     let p: Vec<&str> = d.scans[0]
@@ -920,7 +920,7 @@ fn out_of_order_lines_are_reported() {
     let mut v = ls.clone();
     let (s0, s1) = (
         idx(&|l| starts(l, "S,1,0,")),
-        idx(&|l| starts(l, "S,1,24,")),
+        idx(&|l| starts(l, "S,1,18,")),
     );
     v.swap(s0, s1);
     let d = feed(&v);
@@ -931,7 +931,7 @@ fn out_of_order_lines_are_reported() {
         .collect();
     assert!(
         p.iter()
-            .any(|w| w.contains("from column 0 after the one from column 24")),
+            .any(|w| w.contains("from column 0 after the one from column 18")),
         "{p:?}"
     );
 }
@@ -1001,7 +1001,7 @@ fn full_scale_reaches_the_header_and_the_scoring() {
     let summary = String::from_utf8_lossy(&listen.stdout);
     assert!(
         summary.contains(
-            "protocol v6, full scale 4095, at most 3 defect line(s) per row, reset cause por, start 1 since power-on"
+            "protocol v7, full scale 4095, at most 3 defect line(s) per row, reset cause por, start 1 since power-on"
         ),
         "{summary}"
     );

@@ -68,7 +68,7 @@ fn threshold_zero_defects_have_full_strength_and_decode_cleanly() {
             "the flat scan must have magnitude-0 positions"
         );
         for l in &d_lines {
-            assert_eq!(field(l, 5), u32::MAX as u64, "{channel:?}: {l}");
+            assert_eq!(field(l, 6), u32::MAX as u64, "{channel:?}: {l}");
         }
         for l in text.lines().filter(|l| l.starts_with("O,")) {
             assert!(l.contains(&format!(",{},", u32::MAX)), "object peak: {l}");
