@@ -102,7 +102,7 @@ pub mod h743 {
     /// The columns the row buffers are sized for.
     pub const MAX_COLS: usize = COLS;
 
-    /// Bytes of the output queue (about 1 s of lines at 921600 baud).
+    /// Bytes of the output queue (about 1.4 s of lines at 921600 baud).
     pub const QUEUE_BYTES: usize = 128 * 1024;
     pub const KEEP_RESERVE: usize = super::keep_reserve(MAX_COLS);
     const _: () = assert!(super::queue_fits(QUEUE_BYTES, MAX_COLS));

@@ -188,3 +188,36 @@ fn the_vectors_cover_the_protocol() {
         ])
     );
 }
+
+/// The spread channel's vector carries what its maps make, worked out by
+/// hand from docs/protocol.md: a clear 5x5 map (a cone, 7 400 in all, 800
+/// of it outside the 3x3 core around its peak) and a haloed one (the cone
+/// at 3/4 plus 115 on each of the 16 rim cells: 7 390, 2 440 outside).
+/// At (1, 10) the map below is haloed and the other three neighbours
+/// clear: `smag = q(haloed) - q(clear)`, a spread defect alone at
+/// `sthr=3277` (thr is out of reach), strength `floor(2^16 smag / sthr)`.
+#[test]
+fn the_spread_vector_carries_the_hand_computed_values() {
+    let q = |outside: u64, power: u64| (outside << 16) / power;
+    let smag = q(2440, 7390) - q(800, 7400);
+    assert_eq!(smag, 21638 - 7084);
+    let bytes = std::fs::read(dir().join("good-spread.txt")).unwrap();
+    let text = String::from_utf8(bytes).unwrap();
+    let d = text
+        .lines()
+        .find(|l| l.starts_with("D,1,10,"))
+        .expect("the defect above the patch");
+    let f: Vec<u64> = d
+        .split('*')
+        .next()
+        .unwrap()
+        .split(',')
+        .skip(1)
+        .map(|v| v.parse().unwrap())
+        .collect();
+    // row, col, mag, pmag, smag, strength, flags
+    assert_eq!(f[4], smag, "{d}");
+    assert_eq!(f[5], (smag << 16) / 3277, "{d}");
+    assert_eq!(f[6], u64::from(cvm_core::flags::SPREAD_DEFECT), "{d}");
+    assert!(text.lines().next().unwrap().contains(",sthr=3277,"));
+}
