@@ -85,14 +85,21 @@ pub(crate) fn isqrt(s: u32) -> u32 {
 /// The smallest `Q15` threshold at or above `t` (a contrast; 0 for `t <= 0`,
 /// [`POWER_OFF`] for `t` above every magnitude or NaN).
 pub fn threshold_from_units(t: f64) -> u32 {
+    fixed_threshold(t, POWER_FRAC, POWER_MAX, POWER_OFF)
+}
+
+/// The smallest threshold with `frac` fraction bits at or above `t`: 0
+/// for `t <= 0`, `off` for `t` above `max` (no magnitude reaches it) or
+/// NaN. The power and spread channels' thresholds are both made so.
+pub(crate) fn fixed_threshold(t: f64, frac: u32, max: u32, off: u32) -> u32 {
     if t.is_nan() {
-        return POWER_OFF;
+        return off;
     }
-    let v = t * (1u32 << POWER_FRAC) as f64;
+    let v = t * (1u32 << frac) as f64;
     if v <= 0.0 {
         0
-    } else if v > POWER_MAX as f64 {
-        POWER_OFF
+    } else if v > max as f64 {
+        off
     } else {
         let fl = v as u32;
         if (fl as f64) < v { fl + 1 } else { fl }

@@ -51,7 +51,7 @@
 //! channel is on ([`crate::Engine::set_spread_threshold`]).
 
 use crate::config::MAX_CELLS;
-use crate::power::isqrt;
+use crate::power::{fixed_threshold, isqrt};
 use crate::scorer::magnitude as magnitude64;
 
 /// Fraction bits of the spread channel's values.
@@ -214,18 +214,7 @@ pub fn magnitude(s0: u16, s1: u16) -> u32 {
 /// The smallest `Q16` threshold at or above `t` (a share of the power; 0
 /// for `t <= 0`, [`SPREAD_OFF`] for `t` above every magnitude or NaN).
 pub fn threshold_from_units(t: f64) -> u32 {
-    if t.is_nan() {
-        return SPREAD_OFF;
-    }
-    let v = t * (1u32 << SPREAD_FRAC) as f64;
-    if v <= 0.0 {
-        0
-    } else if v > SPREAD_MAX as f64 {
-        SPREAD_OFF
-    } else {
-        let fl = v as u32;
-        if (fl as f64) < v { fl + 1 } else { fl }
-    }
+    fixed_threshold(t, SPREAD_FRAC, SPREAD_MAX, SPREAD_OFF)
 }
 
 /// A `Q16` spread value as a share of the power.
