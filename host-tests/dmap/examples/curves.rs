@@ -18,7 +18,8 @@ use cvm_reference::{Emd, Ground, gradient_image};
 use cvm_sim::Scan;
 use dmap::halos::plot::{Chart, Series, draw};
 use dmap::halos::{
-    Geo, Halo, Thresholds, around, calibrate, found, halo_part, near, peak_ratios, run_scan,
+    Geo, Halo, Thresholds, around, calibrate_scans, found, halo_part, near, peak_ratios, run_scan,
+    simulate,
 };
 use dmap::objects::components;
 use rayon::prelude::*;
@@ -43,15 +44,6 @@ const COLOURS: [[u8; 3]; 6] = [
     [214, 39, 40],
     [127, 127, 127],
 ];
-
-fn simulate(cfg: &cvm_sim::Config) -> Scan {
-    cvm_sim::simulate(cfg, &|| {}).expect("valid part")
-}
-
-fn scorer(scan: &Scan) -> Scorer {
-    let g = cvm_core::Geometry::new(scan.j1 as u8, scan.j2 as u8).unwrap();
-    Scorer::new(&cvm_core::Config::paper(g)).unwrap()
-}
 
 /// EMD gradient magnitudes of a scan, scaled to integers.
 fn emd(scan: &Scan) -> Vec<u32> {
@@ -131,9 +123,7 @@ fn measure(geo: Geo) -> Result {
         .iter()
         .map(|&k| simulate(&geo.part(k, RASTER)))
         .collect();
-    let scorer = scorer(&refs[0]);
-    let views: Vec<_> = refs.iter().map(|s| (s.rows, s.cols, &s.data[..])).collect();
-    let thr = calibrate(&scorer, &views, &Rule::DEFAULT);
+    let (scorer, thr) = calibrate_scans(&refs, &Rule::DEFAULT);
     let mut h = Box::new(Histogram::<{ bins(32) }>::new());
     for m in refs.par_iter().map(emd).collect::<Vec<_>>() {
         m.iter().for_each(|&v| h.add(v));

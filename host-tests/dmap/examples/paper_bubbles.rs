@@ -9,11 +9,11 @@
 //! (`-- sweep` skips the full parts and takes the thresholds from the
 //! command line: `-- sweep CVM POWER SPREAD`, integers as printed).
 
+use cvm_core::Object;
 use cvm_core::calibration::Rule;
-use cvm_core::{Object, Scorer};
 use cvm_sim::{Bubble, Config, Scan, Vec3, preset};
 use dmap::halos::run::{around_truth, near_truth, peak_ratios};
-use dmap::halos::{Thresholds, calibrate, run_scan};
+use dmap::halos::{Thresholds, calibrate_scans, run_scan, scorer_for, simulate};
 
 const CALIBRATION: [u64; 3] = [11, 12, 13];
 const UNSEEN: [u64; 2] = [21, 22];
@@ -26,10 +26,6 @@ fn part(defect_free: bool, seed: u64) -> Config {
     c.receiver.spot = 0.3;
     c.seed = seed;
     c
-}
-
-fn simulate(cfg: &Config) -> Scan {
-    cvm_sim::simulate(cfg, &|| {}).expect("valid part")
 }
 
 /// The positions whose beam axis passes within `radius + footprint * waist`
@@ -45,11 +41,6 @@ fn truth(cfg: &Config, b: &Bubble) -> Vec<(usize, usize)> {
             (x - b.center.x).hypot(y - b.center.y) < reach
         })
         .collect()
-}
-
-fn scorer(scan: &Scan) -> Scorer {
-    let g = cvm_core::Geometry::new(scan.j1 as u8, scan.j2 as u8).unwrap();
-    Scorer::new(&cvm_core::Config::paper(g)).unwrap()
 }
 
 /// Each bubble: found, and the channels' peaks over their thresholds.
@@ -115,9 +106,7 @@ fn full() -> Thresholds {
         .iter()
         .map(|&s| simulate(&part(true, s)))
         .collect();
-    let scorer = scorer(&refs[0]);
-    let views: Vec<_> = refs.iter().map(|s| (s.rows, s.cols, &s.data[..])).collect();
-    let thr = calibrate(&scorer, &views, &Rule::DEFAULT);
+    let (scorer, thr) = calibrate_scans(&refs, &Rule::DEFAULT);
     println!("thresholds (tail rule, seeds {CALIBRATION:?}): {thr:?}");
     println!(
         "  as values: CVM {:.4}, power contrast {:.4}, spread {:.4}",
@@ -192,7 +181,7 @@ fn sweep(thr: Thresholds) {
     for seed in SWEEP_SEEDS {
         let cfg = sweep_part(seed);
         let scan = simulate(&cfg);
-        let scorer = scorer(&scan);
+        let scorer = scorer_for(&scan);
         let out = run_scan(&scorer, scan.rows, scan.cols, &scan.data, thr);
         println!("\nseed {seed}:\n");
         header();

@@ -12,11 +12,10 @@
 //! A halo is found when an object lies within one position of its truth
 //! region.
 
-use cvm_core::Scorer;
 use cvm_core::calibration::Rule;
 use cvm_sim::Scan;
 use dmap::halos::run::{around, near, peak_ratios};
-use dmap::halos::{Geo, calibrate, found, halo_part, run_scan};
+use dmap::halos::{Geo, calibrate_scans, found, halo_part, run_scan, simulate};
 
 const REFERENCE: [u64; 8] = [500, 501, 502, 503, 504, 505, 506, 507];
 const FREE_PARTS: u64 = 20;
@@ -37,23 +36,12 @@ const MISSED: [(Geo, f64, f64); 1] = [(Geo::Fifteen, 1.0, 0.10)];
 /// it (0.059 for 10 % on one position).
 const EXCUSED_BELOW: f64 = 0.04;
 
-fn simulate(cfg: &cvm_sim::Config) -> Scan {
-    cvm_sim::simulate(cfg, &|| {}).expect("valid part")
-}
-
-fn scorer(scan: &Scan) -> Scorer {
-    let g = cvm_core::Geometry::new(scan.j1 as u8, scan.j2 as u8).unwrap();
-    Scorer::new(&cvm_core::Config::paper(g)).unwrap()
-}
-
 fn check(geo: Geo) -> Vec<String> {
     let refs: Vec<Scan> = REFERENCE
         .iter()
         .map(|&k| simulate(&geo.part(k, RASTER)))
         .collect();
-    let scorer = scorer(&refs[0]);
-    let views: Vec<_> = refs.iter().map(|s| (s.rows, s.cols, &s.data[..])).collect();
-    let thr = calibrate(&scorer, &views, &Rule::DEFAULT);
+    let (scorer, thr) = calibrate_scans(&refs, &Rule::DEFAULT);
     let mut failures = Vec::new();
     for (si, &size) in SIZES.iter().enumerate() {
         let (cfg, halos) = halo_part(geo, 120 + si as u64, RASTER, size, &SHARES, &AT);

@@ -12,7 +12,7 @@ pub mod plot;
 pub mod run;
 pub mod thresholds;
 
-pub use calib::calibrate;
+pub use calib::{calibrate, calibrate_scans, scorer_for, simulate};
 pub use parts::{Geo, Halo, halo_part};
 pub use run::{Outcome, around, found, near, peak_ratios, run_scan};
 pub use thresholds::Thresholds;
