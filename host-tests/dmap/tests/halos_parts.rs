@@ -1,10 +1,11 @@
 //! The pieces of `dmap::halos` against independent references: a halo's
-//! truth region against the simulator's own truth mask, and the "found"
+//! truth region against the simulator's own truth mask, a halo's strength
+//! in a beam's power against every beam of the raster, and the "found"
 //! rule on hand-made objects.
 
 use cvm_core::Object;
 use dmap::halos::run::near_truth;
-use dmap::halos::{Geo, Thresholds, halo_part};
+use dmap::halos::{Geo, Thresholds, halo_part, halo_part_of_beam_power, strongest_beam};
 
 #[test]
 fn halo_truth_regions_are_the_simulators_truth_mask() {
@@ -22,6 +23,40 @@ fn halo_truth_regions_are_the_simulators_truth_mask() {
             }
             assert_eq!(ours, mask, "{geo:?}, discs of {size} positions");
         }
+    }
+}
+
+#[test]
+fn a_halo_of_a_beams_power_takes_that_power_from_its_strongest_beam() {
+    let at = [(9, 9), (9, 29), (29, 19)];
+    for geo in Geo::BOTH {
+        for size in [1.0, 3.0] {
+            let powers = [0.10, 0.20, 0.30];
+            let (cfg, halos) = halo_part_of_beam_power(geo, 11, 39, size, &powers, &at).unwrap();
+            let r = &cfg.raster;
+            for (h, &p) in halos.iter().zip(&powers) {
+                // The beam nearest the disc's centre takes the most: the
+                // overlap of a Gaussian beam with a disc falls with the
+                // distance between their centres.
+                let nearest = (0..39 * 39)
+                    .map(|q| r.position(q / 39, q % 39))
+                    .min_by(|a, b| {
+                        let d = |(x, y): (f64, f64)| (x - h.disc.x).hypot(y - h.disc.y);
+                        d(*a).total_cmp(&d(*b))
+                    })
+                    .unwrap();
+                let most = h.disc.beam_share(nearest.0, nearest.1, r.waist);
+                assert!((most - p).abs() < 1e-12, "{geo:?} {size}: {most} for {p}");
+                assert!(h.disc.share >= p && h.disc.share <= 1.0, "{}", h.disc.share);
+                assert_eq!(strongest_beam(&cfg, &h.disc), most);
+            }
+            let discs: Vec<_> = halos.iter().map(|h| h.disc).collect();
+            assert_eq!(cfg.part.scatterers, discs);
+        }
+        // No beam loses 90 % of its power to a disc of one position: at
+        // most the 59 % of a centred beam that crosses it.
+        let err = halo_part_of_beam_power(geo, 11, 39, 1.0, &[0.9], &at).unwrap_err();
+        assert!(err.contains("not 90.0 %"), "{err}");
     }
 }
 

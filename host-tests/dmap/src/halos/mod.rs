@@ -13,6 +13,6 @@ pub mod run;
 pub mod thresholds;
 
 pub use calib::{calibrate, calibrate_scans, scorer_for, simulate};
-pub use parts::{Geo, Halo, halo_part};
+pub use parts::{Geo, Halo, halo_part, halo_part_of_beam_power, strongest_beam};
 pub use run::{Outcome, around, found, near, peak_ratios, run_scan};
 pub use thresholds::Thresholds;

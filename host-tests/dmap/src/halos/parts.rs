@@ -107,3 +107,51 @@ pub fn halo_part(
     cfg.part.scatterers = halos.iter().map(|h| h.disc).collect();
     (cfg, halos)
 }
+
+/// The largest share of one beam's power that `disc` sends into its halo,
+/// over the beams of `cfg`'s raster (`Scatterer::beam_share`). Beams whose
+/// axis is more than three waists from the disc's rim put less than
+/// `e^-18` of their power on it and are skipped.
+pub fn strongest_beam(cfg: &Config, disc: &Scatterer) -> f64 {
+    let r = &cfg.raster;
+    let reach = disc.radius + 3.0 * r.waist;
+    (0..r.rows * r.cols)
+        .map(|p| r.position(p / r.cols, p % r.cols))
+        .filter(|&(x, y)| (x - disc.x).hypot(y - disc.y) <= reach)
+        .map(|(x, y)| disc.beam_share(x, y, r.waist))
+        .fold(0.0, f64::max)
+}
+
+/// [`halo_part`] with each halo's strength given as the share of a beam's
+/// power it takes: each disc's share of the light crossing it is set so
+/// that the beam putting the most into its halo ([`strongest_beam`]) puts
+/// exactly `powers[i]`. A disc off the beams needs a larger share than one
+/// centred on a beam; a share above 1 (a power no beam can lose to this
+/// disc) is an error.
+pub fn halo_part_of_beam_power(
+    geo: Geo,
+    k: u64,
+    n: usize,
+    size: f64,
+    powers: &[f64],
+    at: &[(usize, usize)],
+) -> Result<(Config, Vec<Halo>), String> {
+    let ones = vec![1.0; powers.len()];
+    let (mut cfg, mut halos) = halo_part(geo, k, n, size, &ones, at);
+    for (h, &p) in halos.iter_mut().zip(powers) {
+        let most = strongest_beam(&cfg, &h.disc);
+        let share = p / most;
+        if !(share > 0.0 && share <= 1.0) {
+            return Err(format!(
+                "a disc of {size} positions at ({:.3}, {:.3}) mm takes at most {:.1} % of a beam's power, not {:.1} %",
+                h.disc.x,
+                h.disc.y,
+                most * 100.0,
+                p * 100.0
+            ));
+        }
+        h.disc.share = share;
+    }
+    cfg.part.scatterers = halos.iter().map(|h| h.disc).collect();
+    Ok((cfg, halos))
+}
