@@ -7,7 +7,13 @@
 //! reference parts; false objects on twenty unseen defect-free parts.
 //! Writes `docs/img/halo_curves_9x9.png` and `docs/img/halo_curves_15x15.png`.
 //!
-//! `cd host-tests && cargo run --release -p dmap --example curves`
+//! With `beam`, a halo's strength is the share of its strongest beam's
+//! power that it takes (5, 7.5, 10 and 15 %; a disc of one position up
+//! to half a pitch off the beams can take no more than 18 %), not the
+//! share of the light crossing the disc, and the plots are
+//! `halo_curves_beam_*.png`.
+//!
+//! `cd host-tests && cargo run --release -p dmap --example curves [-- beam]`
 
 use std::path::Path;
 
@@ -18,8 +24,8 @@ use cvm_reference::{Emd, Ground, gradient_image};
 use cvm_sim::Scan;
 use dmap::halos::plot::{Chart, Series, draw};
 use dmap::halos::{
-    Geo, Halo, Thresholds, around, calibrate_scans, found, halo_part, near, peak_ratios, run_scan,
-    simulate,
+    Geo, Halo, Thresholds, around, calibrate_scans, found, halo_part, halo_part_of_beam_power,
+    near, peak_ratios, run_scan, simulate,
 };
 use dmap::objects::components;
 use rayon::prelude::*;
@@ -28,7 +34,10 @@ const REFERENCE: [u64; 8] = [500, 501, 502, 503, 504, 505, 506, 507];
 const FREE_PARTS: u64 = 20;
 const DEFECT_PARTS: u64 = 5;
 const RASTER: usize = 39;
+/// Shares of the light crossing a disc that it scatters.
 const SHARES: [f64; 4] = [0.05, 0.10, 0.20, 0.30];
+/// Shares of its strongest beam's power that a halo takes (`beam`).
+const POWERS: [f64; 4] = [0.05, 0.075, 0.10, 0.15];
 const SIZES: [f64; 3] = [1.0, 2.0, 3.0];
 /// One halo per quadrant.
 const AT: [(usize, usize); 4] = [(9, 9), (9, 29), (29, 9), (29, 29)];
@@ -117,7 +126,26 @@ struct Result {
     worst: Vec<Vec<f64>>,
 }
 
-fn measure(geo: Geo) -> Result {
+/// How the strengths of a run are given.
+#[derive(Clone, Copy, PartialEq)]
+enum Strength {
+    /// [`SHARES`] of the light crossing each disc.
+    Crossing,
+    /// [`POWERS`] of the strongest beam's power.
+    Beam,
+}
+
+impl Strength {
+    fn levels(self) -> [f64; 4] {
+        match self {
+            Strength::Crossing => SHARES,
+            Strength::Beam => POWERS,
+        }
+    }
+}
+
+fn measure(geo: Geo, strength: Strength) -> Result {
+    let levels = strength.levels();
     let t = std::time::Instant::now();
     let refs: Vec<Scan> = REFERENCE
         .iter()
@@ -159,45 +187,48 @@ fn measure(geo: Geo) -> Result {
     let jobs: Vec<(usize, u64)> = (0..SIZES.len())
         .flat_map(|si| (0..DEFECT_PARTS).map(move |k| (si, k)))
         .collect();
+    // Per part: its size, its halos with their strength's index.
     type Run = (
         usize,
-        Vec<Halo>,
+        Vec<(Halo, usize)>,
         (Vec<Vec<cvm_core::Object>>, Vec<cvm_core::PositionScore>),
     );
     let runs: Vec<Run> = jobs
         .par_iter()
         .map(|&(si, k)| {
             let id = FREE_PARTS + 100 * (si as u64 + 1) + k;
-            let shares: Vec<f64> = (0..AT.len())
-                .map(|i| SHARES[(i + k as usize) % 4])
-                .collect();
-            let (cfg, halos) = halo_part(geo, id, RASTER, SIZES[si], &shares, &AT);
+            let index: Vec<usize> = (0..AT.len()).map(|i| (i + k as usize) % 4).collect();
+            let at: Vec<f64> = index.iter().map(|&i| levels[i]).collect();
+            let (cfg, halos) = match strength {
+                Strength::Crossing => halo_part(geo, id, RASTER, SIZES[si], &at, &AT),
+                Strength::Beam => halo_part_of_beam_power(geo, id, RASTER, SIZES[si], &at, &AT)
+                    .unwrap_or_else(|e| panic!("{}: {e}", geo.name())),
+            };
             let scan = simulate(&cfg);
+            let halos = halos.into_iter().zip(index).collect();
             (si, halos, objects_of(&scorer, &scan, thr, emd_thr))
         })
         .collect();
     let mut res = Result {
-        found: vec![vec![vec![0; SHARES.len()]; SIZES.len()]; METHODS.len()],
+        found: vec![vec![vec![0; levels.len()]; SIZES.len()]; METHODS.len()],
         false_objects,
         stray: vec![0; METHODS.len()],
-        worst: vec![vec![f64::MAX; SHARES.len()]; SIZES.len()],
+        worst: vec![vec![f64::MAX; levels.len()]; SIZES.len()],
     };
     for (si, halos, (objs, scores)) in &runs {
-        for h in halos {
-            let ai = SHARES.iter().position(|&s| s == h.disc.share).unwrap();
+        for &(ref h, ai) in halos {
             let r = peak_ratios(scores, RASTER, around(h, RASTER, RASTER), thr);
             let best = r.iter().cloned().fold(0.0, f64::max);
             let w = &mut res.worst[*si][ai];
             *w = w.min(best);
         }
         for (m, o) in objs.iter().enumerate() {
-            for h in halos {
-                let ai = SHARES.iter().position(|&s| s == h.disc.share).unwrap();
+            for &(ref h, ai) in halos {
                 res.found[m][*si][ai] += usize::from(found(o, h));
             }
             res.stray[m] += o
                 .iter()
-                .filter(|o| !halos.iter().any(|h| near(o, h)))
+                .filter(|o| !halos.iter().any(|(h, _)| near(o, h)))
                 .count();
         }
     }
@@ -205,18 +236,29 @@ fn measure(geo: Geo) -> Result {
     res
 }
 
-fn table(geo: Geo, r: &Result) {
+/// The strengths as column heads, in percent.
+fn heads(strength: Strength) -> String {
+    let v: Vec<String> = strength
+        .levels()
+        .iter()
+        .map(|l| format!("{} %", l * 100.0))
+        .collect();
+    v.join(" | ")
+}
+
+fn table(geo: Geo, strength: Strength, r: &Result) {
     println!(
         "halos found of {DEFECT_PARTS} per cell, sizes 1 / 2 / 3 positions; false objects on {FREE_PARTS} unseen defect-free parts (parts with any); objects away from the halos on the {} halo parts\n",
         DEFECT_PARTS as usize * SIZES.len()
     );
     println!(
-        "| {} | 5 % | 10 % | 20 % | 30 % | false objects (parts) | stray |",
-        geo.name()
+        "| {} | {} | false objects (parts) | stray |",
+        geo.name(),
+        heads(strength)
     );
     println!("|---|---|---|---|---|---|---|");
     for (m, name) in METHODS.iter().enumerate() {
-        let cells: Vec<String> = (0..SHARES.len())
+        let cells: Vec<String> = (0..strength.levels().len())
             .map(|ai| {
                 let v: Vec<String> = (0..SIZES.len())
                     .map(|si| r.found[m][si][ai].to_string())
@@ -234,11 +276,11 @@ fn table(geo: Geo, r: &Result) {
     }
 }
 
-fn margins(geo: Geo, r: &Result) {
+fn margins(geo: Geo, strength: Strength, r: &Result) {
     println!(
         "\nall three channels, the weakest halo of {DEFECT_PARTS}: its strongest channel's peak over that channel's threshold\n"
     );
-    println!("| {} | 5 % | 10 % | 20 % | 30 % |", geo.name());
+    println!("| {} | {} |", geo.name(), heads(strength));
     println!("|---|---|---|---|---|");
     for (si, size) in SIZES.iter().enumerate() {
         let cells: Vec<String> = r.worst[si].iter().map(|w| format!("{w:.2}")).collect();
@@ -246,13 +288,19 @@ fn margins(geo: Geo, r: &Result) {
     }
 }
 
-/// Each method's curve moved sideways by up to one percentage point, so
-/// that curves that coincide stay visible.
-fn nudge(m: usize) -> f64 {
-    (m as f64 - (METHODS.len() - 1) as f64 / 2.0) * 0.4
+/// Each method's curve moved sideways by up to `reach` percentage points,
+/// so that curves that coincide stay visible.
+fn nudge(m: usize, reach: f64) -> f64 {
+    (m as f64 - (METHODS.len() - 1) as f64 / 2.0) * reach / ((METHODS.len() - 1) as f64 / 2.0)
 }
 
-fn plot(geo: Geo, r: &Result) {
+fn plot(geo: Geo, strength: Strength, r: &Result) {
+    let levels = strength.levels();
+    // Small beside the narrowest gap between two strengths (5 and 2.5 points).
+    let reach = match strength {
+        Strength::Crossing => 1.0,
+        Strength::Beam => 0.25,
+    };
     let charts: Vec<Chart> = SIZES
         .iter()
         .enumerate()
@@ -268,12 +316,12 @@ fn plot(geo: Geo, r: &Result) {
                 .map(|(m, name)| Series {
                     name: name.to_uppercase(),
                     colour: COLOURS[m],
-                    points: SHARES
+                    points: levels
                         .iter()
                         .enumerate()
                         .map(|(ai, &s)| {
                             (
-                                s * 100.0 + nudge(m),
+                                s * 100.0 + nudge(m, reach),
                                 r.found[m][si][ai] as f64 / DEFECT_PARTS as f64,
                             )
                         })
@@ -282,24 +330,32 @@ fn plot(geo: Geo, r: &Result) {
                 .collect(),
         })
         .collect();
-    let im = draw(
-        &charts,
-        (2.0, 33.0),
-        &[5.0, 10.0, 20.0, 30.0],
-        "SCATTERED SHARE %",
-    );
+    let ticks: Vec<f64> = levels.iter().map(|l| l * 100.0).collect();
+    let (range, label, file) = match strength {
+        Strength::Crossing => ((2.0, 33.0), "SCATTERED SHARE %", "halo_curves"),
+        Strength::Beam => ((3.0, 17.0), "SHARE OF THE BEAM POWER %", "halo_curves_beam"),
+    };
+    let im = draw(&charts, range, &ticks, label);
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../../docs/img")
-        .join(format!("halo_curves_{}.png", geo.name()));
+        .join(format!("{file}_{}.png", geo.name()));
     dmap::render::write_png(&path, &im).expect("write the plot");
     println!("\nwrote {}", path.display());
 }
 
 fn main() {
+    let strength = match std::env::args().nth(1).as_deref() {
+        None => Strength::Crossing,
+        Some("beam") => Strength::Beam,
+        Some(other) => {
+            eprintln!("curves: unknown argument {other:?} (none, or `beam`)");
+            std::process::exit(2);
+        }
+    };
     for geo in Geo::BOTH {
-        let r = measure(geo);
-        table(geo, &r);
-        margins(geo, &r);
-        plot(geo, &r);
+        let r = measure(geo, strength);
+        table(geo, strength, &r);
+        margins(geo, strength, &r);
+        plot(geo, strength, &r);
     }
 }
