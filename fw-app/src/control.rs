@@ -13,6 +13,7 @@
 //! `c` (a restart would bring the record's back); `save` writes every
 //! value, which makes them all `f`.
 
+use cvm_core::calibration::rule::{DEFAULT_TAIL_PPM, Rule};
 use cvm_core::command::{
     Calibration, Capacity, Key, LastScan, LinkError, Refusal, Reply, Request, Status, conflict,
     encode_reply, parse_request,
@@ -39,6 +40,9 @@ pub struct CalibrationRun {
     /// The request's id, which the result carries.
     pub id: u32,
     pub scans: u16,
+    /// The target of the tail rule that sets the thresholds, false
+    /// positions per million parts.
+    pub rate_ppm: u32,
     /// The scan driver has armed it (it starts with the next scan).
     pub armed: bool,
 }
@@ -144,6 +148,19 @@ impl Control {
         Some(run.scans)
     }
 
+    /// The rule that sets the thresholds of the calibration under way:
+    /// the tail rule with the request's target rate and the default tail
+    /// share (`Rule::DEFAULT` when none runs).
+    pub fn calibration_rule(&self) -> Rule {
+        match self.calibration {
+            Some(run) => Rule::Tail {
+                rate_ppm: run.rate_ppm,
+                tail_ppm: DEFAULT_TAIL_PPM,
+            },
+            None => Rule::DEFAULT,
+        }
+    }
+
     /// A received request line (without its `\n`): the reply goes to
     /// `sink`, what the board must do besides is returned.
     pub fn line(&mut self, line: &[u8], sink: &mut impl LineSink) -> Effect {
@@ -193,7 +210,7 @@ impl Control {
                 }
             }
             Request::Get(key) => self.value(id, key, sink),
-            Request::Set(..) | Request::Defaults | Request::Save | Request::Calibrate(_)
+            Request::Set(..) | Request::Defaults | Request::Save | Request::Calibrate { .. }
                 if busy =>
             {
                 self.refuse(Some(id), Refusal::Busy, sink);
@@ -224,13 +241,14 @@ impl Control {
                 self.change(s);
                 encode_reply(Some(id), &Reply::Defaults, sink);
             }
-            Request::Calibrate(n) => {
+            Request::Calibrate { scans, rate_ppm } => {
                 self.calibration = Some(CalibrationRun {
                     id,
-                    scans: n,
+                    scans,
+                    rate_ppm,
                     armed: false,
                 });
-                encode_reply(Some(id), &Reply::Calibrating(n), sink);
+                encode_reply(Some(id), &Reply::Calibrating(scans), sink);
             }
             Request::Save => {
                 self.saving = true;

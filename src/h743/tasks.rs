@@ -4,7 +4,7 @@
 use core::cell::RefCell;
 use core::sync::atomic::Ordering;
 
-use cvm_core::calibration::{Progress, Rule};
+use cvm_core::calibration::Progress;
 use cvm_core::command::Refusal;
 use cvm_core::protocol::{LineSink, MAX_LINE, Priority};
 use cvm_core::verdict::Ahead;
@@ -208,7 +208,7 @@ fn scan_ended(driver: &mut ScanDriver<'static, MAX_COLS>, control: &RefCell<Cont
         && let Progress::Done { .. } = cal.progress()
     {
         let mut replies = QueueSink(&REPLIES);
-        match cal.finish(&Rule::DEFAULT) {
+        match cal.finish(&c.calibration_rule()) {
             Ok(result) => c.calibrated(&result, &mut replies),
             Err(_) => c.calibration_failed(Refusal::NoResult, &mut replies),
         }

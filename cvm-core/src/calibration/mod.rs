@@ -117,20 +117,26 @@ pub struct Statistics {
     pub spread: Channel,
 }
 
-impl From<Statistics> for Calibration {
-    fn from(s: Statistics) -> Self {
+impl Statistics {
+    /// The result as the board reports it, the thresholds set by `rule`.
+    pub fn calibration(&self, rule: &Rule) -> Calibration {
         Calibration {
-            scans: s.scans,
-            positions: s.cvm.positions,
-            threshold: s.cvm.threshold,
-            power_threshold: s.power.threshold,
-            median: s.cvm.median,
-            mad: s.cvm.mad,
-            power_median: s.power.median,
-            power_mad: s.power.mad,
-            spread_threshold: s.spread.threshold,
-            spread_median: s.spread.median,
-            spread_mad: s.spread.mad,
+            scans: self.scans,
+            positions: self.cvm.positions,
+            threshold: self.cvm.threshold,
+            power_threshold: self.power.threshold,
+            median: self.cvm.median,
+            mad: self.cvm.mad,
+            power_median: self.power.median,
+            power_mad: self.power.mad,
+            spread_threshold: self.spread.threshold,
+            spread_median: self.spread.median,
+            spread_mad: self.spread.mad,
+            rate_ppm: match *rule {
+                // The rule takes 0 as 1.
+                Rule::Tail { rate_ppm, .. } => rate_ppm.max(1),
+                Rule::Spread { .. } => 0,
+            },
         }
     }
 }
@@ -276,7 +282,7 @@ impl Calibrator {
 
     /// The result as the board reports it (`calibrated` reply).
     pub fn finish(&self, rule: &Rule) -> Result<Calibration, CalibrationError> {
-        self.statistics(rule).map(Calibration::from)
+        self.statistics(rule).map(|s| s.calibration(rule))
     }
 
     /// Calibrates on the `scans` scans that begin next (0: stops

@@ -30,4 +30,6 @@ pub use refusal::Refusal;
 pub use reply::{Calibration, Reply, encode_reply, parse_reply};
 pub use request::{Request, encode_request, parse_request};
 pub use status::{LastScan, Status};
-pub use wire::{MAX_CALIBRATION_SCANS, MAX_LINE, REPLY, REQUEST, VERSION};
+pub use wire::{
+    MAX_CALIBRATION_RATE_PPM, MAX_CALIBRATION_SCANS, MAX_LINE, REPLY, REQUEST, VERSION,
+};

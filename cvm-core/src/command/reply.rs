@@ -6,6 +6,7 @@ use super::key::Key;
 use super::refusal::Refusal;
 use super::status::Status;
 use super::wire::{FrameError, REPLY, checked_body, kv, parse_u32, split_once};
+use crate::calibration::rule::DEFAULT_RATE_PPM;
 use crate::protocol::{LineBuf, LineSink, ParseError, Priority};
 use crate::settings::Source;
 
@@ -41,6 +42,10 @@ pub struct Calibration {
     /// The same of the spread magnitudes.
     pub spread_median: u32,
     pub spread_mad: u32,
+    /// The target the tail rule set the thresholds for, in false positions
+    /// per million parts (the `calibrate` request's, 1000 by default); 0
+    /// when another rule set them (only `dmap calibrate --rule spread`).
+    pub rate_ppm: u32,
 }
 
 /// A reply, decoded.
@@ -115,6 +120,7 @@ pub fn encode_reply(id: Option<u32>, r: &Reply, sink: &mut impl LineSink) {
             l.kv_u64(b"pmad", c.power_mad as u64);
             l.kv_u64(b"smed", c.spread_median as u64);
             l.kv_u64(b"smad", c.spread_mad as u64);
+            l.kv_u64(b"rate", c.rate_ppm as u64);
         }
         Reply::Saved => l.field(b"save"),
         Reply::Defaults => l.field(b"defaults"),
@@ -180,7 +186,7 @@ fn parse_ok<'s, I: Iterator<Item = &'s [u8]>>(f: &mut I) -> Result<Reply<'s>, Pa
                     .ok_or(ParseError::Format)
             };
             let scans = u16::try_from(field("scans")?).map_err(|_| ParseError::Format)?;
-            Reply::Calibrated(Calibration {
+            let mut c = Calibration {
                 scans,
                 positions: field("positions")?,
                 threshold: field("thr")?,
@@ -192,7 +198,15 @@ fn parse_ok<'s, I: Iterator<Item = &'s [u8]>>(f: &mut I) -> Result<Reply<'s>, Pa
                 power_mad: field("pmad")?,
                 spread_median: field("smed")?,
                 spread_mad: field("smad")?,
-            })
+                // A board that does not say calibrated for the default.
+                rate_ppm: DEFAULT_RATE_PPM,
+            };
+            if let Some(x) = f.next() {
+                c.rate_ppm = kv(x, b"rate")
+                    .and_then(parse_u32)
+                    .ok_or(ParseError::Format)?;
+            }
+            Reply::Calibrated(c)
         }
         kv_field => {
             let (key, value, source) = key_value_source(kv_field).ok_or(ParseError::Format)?;

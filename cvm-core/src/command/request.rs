@@ -3,8 +3,10 @@
 use super::key::{Capacity, Key};
 use super::refusal::Refusal;
 use super::wire::{
-    FrameError, MAX_CALIBRATION_SCANS, MAX_LINE, REQUEST, checked_body, parse_u32, split_once,
+    FrameError, MAX_CALIBRATION_RATE_PPM, MAX_CALIBRATION_SCANS, MAX_LINE, REQUEST, checked_body,
+    parse_u32, split_once,
 };
+use crate::calibration::rule::DEFAULT_RATE_PPM;
 use crate::protocol::{LineBuf, LineSink, Priority};
 
 /// A request, decoded.
@@ -17,8 +19,11 @@ pub enum Request {
     Get(Key),
     /// `set,<key>=<value>`, the value checked against the key's range.
     Set(Key, u32),
-    /// `calibrate,<n>`: the next n scans are of defect-free reference parts.
-    Calibrate(u16),
+    /// `calibrate,<n>[,<rate>]`: the next n scans are of defect-free
+    /// reference parts, and the thresholds are set for a target of `rate`
+    /// false positions per million parts (the tail rule's; 1000, one in
+    /// 1000 parts, when not given).
+    Calibrate { scans: u16, rate_ppm: u32 },
     /// `save`: the settings in effect go to flash.
     Save,
     /// `defaults`: back to the compiled values (not saved).
@@ -44,10 +49,16 @@ pub fn encode_request(id: u32, r: &Request, sink: &mut impl LineSink) {
             l.byte(b'=');
             k.encode(v, &mut l);
         }
-        Request::Calibrate(n) => {
+        Request::Calibrate { scans, rate_ppm } => {
             l.field(b"calibrate");
             l.byte(b',');
-            l.u64(n as u64);
+            l.u64(scans as u64);
+            // The default goes unsaid, so that a board that predates the
+            // argument takes the request.
+            if rate_ppm != DEFAULT_RATE_PPM {
+                l.byte(b',');
+                l.u64(rate_ppm as u64);
+            }
         }
         Request::Save => l.field(b"save"),
         Request::Defaults => l.field(b"defaults"),
@@ -84,6 +95,11 @@ pub fn parse_request(line: &[u8], cap: &Capacity) -> Result<(u32, Request), Refu
     let refuse = |r| (Some(id), r);
     let command = f.next().ok_or(refuse(Refusal::Malformed))?;
     let arg = f.next();
+    // Only `calibrate` takes a second argument.
+    let second = match command {
+        b"calibrate" => f.next(),
+        _ => None,
+    };
     if f.next().is_some() {
         return Err(refuse(Refusal::Malformed));
     }
@@ -111,20 +127,32 @@ pub fn parse_request(line: &[u8], cap: &Capacity) -> Result<(u32, Request), Refu
         }
         b"calibrate" => {
             let n = arg.ok_or(refuse(Refusal::Malformed))?;
-            if n.is_empty() || !n.iter().all(u8::is_ascii_digit) {
-                return Err(refuse(Refusal::WrongType));
-            }
-            let range = Refusal::OutOfRange {
-                min: 1,
-                max: MAX_CALIBRATION_SCANS as u32,
+            let scans = count(n, MAX_CALIBRATION_SCANS as u32).map_err(refuse)?;
+            let rate_ppm = match second {
+                None => DEFAULT_RATE_PPM,
+                Some(r) => count(r, MAX_CALIBRATION_RATE_PPM).map_err(refuse)?,
             };
-            match parse_u32(n).and_then(|n| u16::try_from(n).ok()) {
-                Some(n) if (1..=MAX_CALIBRATION_SCANS).contains(&n) => {
-                    Ok((id, Request::Calibrate(n)))
-                }
-                _ => Err(refuse(range)),
-            }
+            Ok((
+                id,
+                Request::Calibrate {
+                    // At most MAX_CALIBRATION_SCANS, a u16.
+                    scans: scans as u16,
+                    rate_ppm,
+                },
+            ))
         }
         _ => Err(refuse(Refusal::UnknownCommand)),
+    }
+}
+
+/// A decimal count in `1..=max`: digits only (`wrong-type` otherwise),
+/// and `range,1,<max>` outside it (or past 32 bits).
+fn count(s: &[u8], max: u32) -> Result<u32, Refusal> {
+    if s.is_empty() || !s.iter().all(u8::is_ascii_digit) {
+        return Err(Refusal::WrongType);
+    }
+    match parse_u32(s) {
+        Some(n) if (1..=max).contains(&n) => Ok(n),
+        _ => Err(Refusal::OutOfRange { min: 1, max }),
     }
 }

@@ -18,6 +18,9 @@ pub const REQUEST: u8 = b'C';
 pub const REPLY: u8 = b'A';
 /// Most scans one `calibrate` may take.
 pub const MAX_CALIBRATION_SCANS: u16 = 100;
+/// Largest target rate a `calibrate` may ask for, in false positions per
+/// million parts: one per part.
+pub const MAX_CALIBRATION_RATE_PPM: u32 = 1_000_000;
 
 /// Why a received line's frame is not accepted.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -6,8 +6,8 @@
 
 use cvm_core::command::{
     Calibration, Capacity, Event, Key, Kind, LastScan, LineReader, LinkError,
-    MAX_CALIBRATION_SCANS, MAX_LINE, Refusal, Reply, Request, Source, Status, Store, conflict,
-    encode_reply, encode_request, parse_reply, parse_request,
+    MAX_CALIBRATION_RATE_PPM, MAX_CALIBRATION_SCANS, MAX_LINE, Refusal, Reply, Request, Source,
+    Status, Store, conflict, encode_reply, encode_request, parse_reply, parse_request,
 };
 use cvm_core::protocol::{LineSink, MAX_FW, ParseError, Priority, ResetCause};
 use cvm_core::settings::{KEYS, RejectMode};
@@ -74,7 +74,7 @@ fn crc_reference_is_the_catalogued_one() {
 
 #[test]
 fn requests_are_written_as_specified() {
-    let cases: [(u32, Request, &str); 13] = [
+    let cases: [(u32, Request, &str); 15] = [
         (1, Request::Status, "C,1,status"),
         (2, Request::Set(Key::RejectMode, 1), "C,2,set,mode=row"),
         (3, Request::Set(Key::ReadyLevel, 0), "C,3,set,ready=low"),
@@ -88,7 +88,31 @@ fn requests_are_written_as_specified() {
             "C,4294967295,set,pthr=3277",
         ),
         (0, Request::Set(Key::Scores, 1), "C,0,set,scores=1"),
-        (9, Request::Calibrate(5), "C,9,calibrate,5"),
+        (
+            9,
+            Request::Calibrate {
+                scans: 5,
+                rate_ppm: 1000,
+            },
+            "C,9,calibrate,5",
+        ),
+        // One false position in 10 000 parts; the largest target.
+        (
+            13,
+            Request::Calibrate {
+                scans: 100,
+                rate_ppm: 100,
+            },
+            "C,13,calibrate,100,100",
+        ),
+        (
+            14,
+            Request::Calibrate {
+                scans: 1,
+                rate_ppm: 1_000_000,
+            },
+            "C,14,calibrate,1,1000000",
+        ),
         (10, Request::Save, "C,10,save"),
         (11, Request::Defaults, "C,11,defaults"),
         (12, Request::Reset, "C,12,reset"),
@@ -133,6 +157,7 @@ fn replies_are_written_as_specified() {
         spread_threshold: 6554,
         spread_median: 700,
         spread_mad: 90,
+        rate_ppm: 1000,
     };
     let cases: Vec<(Option<u32>, Reply, &str)> = vec![
         (
@@ -173,7 +198,16 @@ fn replies_are_written_as_specified() {
             Some(9),
             Reply::Calibrated(cal),
             "A,9,ok,calibrated,scans=5,positions=1500,thr=838861,pthr=3277,sthr=6554,med=1000,mad=120,pmed=500,pmad=60,\
-             smed=700,smad=90",
+             smed=700,smad=90,rate=1000",
+        ),
+        (
+            Some(9),
+            Reply::Calibrated(Calibration {
+                rate_ppm: 100,
+                ..cal
+            }),
+            "A,9,ok,calibrated,scans=5,positions=1500,thr=838861,pthr=3277,sthr=6554,med=1000,mad=120,pmed=500,pmad=60,\
+             smed=700,smad=90,rate=100",
         ),
         (Some(10), Reply::Saved, "A,10,ok,save"),
         (Some(11), Reply::Defaults, "A,11,ok,defaults"),
@@ -197,6 +231,27 @@ fn replies_are_written_as_specified() {
             String::from_utf8_lossy(&framed(body))
         );
         assert_eq!(parse_reply(&line), Ok((id, r)), "{body}");
+    }
+    // A board that predates the `rate` field calibrated for the default
+    // target; any other field in its place, or after it, is refused.
+    let before = "A,9,ok,calibrated,scans=5,positions=1500,thr=838861,pthr=3277,sthr=6554,med=1000,\
+                  mad=120,pmed=500,pmad=60,smed=700,smad=90";
+    assert_eq!(
+        parse_reply(&framed(before)),
+        Ok((Some(9), Reply::Calibrated(cal)))
+    );
+    for tail in [
+        ",rte=100",
+        ",rate=100,x=1",
+        ",rate=-1",
+        ",rate=",
+        ",rate=4294967296",
+    ] {
+        assert_eq!(
+            parse_reply(&framed(&format!("{before}{tail}"))),
+            Err(ParseError::Format),
+            "{tail}"
+        );
     }
 }
 
@@ -260,6 +315,14 @@ fn every_refusal_of_a_request() {
         ("C,5,calibrate,0", Some(5), range(1, 100)),
         ("C,5,calibrate,101", Some(5), range(1, 100)),
         ("C,5,calibrate,70000", Some(5), range(1, 100)),
+        ("C,5,calibrate,5,0", Some(5), range(1, 1_000_000)),
+        ("C,5,calibrate,5,1000001", Some(5), range(1, 1_000_000)),
+        ("C,5,calibrate,5,4294967296", Some(5), range(1, 1_000_000)),
+        ("C,5,calibrate,5,0.001", Some(5), Refusal::WrongType),
+        ("C,5,calibrate,5,", Some(5), Refusal::WrongType),
+        ("C,5,calibrate,5,100,1", Some(5), Refusal::Malformed),
+        ("C,5,calibrate,0,100", Some(5), range(1, 100)),
+        ("C,5,set,thr=5,6", Some(5), Refusal::Malformed),
         ("C,5", Some(5), Refusal::Malformed),
         ("C,5,status,now", Some(5), Refusal::Malformed),
         ("C,5,save,1", Some(5), Refusal::Malformed),
@@ -466,6 +529,7 @@ fn the_longest_status_fits_a_line() {
         spread_threshold: u32::MAX,
         spread_median: u32::MAX,
         spread_mad: u32::MAX,
+        rate_ppm: u32::MAX,
     };
     assert!(reply_line(Some(u32::MAX), &Reply::Calibrated(c)).len() <= MAX_LINE);
     // Every value reply: the longest key with the longest value.
@@ -574,7 +638,8 @@ fn valid_request() -> impl Strategy<Value = Request> {
                 lo + (v % (hi - lo).saturating_add(1).max(1)).min(hi - lo),
             )
         }),
-        (1..=MAX_CALIBRATION_SCANS).prop_map(Request::Calibrate),
+        (1..=MAX_CALIBRATION_SCANS, 1..=MAX_CALIBRATION_RATE_PPM)
+            .prop_map(|(scans, rate_ppm)| Request::Calibrate { scans, rate_ppm }),
         Just(Request::Save),
         Just(Request::Defaults),
         Just(Request::Reset),
@@ -644,7 +709,7 @@ proptest! {
         id in any::<u32>(),
         key in key(), v in any::<u32>(), src in source(),
         n in 1..=MAX_CALIBRATION_SCANS,
-        cal in prop::array::uniform10(any::<u32>()),
+        cal in prop::array::uniform11(any::<u32>()),
         why in refusal(),
         st in status("0.1.0-rc.1+g3af9"),
     ) {
@@ -654,6 +719,7 @@ proptest! {
             scans: n, positions: cal[0], threshold: cal[1], power_threshold: cal[2],
             median: cal[3], mad: cal[4], power_median: cal[5], power_mad: cal[6],
             spread_threshold: cal[7], spread_median: cal[8], spread_mad: cal[9],
+            rate_ppm: cal[10],
         };
         let replies = [
             Reply::Status(st),

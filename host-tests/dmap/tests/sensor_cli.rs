@@ -5,6 +5,7 @@
 //! as it opens a real serial port. Expected values come from the settings
 //! the fake board is built with here.
 
+use cvm_core::calibration::rule::Rule;
 use cvm_core::command::{Calibration, Capacity, Event, LineReader};
 use cvm_core::protocol::{LineSink, Priority, crc16};
 use cvm_core::settings::{KEYS, Settings, Store};
@@ -37,6 +38,7 @@ const CAL: Calibration = Calibration {
     spread_threshold: 9876,
     spread_median: 1500,
     spread_mad: 321,
+    rate_ppm: 1000,
 };
 
 fn compiled() -> Settings {
@@ -228,7 +230,12 @@ fn board(
         }
         if calibration_due.is_some_and(|t| Instant::now() >= t) {
             calibration_due = None;
-            control.calibrated(&CAL, &mut out);
+            // The request's target, as the board's rule would use it.
+            let rate_ppm = match control.calibration_rule() {
+                Rule::Tail { rate_ppm, .. } => rate_ppm,
+                Rule::Spread { .. } => 0,
+            };
+            control.calibrated(&Calibration { rate_ppm, ..CAL }, &mut out);
         }
         for l in &out.0 {
             result_line(&master);
@@ -406,6 +413,19 @@ fn bad_keys_and_values_are_refused_before_anything_is_sent() {
         (&["set", "mode=sideways"][..], "mode takes part or row"),
         (&["get", "threshold"][..], "unknown setting `threshold`"),
         (&["calibrate", "--scans", "0"][..], "--scans"),
+        (
+            &["calibrate", "--scans", "1", "--rate", "0"][..],
+            "--rate must be a multiple of 0.000001 in (0, 1] false positions per part, got 0",
+        ),
+        (&["calibrate", "--scans", "1", "--rate", "2"][..], "got 2"),
+        (
+            &["calibrate", "--scans", "1", "--rate", "0.0000005"][..],
+            "got 0.0000005",
+        ),
+        (
+            &["calibrate", "--scans", "1", "--rate", "often"][..],
+            "--rate",
+        ),
     ] {
         let out = fake.dmap(args);
         assert_eq!(out.status.code(), Some(2), "{args:?}");
@@ -496,7 +516,7 @@ fn calibrate_waits_for_the_result() {
     let s = ok(&out);
     assert_eq!(
         s,
-        "calibrated on 3 scans (2700 positions with data)\n\
+        "calibrated on 3 scans (2700 positions with data), for 0.001 false positions per part and channel\n\
          thr  =    5123456  magnitudes: median 1000000, MAD 123456\n\
          pthr =       4321  power magnitudes: median 800, MAD 99\n\
          sthr =       9876  spread magnitudes: median 1500, MAD 321\n\
@@ -529,6 +549,25 @@ fn calibrate_waits_for_the_result() {
         row(&t, "sthr"),
         ("9876".into(), "changed, not saved".into())
     );
+
+    // A target of one in 10 000 parts reaches the board and comes back.
+    let s = ok(&fake.dmap(&["calibrate", "--scans", "2", "--rate", "0.0001"]));
+    assert!(
+        s.starts_with(
+            "calibrated on 3 scans (2700 positions with data), for 0.0001 false positions per part and channel\n"
+        ),
+        "{s}"
+    );
+    let v: serde_json::Value = serde_json::from_str(&ok(&fake.dmap(&[
+        "--json",
+        "calibrate",
+        "--scans",
+        "1",
+        "--rate",
+        "0.5",
+    ])))
+    .unwrap();
+    assert_eq!(v["replies"][0]["rate_ppm"], 500_000, "{v}");
 
     // A result that takes longer than the scans may: the calibrate timeout.
     let out = fake.dmap(&["calibrate", "--scans", "3", "--scan-timeout", "0.01"]);

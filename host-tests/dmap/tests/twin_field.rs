@@ -176,7 +176,8 @@ fn a_changed_setting_takes_effect_when_the_next_scan_starts() {
 }
 
 #[test]
-fn calibrate_5_on_the_board_equals_dmap_calibrate_and_scores_the_next_part_with_it() {
+fn calibrate_5_for_a_target_rate_on_the_board_equals_dmap_calibrate_and_scores_the_next_part_with_it()
+ {
     let dir = tempfile::tempdir().unwrap();
     // A part scanning while the request arrives, five defect-free
     // references (seeds the rule never saw elsewhere), then a defective
@@ -187,7 +188,8 @@ fn calibrate_5_on_the_board_equals_dmap_calibrate_and_scores_the_next_part_with_
     let scan = dir.path().join("seven.npy");
     concat(&parts, &scan);
     let req = dir.path().join("req.txt");
-    write_requests(&req, &[(5, &framed("C,7,calibrate,5"))]).unwrap();
+    // For one false position in 10 000 parts, not the default 1 in 1000.
+    write_requests(&req, &[(5, &framed("C,7,calibrate,5,100"))]).unwrap();
     let out = dmap(
         &[
             &["twin", scan.to_str().unwrap()][..],
@@ -210,21 +212,36 @@ fn calibrate_5_on_the_board_equals_dmap_calibrate_and_scores_the_next_part_with_
     let (Some(7), Reply::Calibrated(board)) = decoded[1] else {
         panic!("{:?}", decoded[1])
     };
-    // `dmap calibrate` on the five references, with the same options.
-    let cal = dir.path().join("cal.json");
-    let refs: Vec<&str> = parts[1..6].iter().map(|p| p.to_str().unwrap()).collect();
-    dmap(
-        &[
-            &["calibrate"][..],
-            &refs,
-            &OPTS,
-            &["-o", cal.to_str().unwrap()],
-        ]
-        .concat(),
+    // `dmap calibrate` on the five references, with the same options and
+    // target.
+    let calibrate = |rate: &str, name: &str| {
+        let cal = dir.path().join(name);
+        let refs: Vec<&str> = parts[1..6].iter().map(|p| p.to_str().unwrap()).collect();
+        dmap(
+            &[
+                &["calibrate"][..],
+                &refs,
+                &OPTS,
+                &["--rate", rate, "-o", cal.to_str().unwrap()],
+            ]
+            .concat(),
+        );
+        let v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&cal).unwrap()).unwrap();
+        (cal, calibration_of_file(&v))
+    };
+    let (cal, host) = calibrate("0.0001", "cal.json");
+    assert_eq!(board, host);
+    assert_eq!(board.rate_ppm, 100);
+    // The target took effect: a rarer false position needs higher
+    // thresholds than the default's.
+    let (_, default) = calibrate("0.001", "default.json");
+    assert!(
+        board.threshold > default.threshold
+            && board.power_threshold > default.power_threshold
+            && board.spread_threshold > default.spread_threshold,
+        "{board:?} against {default:?}"
     );
-    let v: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&cal).unwrap()).unwrap();
-    assert_eq!(board, calibration_of_file(&v));
     assert_eq!(board.positions, (5 * ROWS * COLS) as u32);
     // The spread measured with the board's channel off (compiled), and
     // its threshold set: the next part decides with it, as `dmap stream

@@ -97,7 +97,10 @@ fn round_trip(u: &mut Unstructured) -> Result<()> {
         0 => Request::Status,
         1 => Request::Get(key),
         2 => Request::Set(key, u.int_in_range(lo..=hi)?),
-        3 => Request::Calibrate(u.int_in_range(1..=cvm_core::command::MAX_CALIBRATION_SCANS)?),
+        3 => Request::Calibrate {
+            scans: u.int_in_range(1..=cvm_core::command::MAX_CALIBRATION_SCANS)?,
+            rate_ppm: u.int_in_range(1..=cvm_core::command::MAX_CALIBRATION_RATE_PPM)?,
+        },
         4 => Request::Save,
         5 => Request::Defaults,
         _ => Request::Reset,

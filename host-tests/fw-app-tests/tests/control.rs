@@ -4,6 +4,7 @@
 //! scans. Replies are decoded with the core's reply parser and checked
 //! against values written here.
 
+use cvm_core::calibration::rule::{DEFAULT_TAIL_PPM, Rule};
 use cvm_core::command::{
     Capacity, Key, Refusal, Reply, Request, Source, Store, encode_request, parse_reply,
 };
@@ -226,8 +227,21 @@ fn a_loaded_record_is_used_unless_it_does_not_fit() {
 #[test]
 fn calibration_is_armed_once_then_sets_the_three_thresholds() {
     let mut c = control(Store::Empty, None);
-    let (r, _) = ask(&mut c, 9, Request::Calibrate(5));
+    assert_eq!(c.calibration_rule(), Rule::DEFAULT);
+    let calibrate = Request::Calibrate {
+        scans: 5,
+        rate_ppm: 100,
+    };
+    let (r, _) = ask(&mut c, 9, calibrate);
     assert_eq!(r, [Reply::Calibrating(5)]);
+    // The request's target, with the default tail share, until the end.
+    assert_eq!(
+        c.calibration_rule(),
+        Rule::Tail {
+            rate_ppm: 100,
+            tail_ppm: DEFAULT_TAIL_PPM
+        }
+    );
     assert_eq!(c.calibration_to_arm(), Some(5));
     assert_eq!(c.calibration_to_arm(), None);
     assert_eq!(
@@ -248,10 +262,12 @@ fn calibration_is_armed_once_then_sets_the_three_thresholds() {
         spread_threshold: 890,
         spread_median: 50,
         spread_mad: 6,
+        rate_ppm: 100,
     };
     let mut out = Lines::default();
     c.calibrated(&cal, &mut out);
     assert_eq!(replies(out, Some(9)), [Reply::Calibrated(cal)]);
+    assert_eq!(c.calibration_rule(), Rule::DEFAULT);
     let s = c.take_changed().unwrap();
     assert_eq!(
         (s.threshold, s.power_threshold, s.spread_threshold),

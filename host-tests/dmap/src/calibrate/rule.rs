@@ -73,6 +73,15 @@ fn exact_units(v: f64, den: u64) -> Option<u32> {
         .then_some(whole as u32)
 }
 
+/// A target rate of false positions per part in `(0, 1]` as the board
+/// takes it, in millionths, when it is an exact multiple of one.
+pub fn rate_ppm(rate: f64) -> Option<u32> {
+    if !(rate.is_finite() && rate > 0.0 && rate <= 1.0) {
+        return None;
+    }
+    exact_units(rate, P_DEN).filter(|&u| u > 0)
+}
+
 impl Rule {
     /// The rule of `o`: `--rule`, else the one whose parameters are given,
     /// else the board's; the other parameters at their defaults. Refuses a

@@ -189,7 +189,7 @@ impl<P: Read + Write> Session<'_, P> {
                         source,
                     }
                 }
-                Request::Calibrate(_) => self.calibrate(id, w, deadline, scan_timeout)?,
+                Request::Calibrate { .. } => self.calibrate(id, w, deadline, scan_timeout)?,
                 Request::Save | Request::Defaults | Request::Reset => {
                     let want = match ask.request {
                         Request::Save => Answer::Saved,

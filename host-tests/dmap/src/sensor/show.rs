@@ -39,6 +39,18 @@ pub enum Done {
     },
 }
 
+/// The target a calibration's thresholds were set for, in words (none
+/// for a rule without one, `rate_ppm` 0).
+pub fn target(rate_ppm: u32) -> String {
+    match rate_ppm {
+        0 => String::new(),
+        r => format!(
+            ", for {} false positions per part and channel",
+            f64::from(r) / 1e6
+        ),
+    }
+}
+
 /// A source in words.
 pub fn source_text(s: Source) -> &'static str {
     match s {
@@ -131,13 +143,14 @@ pub fn text(done: &[Done]) -> String {
                 source_text(*source)
             ),
             Done::Calibrated { c, .. } => format!(
-                "calibrated on {} scans ({} positions with data)\n\
+                "calibrated on {} scans ({} positions with data){}\n\
                  thr  = {:>10}  magnitudes: median {}, MAD {}\n\
                  pthr = {:>10}  power magnitudes: median {}, MAD {}\n\
                  sthr = {:>10}  spread magnitudes: median {}, MAD {}\n\
                  all three in effect from the next scan (changed, not saved: save keeps them)\n",
                 c.scans,
                 c.positions,
+                target(c.rate_ppm),
                 c.threshold,
                 c.median,
                 c.mad,
@@ -205,6 +218,7 @@ fn done_json(d: &Done) -> Value {
             "thr": c.threshold, "pthr": c.power_threshold, "med": c.median, "mad": c.mad,
             "pmed": c.power_median, "pmad": c.power_mad,
             "sthr": c.spread_threshold, "smed": c.spread_median, "smad": c.spread_mad,
+            "rate_ppm": c.rate_ppm,
         }),
         Done::Saved { id } => json!({"id": id, "reply": "save"}),
         Done::Defaults { id } => json!({"id": id, "reply": "defaults"}),

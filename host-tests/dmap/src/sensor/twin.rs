@@ -131,9 +131,10 @@ fn said(r: &Reply<'_>, compact: bool) -> String {
         ),
         Reply::Calibrating(n) => format!("calibrating on the next {n} scans"),
         Reply::Calibrated(c) => format!(
-            "calibrated on {} scans ({} positions): thr={} (median {}, MAD {}), pthr={} (median {}, MAD {}), sthr={} (median {}, MAD {})",
+            "calibrated on {} scans ({} positions){}: thr={} (median {}, MAD {}), pthr={} (median {}, MAD {}), sthr={} (median {}, MAD {})",
             c.scans,
             c.positions,
+            super::show::target(c.rate_ppm),
             c.threshold,
             c.median,
             c.mad,
@@ -204,7 +205,7 @@ mod tests {
             &specs(&[
                 "0:status",
                 "5:set thr=100 mode=row",
-                "5:calibrate --scans 3",
+                "5:calibrate --scans 3 --rate 0.0001",
             ]),
             10,
         )
@@ -217,7 +218,14 @@ mod tests {
                 (0, 1, Request::Status),
                 (5, 2, Request::Set(Key::Threshold, 100)),
                 (5, 3, Request::Set(Key::RejectMode, 1)),
-                (5, 4, Request::Calibrate(3)),
+                (
+                    5,
+                    4,
+                    Request::Calibrate {
+                        scans: 3,
+                        rate_ppm: 100
+                    }
+                ),
             ]
         );
         // Beam 5's three requests in one burst, in the order given.
@@ -229,7 +237,7 @@ mod tests {
         assert_eq!(lines.len(), 3);
         assert!(lines[0].starts_with("C,2,set,thr=100*"), "{text}");
         assert!(lines[1].starts_with("C,3,set,mode=row*"), "{text}");
-        assert!(lines[2].starts_with("C,4,calibrate,3*"), "{text}");
+        assert!(lines[2].starts_with("C,4,calibrate,3,100*"), "{text}");
 
         for (bad, why) in [
             ("10:status", "not a beam of this scan (0..10)"),
@@ -239,6 +247,7 @@ mod tests {
             ("0:frobnicate", "frobnicate"),
             ("0:calibrate --scans 101", "101"),
             ("0:calibrate --scans 2 --scan-timeout 5", "--scan-timeout"),
+            ("0:calibrate --scans 2 --rate 3", "--rate must be"),
         ] {
             let e = plan(&specs(&[bad]), 10).unwrap_err().to_string();
             assert!(

@@ -7,6 +7,7 @@
 
 use super::failure::Failure;
 use clap::Subcommand;
+use cvm_core::calibration::rule::DEFAULT_RATE_PPM;
 use cvm_core::command::{Capacity, Key, Kind, MAX_CALIBRATION_SCANS, Request};
 
 /// The widest capacity the `status` reply can carry (`cap=` and `dcap`
@@ -38,14 +39,21 @@ pub enum Action {
         #[arg(value_name = "KEY=VALUE", required = true)]
         pairs: Vec<String>,
     },
-    /// Calibrate both thresholds on the next N scans (defect-free reference
-    /// parts): waits for the board to accept, then for its result after the
-    /// N-th scan; the thresholds are in effect from the next scan, not saved
+    /// Calibrate the three thresholds on the next N scans (defect-free
+    /// reference parts): waits for the board to accept, then for its result
+    /// after the N-th scan; the thresholds are in effect from the next scan,
+    /// not saved
     Calibrate {
         /// Scans to calibrate on, 1..=100
         #[arg(long, value_name = "N",
               value_parser = clap::value_parser!(u16).range(1..=MAX_CALIBRATION_SCANS as i64))]
         scans: u16,
+        /// Target false positions per part, per channel, that the
+        /// thresholds are set for (the tail rule's, as `dmap calibrate
+        /// --rate`; default 0.001: one in 1000 parts; a multiple of
+        /// 0.000001 in (0, 1])
+        #[arg(long, value_name = "RATE")]
+        rate: Option<f64>,
         /// Wait at most SECS per scan for the result, after the board
         /// accepted (default 60: N scans of up to a minute each)
         #[arg(long, value_name = "SECS", value_parser = positive_secs)]
@@ -160,8 +168,26 @@ impl Action {
             Action::Status => one("status", Request::Status),
             Action::Get { key: name } => one(&format!("get {name}"), Request::Get(key(name)?)),
             Action::Set { pairs } => pairs.iter().map(|p| set(p)).collect(),
-            Action::Calibrate { scans, .. } => {
-                one(&format!("calibrate {scans}"), Request::Calibrate(*scans))
+            Action::Calibrate { scans, rate, .. } => {
+                let rate_ppm = match rate {
+                    None => DEFAULT_RATE_PPM,
+                    Some(r) => crate::calibrate::rule::rate_ppm(*r).ok_or_else(|| {
+                        Failure::usage(format!(
+                            "--rate must be a multiple of 0.000001 in (0, 1] false positions per part, got {r}"
+                        ))
+                    })?,
+                };
+                let words = match rate {
+                    None => format!("calibrate {scans}"),
+                    Some(r) => format!("calibrate {scans} at {r} per part"),
+                };
+                one(
+                    &words,
+                    Request::Calibrate {
+                        scans: *scans,
+                        rate_ppm,
+                    },
+                )
             }
             Action::Save => one("save", Request::Save),
             Action::Defaults => one("defaults", Request::Defaults),

@@ -138,6 +138,34 @@ fn requests() -> Vec<Value> {
         request("lower-case checksum digits", &lower_crc(25)),
         request("not a C line", &sealed("A,26,status")),
         request("256 bytes before the newline: too long", &sealed(&long)),
+        request(
+            "calibrate for a target of 1 false position in 10 000 parts",
+            &sealed("C,27,calibrate,10,100"),
+        ),
+        request(
+            "the default target said: written again without it",
+            &sealed("C,28,calibrate,10,1000"),
+        ),
+        request(
+            "a target of 0: range with its limits",
+            &sealed("C,29,calibrate,10,0"),
+        ),
+        request(
+            "a target above one per part: range",
+            &sealed("C,30,calibrate,10,1000001"),
+        ),
+        request(
+            "a target as a fraction: wrong type (millionths only)",
+            &sealed("C,31,calibrate,10,0.001"),
+        ),
+        request(
+            "a third calibrate argument",
+            &sealed("C,32,calibrate,10,100,5"),
+        ),
+        request(
+            "a second argument to another command",
+            &sealed("C,33,get,thr,pthr"),
+        ),
     ]
 }
 
@@ -170,6 +198,7 @@ fn replies() -> Vec<Value> {
         spread_threshold: 9830,
         spread_median: 1311,
         spread_mad: 655,
+        rate_ppm: 1000,
     };
     let value = Reply::Value {
         key: Key::Threshold,
@@ -207,6 +236,18 @@ fn replies() -> Vec<Value> {
         reply(
             "refused, no id: overrun",
             &line(None, &Reply::Refused(Refusal::Overrun)),
+        ),
+        reply(
+            "calibrated without its rate (a board before the field): the default",
+            &sealed(
+                "A,6,ok,calibrated,scans=10,positions=90000,thr=5033165,pthr=3277,sthr=9830,med=1200000,mad=300000,pmed=800,pmad=200,smed=1311,smad=655",
+            ),
+        ),
+        reply(
+            "calibrated with a field after the rate",
+            &sealed(
+                "A,6,ok,calibrated,scans=10,positions=90000,thr=5033165,pthr=3277,sthr=9830,med=1200000,mad=300000,pmed=800,pmad=200,smed=1311,smad=655,rate=100,x=1",
+            ),
         ),
         reply("ok with no id", &sealed("A,-,ok,save")),
         reply("an unknown reason", &sealed("A,1,err,sorry")),

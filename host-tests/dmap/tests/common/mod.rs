@@ -138,6 +138,8 @@ pub fn calibration_of_file(v: &serde_json::Value) -> cvm_core::command::Calibrat
         spread_threshold: thr("spread"),
         spread_median: int("spread", "median"),
         spread_mad: int("spread", "mad"),
+        // The tail rule's target; 0 for the spread rule, which has none.
+        rate_ppm: v["rule"]["rate_ppm"].as_u64().unwrap_or(0) as u32,
     }
 }
 
