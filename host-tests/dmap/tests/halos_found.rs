@@ -11,8 +11,10 @@
 //! centred up to half a pitch off the beams:
 //!
 //! - **by a beam's power**: three parts, one per disc size (1, 2, 3
-//!   positions), each with halos that take 10 %, 20 % and 30 % of the
-//!   power of the beam they take the most from. Every one must be found.
+//!   positions), each with halos that take 10 %, 15 % and 20 % of the
+//!   power of the beam they take the most from (a one-position disc half
+//!   a pitch off the beams can take no more than 18.5 %). Every one must
+//!   be found.
 //! - **the floor**: the one-position discs of the first of those parts
 //!   with 10 %, 20 % and 30 % of the light crossing them scattered, which
 //!   is less of any beam's power (a centred beam sends 59 % of its light
