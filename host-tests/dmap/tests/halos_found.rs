@@ -12,9 +12,11 @@
 //!
 //! - **by a beam's power**: three parts, one per disc size (1, 2, 3
 //!   positions), each with halos that take 10 %, 15 % and 20 % of the
-//!   power of the beam they take the most from (a one-position disc half
-//!   a pitch off the beams can take no more than 18.5 %). Every one must
-//!   be found.
+//!   power of the beam they take the most from (what a one-position disc
+//!   can take depends on where it lies: 59 % of a beam centred on it,
+//!   18.5 % half a pitch off in both directions; these discs allow 20 %,
+//!   and `halo_part_of_beam_power` refuses more than a disc can take).
+//!   Every one must be found.
 //! - **the floor**: the one-position discs of the first of those parts
 //!   with 10 %, 20 % and 30 % of the light crossing them scattered, which
 //!   is less of any beam's power (a centred beam sends 59 % of its light
