@@ -229,16 +229,20 @@ pub struct Outputs {
     pub pulse_us: u32,
     /// Row mode: the pulse starts this many rows after the closing row.
     pub row_delay: u32,
-    /// READY's asserted level is high. High is the fail-safe choice: a
-    /// broken wire or an unpowered board reads low, "not ready".
+    /// READY's asserted level is high: always, the fail-safe level (a
+    /// pin in reset, an unpowered board or a broken wire reads low at the
+    /// PLC's input, "not ready"). The command channel refuses the other.
     pub ready_high: bool,
-    /// REJECT's asserted level is high.
+    /// REJECT's asserted level is high: never, REJECT is active low for
+    /// the same reason (a floating line reads "reject").
     pub reject_high: bool,
 }
 
 impl Outputs {
     /// The defaults: every object and every lost position rejects the
-    /// part; REJECT held per part; both outputs active high.
+    /// part; REJECT held per part; READY active high and REJECT active
+    /// low, the levels at which a line that nothing drives reads "not
+    /// ready" and "reject".
     pub const DEFAULT: Outputs = Outputs {
         min_area: 0,
         min_strength: 0,
@@ -248,7 +252,7 @@ impl Outputs {
         pulse_us: 0,
         row_delay: 0,
         ready_high: true,
-        reject_high: true,
+        reject_high: false,
     };
 }
 

@@ -92,12 +92,23 @@ impl Control {
         let mut loaded = false;
         if let (Store::Loaded, Some(values)) = (store, record) {
             let mut s = next;
+            let mut sources = [Source::Flash; KEYS];
             let fits = Key::ALL.into_iter().zip(values).all(|(k, v)| {
                 let (lo, hi) = k.range(&cap);
-                v >= lo && v <= hi && k.set(&mut s, v)
+                if v >= lo && v <= hi && k.set(&mut s, v) {
+                    true
+                } else if matches!(k, Key::ReadyLevel | Key::RejectLevel) {
+                    // An output level of an earlier firmware that allowed
+                    // both: the fail-safe level stays, the record's other
+                    // values are kept.
+                    sources[k.index()] = Source::Default;
+                    true
+                } else {
+                    false
+                }
             });
             if fits && !conflict(&s) {
-                s.sources = [Source::Flash; KEYS];
+                s.sources = sources;
                 next = s;
                 loaded = true;
             } else {
@@ -257,6 +268,12 @@ impl Control {
                     *v = k.get(&self.next);
                 }
                 return Effect::Save { id, values };
+            }
+            Request::Reset if self.saving => {
+                // A reset now would cut the erase or program under way:
+                // the next start would find the store to repair, with
+                // READY down for the whole erase (docs/commands.md).
+                self.refuse(Some(id), Refusal::Busy, sink);
             }
             Request::Reset => {
                 encode_reply(Some(id), &Reply::Resetting, sink);

@@ -75,11 +75,17 @@ pub struct Words<F> {
     pub flash: F,
     /// Word reads that met a double ECC error and returned [`POISON`].
     pub poisoned: u32,
+    /// Sector erases done.
+    pub erased: u32,
 }
 
 impl<F: FlashWords> Words<F> {
     pub fn new(flash: F) -> Self {
-        Words { flash, poisoned: 0 }
+        Words {
+            flash,
+            poisoned: 0,
+            erased: 0,
+        }
     }
 
     fn check(&self, offset: u32, len: usize, align: usize) -> Result<(), Fault> {
@@ -138,6 +144,7 @@ impl<F: FlashWords> NorFlash for Words<F> {
         let mut at = from;
         while at < to {
             self.flash.erase(at).await?;
+            self.erased = self.erased.wrapping_add(1);
             at += F::SECTOR as u32;
         }
         Ok(())

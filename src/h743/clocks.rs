@@ -41,3 +41,21 @@ pub fn config() -> embassy_stm32::Config {
     config.rcc.voltage_scale = VoltageScale::Scale1;
     config
 }
+
+/// Sets a peripheral's clock enable in `reg` (an RCC `...ENR` register)
+/// and returns once the enable has taken effect. RM0433 (RCC, "peripheral
+/// clock enable") gives the enable two cycles of the peripheral's bus
+/// clock after the write reaches RCC, and RCC sits on AHB4 in D3 while the
+/// timers are on APB1 in D2: a register write issued right after the
+/// enable can reach a peripheral that is not clocked yet and be lost (a
+/// lost TIM14 prescaler makes a 500 µs REJECT pulse 2.5 µs). Reading the
+/// register back cannot complete before the write has landed, and the DSB
+/// keeps every later access behind that read.
+pub fn enable_clock<T: Copy>(
+    reg: embassy_stm32::pac::common::Reg<T, embassy_stm32::pac::common::RW>,
+    set: impl FnOnce(&mut T),
+) {
+    reg.modify(set);
+    let _ = reg.read();
+    cortex_m::asm::dsb();
+}

@@ -98,6 +98,12 @@ impl Ring {
         self.put(x);
     }
 
+    /// [`Ring::push`], and the entries held after it.
+    fn push_len(&mut self, x: Rx) -> usize {
+        self.push(x);
+        self.len
+    }
+
     fn put(&mut self, x: Rx) {
         if let Some(slot) = self.buf.get_mut((self.head + self.len) % RING) {
             *slot = pack(x);
@@ -125,45 +131,75 @@ pub fn take() -> Option<Rx> {
     RX.lock(|r| r.borrow_mut().pop())
 }
 
+/// Bytes USART3's receive FIFO holds (RM0433: RXFIFO of 16 bytes).
+const RX_FIFO: usize = 16;
+
 #[interrupt]
 fn USART3() {
     let u = pac::USART3;
     let mut wake = false;
-    RX.lock(|r| {
-        let mut r = r.borrow_mut();
-        loop {
-            let isr = u.isr().read();
-            if isr.ore() {
-                u.icr().write(|w| w.set_ore(true));
-                r.push(Rx::Overrun);
-                wake = true;
+    // The ring is locked per byte, not for the whole drain: DRDY and the
+    // reads' ends keep preempting this handler between bytes.
+    let push = |x: Rx| RX.lock(|r| r.borrow_mut().push_len(x));
+    loop {
+        if u.isr().read().ore() {
+            // (The marker wakes the command task, whatever the bytes.)
+            // ORE: a byte came while the FIFO was full and was lost. The
+            // FIFO's bytes arrived before it: they go first, then the
+            // marker, so the line they end is intact and the overrun
+            // damages the next one. Bytes that arrive during this drain
+            // come after the marker.
+            u.icr().write(|w| w.set_ore(true));
+            for _ in 0..RX_FIFO {
+                match receive(u) {
+                    Some((x, _)) => {
+                        push(x);
+                    }
+                    None => break,
+                }
             }
-            if !isr.rxne() {
-                break;
-            }
-            // The flags are the head byte's: read them before the byte.
-            let e = if isr.fe() {
-                Some(LinkError::Framing)
-            } else if isr.ne() || isr.pe() {
-                Some(LinkError::Noise)
-            } else {
-                None
-            };
-            if isr.fe() || isr.ne() || isr.pe() {
-                u.icr().write(|w| {
-                    w.set_fe(true);
-                    w.set_ne(true);
-                    w.set_pe(true);
-                });
-            }
-            let b = u.rdr().read().dr() as u8;
-            r.push(Rx::Byte(b, e));
-            wake |= b == b'\n' || e.is_some() || r.len >= RING / 2;
+            push(Rx::Overrun);
+            wake = true;
+            continue;
         }
-    });
+        match receive(u) {
+            Some((x, w)) => {
+                let len = push(x);
+                wake |= w || len >= RING / 2;
+            }
+            None => break,
+        }
+    }
     if wake {
         RX_READY.signal(());
     }
+}
+
+/// The byte at the head of the receive FIFO with its errors, and whether
+/// the command task should look now (a line end or an error); `None`
+/// when the FIFO is empty.
+fn receive(u: pac::usart::Usart) -> Option<(Rx, bool)> {
+    let isr = u.isr().read();
+    if !isr.rxne() {
+        return None;
+    }
+    // The flags are the head byte's: read them before the byte.
+    let e = if isr.fe() {
+        Some(LinkError::Framing)
+    } else if isr.ne() || isr.pe() {
+        Some(LinkError::Noise)
+    } else {
+        None
+    };
+    if e.is_some() {
+        u.icr().write(|w| {
+            w.set_fe(true);
+            w.set_ne(true);
+            w.set_pe(true);
+        });
+    }
+    let b = u.rdr().read().dr() as u8;
+    Some((Rx::Byte(b, e), b == b'\n' || e.is_some()))
 }
 
 /// Starts receiving on PD9 (USART3 RX, the ST-LINK's virtual COM port),

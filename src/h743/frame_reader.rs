@@ -39,6 +39,7 @@ use embassy_stm32::time::Hertz;
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 
+use super::clocks::enable_clock;
 use super::read_deadline::{self, ReadDeadline};
 use super::shared::{ACQ, BEAMS, CELLS, FRAMES};
 use crate::config::h743::{READ_TIMEOUT_US, SPI_DIV, SPI_HZ};
@@ -272,7 +273,7 @@ impl FrameReader {
     /// microseconds is a [`ReadError::Timeout`]; `cs` is the detector's
     /// chip select (high: idle).
     fn new(div: Mbr, timeout_us: u32, cs: Output<'static>) -> Self {
-        pac::RCC.ahb1enr().modify(|w| w.set_dma1en(true));
+        enable_clock(pac::RCC.ahb1enr(), |w| w.set_dma1en(true));
         configure(div);
         pac::DMAMUX1
             .ccr(STREAM)

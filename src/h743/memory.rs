@@ -71,7 +71,7 @@ pub fn load_dtcm_rodata() {
 /// SRAM1..3 (`.sram123`) can hold a row buffer; their clocks are off after
 /// reset, and an access while they are off faults.
 pub fn enable_sram123() {
-    embassy_stm32::pac::RCC.ahb2enr().modify(|w| {
+    super::clocks::enable_clock(embassy_stm32::pac::RCC.ahb2enr(), |w| {
         w.set_sram1en(true);
         w.set_sram2en(true);
         w.set_sram3en(true);

@@ -29,6 +29,7 @@ mod clocks;
 mod command_rx;
 mod commands;
 mod drdy;
+mod failsafe;
 mod flash_bank2;
 mod frame_reader;
 mod memory;
@@ -52,7 +53,7 @@ use defmt_rtt as _;
 use embassy_executor::Executor;
 use embassy_stm32::interrupt::InterruptExt;
 use embassy_stm32::mode::Async;
-use embassy_stm32::peripherals::{DMA1_CH2, PD8, USART3};
+use embassy_stm32::peripherals::{DMA1_CH2, IWDG1, PD8, USART3};
 use embassy_stm32::usart::{self, UartTx};
 use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{Peri, bind_interrupts, dma, interrupt};
@@ -88,6 +89,9 @@ static EXECUTOR: StaticCell<Executor> = StaticCell::new();
 
 #[entry]
 fn main() -> ! {
+    // READY and REJECT to "not ready" and "reject" before anything else
+    // (docs/firmware.md, "Fail-safe").
+    failsafe::at_reset();
     memory::load_dtcm_rodata();
     let mut core = cortex_m::Peripherals::take()
         .unwrap_or_else(|| defmt::panic!("core peripherals taken twice"));
@@ -102,6 +106,10 @@ fn main() -> ! {
     memory::enable_sram123();
     let pins = pins::take(p);
     log_start(cause, boots);
+    // The watchdog runs from here, through the store's start-up repair
+    // (a sector erase: up to 2 s), which feeds it.
+    let mut wdg = IndependentWatchdog::new(pins.iwdg, WATCHDOG_US);
+    wdg.unleash();
 
     frame_reader::install(pins.spi, pins.sck, pins.miso, pins.cs);
     let uart = uart(pins.uart, pins.uart_tx, pins.uart_tx_dma);
@@ -109,16 +117,23 @@ fn main() -> ! {
     // The settings record before the first scan: the scans and the
     // outputs start with the settings in effect.
     settings_store::open(pins.flash, pins.flash_dma);
-    let (store, record) = embassy_futures::block_on(settings_store::load());
+    let (store, record, cut) = block_on_fed(settings_store::load(), &mut wdg);
     let compiled = scoring::compiled_settings(cause, boots);
     let control = Control::new(compiled, CAPACITY, (J1, J2), store, record);
     let settings = *control.settings();
     info!("settings record: {}", store);
     let control: &'static RefCell<Control> = CONTROL.init(RefCell::new(control));
     let driver = scoring::scan_driver(settings);
-    let plc = outputs::PlcOutputs::new(pins.outputs, cause, &settings.outputs);
-    let mut wdg = IndependentWatchdog::new(pins.iwdg, WATCHDOG_US);
-    wdg.unleash();
+    // A power-on is a clean start only when the flash shows nothing cut
+    // short; otherwise the outputs start as after any other reset: not
+    // judged (the header still says `por`).
+    let start = if cut && cause == ResetCause::PowerOn {
+        ResetCause::Other
+    } else {
+        cause
+    };
+    let plc = outputs::PlcOutputs::new(pins.outputs, start, &settings.outputs);
+    wdg.pet();
     QUEUE.lock(|q| q.borrow_mut().set_reserve(KEEP_RESERVE));
     commands::REPLIES.lock(|q| q.borrow_mut().set_reserve(commands::REPLY_ROOM));
     drdy::enable(pins.drdy, pins.drdy_exti, pins.line_sync);
@@ -140,6 +155,22 @@ fn main() -> ! {
             _ => defmt::panic!("thread tasks already running"),
         }
     })
+}
+
+/// Runs `f` to its end before the executor starts, feeding the watchdog
+/// each time it waits (every flash wait of the store yields).
+fn block_on_fed<F: core::future::Future>(
+    f: F,
+    wdg: &mut IndependentWatchdog<'_, IWDG1>,
+) -> F::Output {
+    let mut f = core::pin::pin!(f);
+    let mut cx = core::task::Context::from_waker(core::task::Waker::noop());
+    loop {
+        if let core::task::Poll::Ready(v) = f.as_mut().poll(&mut cx) {
+            return v;
+        }
+        wdg.pet();
+    }
 }
 
 /// USART3 at `BAUD`, transmit only (the ST-LINK's virtual COM port).

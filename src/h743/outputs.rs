@@ -21,16 +21,10 @@ use embassy_stm32::pac::timer::vals::Urs;
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 
-use super::clocks::APB1_TIMER_HZ;
+use super::clocks::{APB1_TIMER_HZ, enable_clock};
+use super::failsafe::{READY_LED, READY_PIN, REJECT_LED, REJECT_PIN};
 use super::pins::OutputPins;
 use crate::config::h743::OUTPUTS;
-
-/// Port E pins: READY on PE14 (D4), REJECT on PE13 (D3).
-const READY_PIN: usize = 14;
-const REJECT_PIN: usize = 13;
-/// Port B: the green LED LD1 (PB0) mirrors READY, the red LD3 (PB14) REJECT.
-const READY_LED: usize = 0;
-const REJECT_LED: usize = 14;
 
 /// One TIM14 count per microsecond.
 const PRESCALER: u32 = APB1_TIMER_HZ / 1_000_000;
@@ -165,7 +159,7 @@ impl PlcOutputs {
         ));
         core::mem::forget(Output::new(pins.ready_led, lv(a.ready), Speed::Low));
         core::mem::forget(Output::new(pins.reject_led, lv(a.reject), Speed::Low));
-        pac::RCC.apb1lenr().modify(|w| w.set_tim14en(true));
+        enable_clock(pac::RCC.apb1lenr(), |w| w.set_tim14en(true));
         let t = pac::TIM14;
         t.cr1().write(|_| {});
         t.psc().write_value((PRESCALER - 1) as u16);

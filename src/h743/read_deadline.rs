@@ -15,7 +15,7 @@ use embassy_stm32::interrupt::InterruptExt;
 use embassy_stm32::pac;
 use embassy_stm32::pac::timer::vals::Urs;
 
-use super::clocks::APB1_TIMER_HZ;
+use super::clocks::{APB1_TIMER_HZ, enable_clock};
 
 /// One count per microsecond.
 const PRESCALER: u32 = APB1_TIMER_HZ / 1_000_000;
@@ -45,7 +45,7 @@ impl ReadDeadline {
     /// `timeout_us` is at least 1 and at most 65 536 (16-bit counter).
     /// The caller sets the interrupt's priority and enables it.
     pub fn new(timeout_us: u32) -> Self {
-        pac::RCC.apb1lenr().modify(|w| w.set_tim13en(true));
+        enable_clock(pac::RCC.apb1lenr(), |w| w.set_tim13en(true));
         let t = pac::TIM13;
         t.cr1().write(|_| {});
         t.psc().write_value((PRESCALER - 1) as u16);

@@ -1,9 +1,9 @@
 //! Why the chip started, how often since power-on, and what it does when
 //! the firmware panics.
 //!
-//! A panic logs its message over defmt and resets the chip at once
-//! (instead of waiting for the watchdog, or for ever before the watchdog
-//! runs). The next start reads the cause from RCC_RSR, logs it, clears the
+//! A panic logs its message over defmt, drives the outputs to their safe
+//! state and resets the chip at once (instead of waiting for the
+//! watchdog, or for ever before the watchdog runs). The next start reads the cause from RCC_RSR, logs it, clears the
 //! flags and counts the start; both go into every header line (`rst`,
 //! `boots`). A software reset is a panic or a debugger's reset request;
 //! a pin reset is the reset button or the ST-LINK.
@@ -56,9 +56,15 @@ pub fn take_cause() -> ResetCause {
     let rcc = pac::RCC;
     let rsr = rcc.rsr().read();
     // Internal resets also pull NRST, so PINRSTF comes with every cause:
-    // test it last.
-    let cause = if rsr.porrstf() || rsr.borrstf() {
+    // test it last. A power-on sets BORRSTF too (the supply rises through
+    // the BOR threshold); BORRSTF alone is a brown-out: the supply dipped
+    // while the board ran, perhaps in the middle of a part, so it is not
+    // a clean start (`other`, and the outputs start not judged).
+    let cause = if rsr.porrstf() {
         ResetCause::PowerOn
+    } else if rsr.borrstf() {
+        defmt::warn!("brown-out reset");
+        ResetCause::Other
     } else if rsr.iwdg1rstf() || rsr.wwdg1rstf() {
         ResetCause::Watchdog
     } else if rsr.sftrstf() {
@@ -80,11 +86,12 @@ pub fn freeze_watchdog_in_debug() {
 
 #[panic_handler]
 fn panic(info: &core::panic::PanicInfo) -> ! {
+    super::failsafe::drive();
     defmt::error!("panic: {}", defmt::Display2Format(info));
-    cortex_m::peripheral::SCB::sys_reset()
+    super::failsafe::stop()
 }
 
 #[defmt::panic_handler]
 fn defmt_panic() -> ! {
-    cortex_m::peripheral::SCB::sys_reset()
+    super::failsafe::stop()
 }

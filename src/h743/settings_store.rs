@@ -61,19 +61,23 @@ pub fn open(flash: Peri<'static, FLASH>, dma: Peri<'static, DMA1_CH7>) {
 /// The record read at start-up: [`Store::Loaded`] and its values when it
 /// is one of this build (`main` checks the values against the capacity);
 /// a few flash reads, or one sector erase when a power cut interrupted
-/// one.
-pub async fn load() -> (Store, Option<[u32; KEYS]>) {
+/// one. The flag says that the flash shows a save cut short (a word with
+/// an ECC error, or a sector the load had to erase again): the power went
+/// while the board was running, so its start is not a clean one.
+pub async fn load() -> (Store, Option<[u32; KEYS]>, bool) {
     let mut guard = STORE.lock().await;
     let Some(store) = guard.as_mut() else {
-        return (Store::Unreadable, None);
+        return (Store::Unreadable, None, false);
     };
     let (state, values) = store.load(&TAG).await;
+    let words = store.flash();
     info!(
-        "settings flash: {} ({} unreadable flash words)",
+        "settings flash: {} ({} unreadable flash words, {} sectors erased)",
         state.word(),
-        store.flash().poisoned
+        words.poisoned,
+        words.erased
     );
-    (state, values)
+    (state, values, words.poisoned > 0 || words.erased > 0)
 }
 
 /// Writes `values` as this build's record, from an async task: every

@@ -59,9 +59,11 @@ pub enum Key {
     Pulse,
     /// Row mode: rows between the closing row and the pulse.
     RowDelay,
-    /// READY's asserted level: `high` or `low`.
+    /// READY's asserted level: `high` only (fail-safe: a line left
+    /// floating, reset or unpowered reads low, "not ready").
     ReadyLevel,
-    /// REJECT's asserted level: `high` or `low`.
+    /// REJECT's asserted level: `low` only (fail-safe: a line left
+    /// floating, reset or unpowered reads low, "reject").
     RejectLevel,
 }
 
@@ -146,6 +148,9 @@ impl Key {
             Key::Rows => (1, cap.max_rows as u32),
             Key::DefectCap => (0, cap.max_dcap as u32),
             Key::Pulse => (0, cap.max_pulse_us),
+            // The fail-safe levels only (docs/firmware.md, "Fail-safe").
+            Key::ReadyLevel => (1, 1),
+            Key::RejectLevel => (0, 0),
             _ => match self.kind() {
                 Kind::Number => (0, u32::MAX),
                 Kind::Flag | Kind::Choice(_) => (0, 1),
@@ -184,13 +189,18 @@ impl Key {
     /// choice's words) is the wrong type, and a number outside
     /// [`Key::range`] (or beyond 32 bits) is out of range.
     pub fn parse_value(self, s: &[u8], cap: &Capacity) -> Result<u32, Refusal> {
+        let (min, max) = self.range(cap);
         if self.kind() != Kind::Number {
-            return self.decode(s).ok_or(Refusal::WrongType);
+            let v = self.decode(s).ok_or(Refusal::WrongType)?;
+            return if v >= min && v <= max {
+                Ok(v)
+            } else {
+                Err(Refusal::OutOfRange { min, max })
+            };
         }
         if s.is_empty() || !s.iter().all(u8::is_ascii_digit) {
             return Err(Refusal::WrongType);
         }
-        let (min, max) = self.range(cap);
         match parse_u32(s) {
             Some(v) if v >= min && v <= max => Ok(v),
             _ => Err(Refusal::OutOfRange { min, max }),
@@ -248,8 +258,8 @@ impl Key {
             }
             Key::Pulse => o.pulse_us = v,
             Key::RowDelay => o.row_delay = v,
-            Key::ReadyLevel if v <= 1 => o.ready_high = v == 1,
-            Key::RejectLevel if v <= 1 => o.reject_high = v == 1,
+            Key::ReadyLevel if v == 1 => o.ready_high = true,
+            Key::RejectLevel if v == 0 => o.reject_high = false,
             Key::Cols
             | Key::Rows
             | Key::Scores

@@ -77,8 +77,8 @@ fn requests_are_written_as_specified() {
     let cases: [(u32, Request, &str); 15] = [
         (1, Request::Status, "C,1,status"),
         (2, Request::Set(Key::RejectMode, 1), "C,2,set,mode=row"),
-        (3, Request::Set(Key::ReadyLevel, 0), "C,3,set,ready=low"),
-        (4, Request::Set(Key::RejectLevel, 1), "C,4,set,reject=high"),
+        (3, Request::Set(Key::ReadyLevel, 1), "C,3,set,ready=high"),
+        (4, Request::Set(Key::RejectLevel, 0), "C,4,set,reject=low"),
         (5, Request::Set(Key::MinArea, 12), "C,5,set,area=12"),
         (42, Request::Get(Key::Threshold), "C,42,get,thr"),
         (7, Request::Get(Key::Rows), "C,7,get,rows"),
@@ -188,10 +188,10 @@ fn replies_are_written_as_specified() {
             Some(44),
             Reply::Value {
                 key: Key::ReadyLevel,
-                value: 0,
+                value: 1,
                 source: Source::Default,
             },
-            "A,44,ok,ready=low:d",
+            "A,44,ok,ready=high:d",
         ),
         (Some(9), Reply::Calibrating(5), "A,9,ok,calibrate,5"),
         (
@@ -301,6 +301,9 @@ fn every_refusal_of_a_request() {
         ("C,5,set,mode=1", Some(5), Refusal::WrongType),
         ("C,5,set,ready=HIGH", Some(5), Refusal::WrongType),
         ("C,5,set,reject=", Some(5), Refusal::WrongType),
+        // Only the fail-safe levels (docs/firmware.md, "Fail-safe").
+        ("C,5,set,ready=low", Some(5), range(1, 1)),
+        ("C,5,set,reject=high", Some(5), range(0, 0)),
         ("C,5,set,pulse=65537", Some(5), range(0, 65536)),
         ("C,5,set,area=4294967296", Some(5), range(0, u32::MAX)),
         ("C,5,set,cols=0", Some(5), range(1, 300)),
@@ -408,7 +411,7 @@ fn keys_read_and_write_the_settings_value() {
     let mut s = Settings::new(300, 200, 4194304, 3277, "t");
     // Each key reads its own field: a distinct value in each, checked
     // against the field, not against the key's own code.
-    let values: [u32; KEYS] = [9, 8, 7, 6, 12, 1, 16, 5, 4, 3, 2, 1, 1000, 11, 0, 0];
+    let values: [u32; KEYS] = [9, 8, 7, 6, 12, 1, 16, 5, 4, 3, 2, 1, 1000, 11, 1, 0];
     for (k, v) in Key::ALL.into_iter().zip(values) {
         assert!(k.set(&mut s, v), "{}", k.name());
     }
@@ -425,7 +428,7 @@ fn keys_read_and_write_the_settings_value() {
     );
     assert_eq!(o.reject_mode, RejectMode::Row);
     assert_eq!((o.pulse_us, o.row_delay), (1000, 11));
-    assert!(!o.ready_high && !o.reject_high);
+    assert!(o.ready_high && !o.reject_high);
     for (k, v) in Key::ALL.into_iter().zip(values) {
         assert_eq!(k.get(&s), v, "{}", k.name());
     }
@@ -437,6 +440,9 @@ fn keys_read_and_write_the_settings_value() {
     assert!(!Key::Rows.set(&mut s, 0));
     assert!(!Key::RejectMode.set(&mut s, 2));
     assert!(!Key::ReadyLevel.set(&mut s, 2));
+    // Only the fail-safe levels: READY active high, REJECT active low.
+    assert!(!Key::ReadyLevel.set(&mut s, 0));
+    assert!(!Key::RejectLevel.set(&mut s, 1));
     assert_eq!(s, before);
 
     let names: Vec<_> = Key::ALL.iter().map(|k| k.name()).collect();

@@ -325,11 +325,15 @@ fn every_action_round_trips_and_sources_follow() {
     assert_eq!(row(&t, "scores").0, "0");
     assert_eq!(row(&t, "mode").0, "part");
 
-    let s = ok(&fake.dmap(&["set", "thr=100", "scores=1", "ready=low"]));
+    let s = ok(&fake.dmap(&["set", "thr=100", "scores=1", "area=3"]));
     assert_eq!(
         s,
-        "thr = 100 (changed, not saved)\nscores = 1 (changed, not saved)\nready = low (changed, not saved)\n"
+        "thr = 100 (changed, not saved)\nscores = 1 (changed, not saved)\narea = 3 (changed, not saved)\n"
     );
+    // The outputs' levels are the fail-safe ones only: refused before
+    // anything is sent.
+    let out = fake.dmap(&["set", "ready=low"]);
+    assert!(!out.status.success());
     // The spread threshold: any 32-bit value, like pthr; a sign or a word
     // is refused before anything is sent.
     let s = ok(&fake.dmap(&["set", "sthr=6554"]));
@@ -349,7 +353,7 @@ fn every_action_round_trips_and_sources_follow() {
     let t = table(&s);
     assert!(t.iter().all(|r| r.2 == "flash"), "{s}");
     assert_eq!(row(&t, "thr").0, "100");
-    assert_eq!(row(&t, "ready").0, "low");
+    assert_eq!(row(&t, "area").0, "3");
     assert_eq!(
         ok(&fake.dmap(&["defaults"])),
         "compiled values in effect from the next scan (not saved)\n"
@@ -360,10 +364,7 @@ fn every_action_round_trips_and_sources_follow() {
         row(&t, "thr"),
         (THR.to_string(), "changed, not saved".into())
     );
-    assert_eq!(
-        row(&t, "ready"),
-        ("high".into(), "changed, not saved".into())
-    );
+    assert_eq!(row(&t, "area"), ("0".into(), "changed, not saved".into()));
 }
 
 #[test]

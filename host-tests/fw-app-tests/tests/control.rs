@@ -99,7 +99,7 @@ fn status_lists_every_setting_with_its_source() {
         0,
         0,
         1,
-        1,
+        0,
     ];
     for ((k, v), got) in Key::ALL.into_iter().zip(want).zip(&r[1..]) {
         assert_eq!(*got, value(k, v, Source::Default), "{}", k.name());
@@ -169,6 +169,9 @@ fn save_makes_every_value_flash_and_defaults_brings_the_compiled_ones_back() {
         ask(&mut c, 3, Request::Save).0,
         [Reply::Refused(Refusal::Busy)]
     );
+    // So is a reset: it would cut the erase or program under way.
+    let (r, e) = ask(&mut c, 3, Request::Reset);
+    assert_eq!((r, e), (vec![Reply::Refused(Refusal::Busy)], Effect::None));
     let mut out = Lines::default();
     c.saved(2, true, &mut out);
     assert_eq!(replies(out, Some(2)), [Reply::Saved]);
@@ -188,7 +191,7 @@ fn save_makes_every_value_flash_and_defaults_brings_the_compiled_ones_back() {
 
 #[test]
 fn a_loaded_record_is_used_unless_it_does_not_fit() {
-    let mut values = [300, 50, 7, 8, 9, 1, 2, 3, 4, 5, 6, 1, 100, 2, 0, 1];
+    let mut values = [300, 50, 7, 8, 9, 1, 2, 3, 4, 5, 6, 1, 100, 2, 1, 0];
     let c = control(Store::Loaded, Some(values));
     let s = c.settings();
     assert_eq!(
@@ -205,7 +208,27 @@ fn a_loaded_record_is_used_unless_it_does_not_fit() {
     assert!(s.sources.iter().all(|&x| x == Source::Flash));
     assert_eq!(s.store, Store::Loaded);
     assert_eq!(s.outputs.pulse_us, 100);
-    assert!(!s.outputs.ready_high);
+    assert!(s.outputs.ready_high && !s.outputs.reject_high);
+
+    // A record of an earlier firmware with the levels that are no longer
+    // allowed: its other values load, the levels stay fail-safe, `d`.
+    let mut old = values;
+    old[Key::ReadyLevel.index()] = 0;
+    old[Key::RejectLevel.index()] = 1;
+    let c = control(Store::Loaded, Some(old));
+    let s = c.settings();
+    assert_eq!(s.store, Store::Loaded);
+    assert_eq!((s.cols, s.threshold, s.outputs.pulse_us), (300, 7, 100));
+    assert!(s.outputs.ready_high && !s.outputs.reject_high);
+    for k in Key::ALL {
+        let level = matches!(k, Key::ReadyLevel | Key::RejectLevel);
+        let want = if level {
+            Source::Default
+        } else {
+            Source::Flash
+        };
+        assert_eq!(s.sources[k.index()], want, "{}", k.name());
+    }
 
     values[Key::Cols.index()] = 301; // beyond this build's capacity
     let c = control(Store::Loaded, Some(values));

@@ -215,11 +215,11 @@ mod tests {
     #[test]
     fn values_are_read_as_the_board_reads_them() {
         assert_eq!(
-            asks(set(&["thr=100", "mode=row", "ready=low", "scores=1"])),
+            asks(set(&["thr=100", "mode=row", "ready=high", "scores=1"])),
             Ok(vec![
                 Request::Set(Key::Threshold, 100),
                 Request::Set(Key::RejectMode, 1),
-                Request::Set(Key::ReadyLevel, 0),
+                Request::Set(Key::ReadyLevel, 1),
                 Request::Set(Key::Scores, 1),
             ])
         );
