@@ -95,7 +95,8 @@ fi
 # of the committed tree with one workspace at its root: members cvm-core,
 # fw-app and the host crates, with the host workspace's settings and lock
 # file. The crates' relative paths are unchanged, so every path dependency
-# and every test that reads a file of the repository (docs/protocol.md)
+# and every test that reads a file of the repository (docs/protocol.md,
+# README.md)
 # resolves inside the copy. cargo-mutants mutates the stage in place (see
 # below), never the working tree.
 commit=$(git rev-parse --verify "$rev^{commit}")

@@ -164,8 +164,8 @@ impl Store {
 }
 
 /// Where a runtime setting's value came from, as the command channel's
-/// `status`, `get` and `set` replies report it (docs/protocol.md, "Command
-/// channel").
+/// `status`, `get` and `set` replies report it (docs/commands.md,
+/// "Settings").
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Source {

@@ -1,4 +1,4 @@
-//! The command channel's logic (docs/protocol.md, "Command channel"),
+//! The command channel's logic (docs/commands.md),
 //! board-independent: what each request does to the settings the next
 //! scan will use, what it answers, and what it asks the board to do
 //! (write flash, calibrate, restart). The board feeds it request lines

@@ -5,7 +5,7 @@
 //! noise, parity) belong to the byte at the head of its FIFO, and only a
 //! handler that reads the flags before each byte can keep them with the
 //! byte, which is what lets a damaged line be refused with its reason
-//! (docs/protocol.md, "Refusals"). At 921 600 baud a byte comes every
+//! (docs/commands.md, "Refusals"). At 921 600 baud a byte comes every
 //! 10.9 µs; the handler costs about 60 instructions a byte and runs below
 //! DRDY and the reads' ends, which preempt it.
 

@@ -68,7 +68,7 @@ use commands::{command_task, store_task};
 use shared::QUEUE;
 use tasks::{score_task, uart_task};
 
-/// What the command channel may set (docs/protocol.md, "Settings"):
+/// What the command channel may set (docs/commands.md, "Settings"):
 /// columns up to the row buffers' size, defect lines up to what the
 /// queue's reserve is sized for, pulses up to TIM14's 16-bit count.
 const CAPACITY: Capacity = Capacity {

@@ -1,4 +1,4 @@
-//! The command channel (docs/protocol.md, "Command channel"): requests a
+//! The command channel (docs/commands.md): requests a
 //! host sends to the board on the serial link, and the replies the board
 //! sends back between its result lines. Lines are framed and checksummed
 //! like the result lines (`<type>,<fields>*XXXX\n`, the same CRC-16, at

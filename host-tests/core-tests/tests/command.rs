@@ -1,5 +1,5 @@
-//! The command channel's codec (cvm_core::command, docs/protocol.md
-//! "Command channel"): hand-written lines checked byte for byte (their CRC
+//! The command channel's codec (cvm_core::command, docs/commands.md):
+//! hand-written lines checked byte for byte (their CRC
 //! from a bit-by-bit CRC-16 written here, not the crate's table), round
 //! trips of every request and reply, every refusal, the line length bound,
 //! the line reader, and arbitrary bytes.

@@ -131,8 +131,8 @@ fn header_round_trip() {
     }
 }
 
-/// A position as the engine can score it (docs/protocol.md, the `S`
-/// line's rules): without data nothing else; with data a power magnitude
+/// A position as the engine can score it (docs/protocol.md, "A position's
+/// rules" of the `S` line): without data nothing else; with data a power magnitude
 /// of at most 46340, a spread magnitude of at most 92680, not both DARK
 /// and SATURATED, CLIPPED (and then a
 /// distance defect) exactly at the top magnitude, a defect's strength at

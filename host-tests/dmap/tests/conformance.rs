@@ -1,5 +1,5 @@
 //! The line protocol's conformance vectors (docs/protocol/vectors,
-//! described in docs/protocol.md, "Conformance vectors"): they are exactly
+//! described in docs/dmap.md, "Conformance vectors"): they are exactly
 //! what the encoder and decoder make now (a change to either that the
 //! vectors do not carry fails here: write them again with `dmap vectors`),
 //! `dmap listen --json` decodes every stream into its expected document

@@ -433,7 +433,8 @@ fn row_lines(
     lines(&sink.0)
 }
 
-/// The byte counts quoted in docs/protocol.md ("Bandwidth"): measured on a
+/// The byte counts quoted in docs/performance.md ("Line protocol
+/// bandwidth"): measured on a
 /// 300-column scan of 15x15 maps, on lines of chosen values, and on lines
 /// with the widest value the encoder can write in every field.
 #[test]

@@ -1,5 +1,5 @@
 //! The command channel's logic (`cvm_fw_app::control`): each request's
-//! reply and effect, the sources of docs/protocol.md, refusals that
+//! reply and effect, the sources of docs/commands.md, refusals that
 //! change nothing, and settings reaching the scan driver only between
 //! scans. Replies are decoded with the core's reply parser and checked
 //! against values written here.

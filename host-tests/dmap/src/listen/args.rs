@@ -45,7 +45,7 @@ pub struct ListenArgs {
     pub max_scans: u32,
     /// Print the summary as one JSON document instead of text: {"objects", "totals"} of
     /// the last (or only) scan, "problems" of the whole stream, and "scans" (every scan's
-    /// header, objects, defect lines, totals and problems); see docs/protocol.md
+    /// header, objects, defect lines, totals and problems); see docs/dmap.md
     #[arg(long)]
     pub json: bool,
 }

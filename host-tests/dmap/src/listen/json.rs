@@ -1,5 +1,5 @@
 //! The JSON report of a decoded stream (`dmap listen --json`, described in
-//! docs/protocol.md).
+//! docs/dmap.md, "--json").
 
 use super::decoder::Decoder;
 use super::scan::{LineError, ObjectSize, ScanResult, channel_names, mm, q8, strength_ratio};

@@ -10,7 +10,7 @@ use cvm_core::flags;
 use cvm_core::protocol::{self, EndInfo};
 
 /// `floor(2^16 · v / t)`, saturating; a threshold of 0 gives the largest
-/// strength (docs/protocol.md, "Strength").
+/// strength (docs/protocol.md, "Values", Strength).
 fn ratio(v: u32, t: u32) -> u32 {
     if t == 0 {
         return u32::MAX;

@@ -18,7 +18,7 @@ pub struct LineError {
 
 /// What kind of damage a [`LineError`] is: a stable name for machines
 /// (`dmap listen --json`'s `"kind"`, the conformance vectors), beside the
-/// sentence for people. docs/protocol.md lists them.
+/// sentence for people. docs/dmap.md ("Kinds of damage") lists them.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Kind {
     /// No `*XXXX` trailer.

@@ -1,5 +1,5 @@
-//! `dmap sensor`: a client of the board's command channel (docs/protocol.md,
-//! "Command channel") on its serial port. One action a run: its requests
+//! `dmap sensor`: a client of the board's command channel (docs/commands.md;
+//! docs/dmap.md, "dmap sensor") on its serial port. One action a run: its requests
 //! go out one at a time, each with its own id (the first random unless
 //! `--id`, then counting up), and each waits for its reply among the result
 //! lines the board keeps sending. `words` turns the action into checked

@@ -265,7 +265,7 @@ fn replies() -> Vec<Value> {
 /// The command channel's vectors, one JSON document.
 pub fn document() -> Value {
     json!({
-        "about": "Command channel lines (docs/protocol.md, Command channel): requests as the board decodes them under the capacity below (accepted: the request written again canonically; refused: the reply the board sends), replies as a host decodes them (accepted: written again canonically; error: why not)",
+        "about": "Command channel lines (docs/commands.md): requests as the board decodes them under the capacity below (accepted: the request written again canonically; refused: the reply the board sends), replies as a host decodes them (accepted: written again canonically; error: why not)",
         "capacity": {"cols": CAP.max_cols, "rows": CAP.max_rows, "dcap": CAP.max_dcap, "pulse_us": CAP.max_pulse_us},
         "requests": requests(),
         "replies": replies(),

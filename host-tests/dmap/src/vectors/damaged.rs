@@ -1,6 +1,6 @@
 //! The damaged streams among the conformance vectors: each a whole stream
 //! of [`super::good`] with one deliberate change, for every kind of damage
-//! docs/protocol.md names (a line the CRC rejects, one cut or too long,
+//! docs/dmap.md names (a line the CRC rejects, one cut or too long,
 //! a field out of its range, lines out of order, repeated or lost, and
 //! lines whose valid CRC covers content that other lines contradict).
 

@@ -1,5 +1,5 @@
 //! `dmap vectors`: the line protocol's conformance vectors
-//! (docs/protocol.md, "Conformance vectors"). Each vector is a stream of
+//! (docs/dmap.md, "Conformance vectors"). Each vector is a stream of
 //! result lines, whole or deliberately damaged, made from synthetic scans
 //! by the firmware's own pipeline (`scenes`, `good`, `damaged`), and the
 //! decode `dmap listen --json` makes of it; and the command channel's
