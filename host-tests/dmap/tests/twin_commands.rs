@@ -135,7 +135,8 @@ fn run(scan: &Path, opts: &[&str], beam_us: &str, bursts: &[Burst], want: &[Want
 fn flood(n: u32, every: u64, thr: u32) -> (Vec<Burst>, Vec<Want>) {
     let defaults = |k: Key| match k {
         Key::Threshold => thr,
-        Key::ReadyLevel | Key::RejectLevel => 1,
+        Key::ReadyLevel => 1,
+        Key::RejectLevel => 0,
         _ => 0,
     };
     let (mut bursts, mut want) = (Vec::new(), Vec::new());

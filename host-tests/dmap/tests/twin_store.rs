@@ -92,7 +92,8 @@ fn values(thr: f64, pthr: f64, scores: bool, dcap: u16) -> Values {
         | Key::RejectMode
         | Key::Pulse
         | Key::RowDelay => 0,
-        Key::ReadyLevel | Key::RejectLevel => 1,
+        Key::ReadyLevel => 1,
+        Key::RejectLevel => 0,
     })
 }
 

@@ -22,7 +22,8 @@ fn values(n: u32) -> Values {
         Key::Threshold => 1_000_000 + n,
         Key::PowerThreshold => 9831,
         Key::SpreadThreshold => 6554,
-        Key::Scores | Key::ReadyLevel | Key::RejectLevel => 1,
+        Key::Scores | Key::ReadyLevel => 1,
+        Key::RejectLevel => 0,
         Key::DefectCap => 4,
         Key::MinArea
         | Key::MinPeak

@@ -367,7 +367,22 @@ def _stats(self):
                   "read_end_us": round(r[0] * 1e6 / CLOCK_HZ, 3) if r[0] >= 0 else -1,
                   "read_beam": r[1]}
                  for t, name, level, beam, r in self.pin_edges]
+    s["lines"] = uart_lines(self.uart)
     return s
+
+
+def uart_lines(uart):
+    """The header and end lines sent on USART3, each with the time of
+    its last byte (µs): what a test lines the pins' timeline up with."""
+    out, start = [], 0
+    for i, (b, t) in enumerate(uart):
+        if b != 0x0A:
+            continue
+        line = bytes(x for x, _ in uart[start:i])
+        start = i + 1
+        if line[:2] in (b"H,", b"E,"):
+            out.append({"us": round(t * 1e6 / CLOCK_HZ, 3), "line": line.decode("ascii", "replace")})
+    return out
 
 
 Machine.stats = _stats

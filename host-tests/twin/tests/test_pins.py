@@ -54,3 +54,15 @@ class Pins(unittest.TestCase):
 
 if __name__ == "__main__":
     unittest.main()
+
+
+class UartLines(unittest.TestCase):
+    def test_header_and_end_lines_with_their_last_bytes_time(self):
+        from h743twin.machine import CLOCK_HZ, uart_lines
+        # One byte every 4 000 cycles (10 µs at 400 MHz): the header's
+        # '\n' is byte 5 (50 µs), the end line's byte 26 (260 µs); the
+        # row line between them is left out.
+        sent = b"H,a*1\nR,x\nE,verdict=good*2\n"
+        uart = [(b, i * CLOCK_HZ // 100_000) for i, b in enumerate(sent)]
+        self.assertEqual(uart_lines(uart), [{"us": 50.0, "line": "H,a*1"},
+                                            {"us": 260.0, "line": "E,verdict=good*2"}])

@@ -1,0 +1,594 @@
+//! The fail-safe matrix (docs/firmware.md, "Fail-safe"): the H743
+//! release firmware, unmodified, on the chip model, through every event
+//! that can leave a part unjudged — power-on, the reset pin, a brown-out,
+//! the watchdog, a panic, a HardFault, the `reset` command, a detector
+//! fault mid-scan, a power cut during a save, a `reset` sent during a
+//! save — in part mode and in row mode (set at boot over the command
+//! channel, as a user deploys it).
+//!
+//! The PLC's inputs read low when nothing drives them (docs/firmware.md,
+//! "Wiring"), so a pin the model records as Hi-Z (`"z"`) reads low. From
+//! each event to the end line of the first clean scan after it, READY
+//! must never read "ready" (high), and must come back with that end line;
+//! in part mode REJECT must read "reject" (low) from the event until the
+//! next scan begins, since the part on the line at the event was never
+//! judged. Needs what tests/twin.rs needs.
+
+mod common;
+
+use common::counters;
+use cvm_core::command::{Key, Request, encode_request};
+use cvm_reference::Geometry;
+use dmap::npy::write_scan_u16;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+const J: usize = 3;
+const ROWS: usize = 3;
+const COLS: usize = 9;
+const BEAMS: usize = ROWS * COLS;
+/// The model's first beam, after reset (`--start-ms`).
+const START_US: f64 = 20_000.0;
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Mode {
+    Part,
+    Row,
+}
+
+/// What the PLC reads on one input: a driven level, or Hi-Z, which its
+/// pull-down reads low.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Level {
+    Low,
+    High,
+    Z,
+}
+
+impl Level {
+    fn reads_high(self) -> bool {
+        self == Level::High
+    }
+}
+
+/// The pins' timeline and the UART lines' times of one run.
+struct Run {
+    /// (µs, pin, level), in time order.
+    pins: Vec<(f64, String, Level)>,
+    /// (µs, line), every `H` and `E` line with the time of its last byte.
+    lines: Vec<(f64, String)>,
+    /// Times of the chip's resets, µs.
+    resets: Vec<f64>,
+    counters: serde_json::Value,
+    stdout: String,
+}
+
+impl Run {
+    fn from(stdout: &[u8], c: serde_json::Value) -> Run {
+        let pins = c["pins"]
+            .as_array()
+            .expect("pins in the counters")
+            .iter()
+            .map(|e| {
+                let level = match &e["level"] {
+                    serde_json::Value::String(s) if s == "z" => Level::Z,
+                    v if v.as_u64() == Some(1) => Level::High,
+                    v if v.as_u64() == Some(0) => Level::Low,
+                    v => panic!("pin level {v}"),
+                };
+                (
+                    e["us"].as_f64().unwrap(),
+                    e["pin"].as_str().unwrap().to_string(),
+                    level,
+                )
+            })
+            .collect();
+        let lines = c["lines"]
+            .as_array()
+            .expect("lines in the counters")
+            .iter()
+            .map(|e| {
+                (
+                    e["us"].as_f64().unwrap(),
+                    e["line"].as_str().unwrap().to_string(),
+                )
+            })
+            .collect();
+        let resets = c["resets"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|r| r["ms"].as_f64().unwrap() * 1e3)
+            .collect();
+        Run {
+            pins,
+            lines,
+            resets,
+            counters: c,
+            stdout: String::from_utf8_lossy(stdout).into_owned(),
+        }
+    }
+
+    /// What `pin` reads at time `t` (µs): its last recorded level at or
+    /// before `t`; Hi-Z before any (every pin is Hi-Z out of reset).
+    fn level(&self, pin: &str, t: f64) -> Level {
+        self.pins
+            .iter()
+            .filter(|e| e.1 == pin && e.0 <= t)
+            .last()
+            .map_or(Level::Z, |e| e.2)
+    }
+
+    /// The times in `(from, to)` at which `pin` reads high: its level just
+    /// after `from`, and every edge to high inside.
+    fn high_within(&self, pin: &str, from: f64, to: f64) -> Vec<f64> {
+        let mut at: Vec<f64> = self
+            .pins
+            .iter()
+            .filter(|e| e.1 == pin && e.0 > from && e.0 < to && e.2.reads_high())
+            .map(|e| e.0)
+            .collect();
+        if self.level(pin, from).reads_high() {
+            at.insert(0, from);
+        }
+        at
+    }
+
+    /// The first end line after `t` whose verdict is not a fault: its time.
+    fn first_clean_end(&self, t: f64) -> Option<f64> {
+        self.lines
+            .iter()
+            .find(|(u, l)| *u > t && l.starts_with("E,") && !l.contains("verdict=fault"))
+            .map(|l| l.0)
+    }
+
+    /// The first header after `t`: the next scan has begun.
+    fn first_header(&self, t: f64) -> Option<f64> {
+        self.lines
+            .iter()
+            .find(|(u, l)| *u > t && l.starts_with("H,"))
+            .map(|l| l.0)
+    }
+}
+
+/// Defect-free maps: a flat field with a little noise.
+fn flat_samples(beams: usize, seed: u64) -> Vec<u16> {
+    let mut state = seed;
+    (0..beams * J * J)
+        .map(|_| {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            600 + (state >> 33) as u16 % 8
+        })
+        .collect()
+}
+
+/// `parts` good parts back to back, in the chip model's scan format.
+fn parts_file(dir: &Path, parts: usize) -> PathBuf {
+    let data = flat_samples(parts * BEAMS, 11);
+    // Each part alone is good on the host.
+    let one = dir.join("part.npy");
+    write_scan_u16(
+        &one,
+        ROWS,
+        COLS,
+        Geometry::new(J, J).unwrap(),
+        &data[..BEAMS * J * J],
+    )
+    .unwrap();
+    let host = common::dmap_ok(&["stream", one.to_str().unwrap(), "--scores"]);
+    assert!(String::from_utf8_lossy(&host.stdout).contains("verdict=good"));
+    let mut file = b"CVMTWIN1".to_vec();
+    for v in [parts * ROWS, COLS, J, J] {
+        file.extend_from_slice(&(v as u32).to_le_bytes());
+    }
+    for v in &data {
+        file.extend_from_slice(&v.to_le_bytes());
+    }
+    let path = dir.join("parts.twin");
+    std::fs::write(&path, file).unwrap();
+    path
+}
+
+/// The release firmware for one part of ROWS x COLS beams of JxJ maps;
+/// everything else is set at run time. `FAILSAFE_ELF` runs the matrix on
+/// another build of the same configuration instead (an earlier firmware,
+/// to see which rows it fails: CHANGELOG).
+fn elf() -> PathBuf {
+    if let Some(p) = std::env::var_os("FAILSAFE_ELF") {
+        return PathBuf::from(p);
+    }
+    dmap::twin::build_elf(&format!(
+        "j1={J} j2={J} cols={COLS} rows={ROWS} scores=true fw={}",
+        cvm_core::VERSION
+    ))
+    .unwrap()
+}
+
+/// A request line as `dmap sensor` frames it, in hex for `--requests`.
+fn hex_request(id: u32, r: &Request) -> String {
+    struct Bytes(Vec<u8>);
+    impl cvm_core::protocol::LineSink for Bytes {
+        fn line(&mut self, l: &[u8], _: cvm_core::protocol::Priority) {
+            self.0.extend_from_slice(l);
+        }
+    }
+    let mut b = Bytes(Vec::new());
+    encode_request(id, r, &mut b);
+    b.0.iter().map(|x| format!("{x:02x}")).collect()
+}
+
+/// One run of the chip model: `parts` good parts at `beam_us`, `requests`
+/// (beam, request), `faults`, and `--flash`/`--power-cut` when given. Row
+/// mode is set and saved at beam 0 (200 µs pulses), as a user deploys
+/// it, so that it outlives the resets (in a flash file of its own when
+/// none is given).
+fn run(
+    mode: Mode,
+    parts: usize,
+    beam_us: f64,
+    faults: &[String],
+    requests: &[(usize, Request)],
+    flash: Option<(&Path, Option<u32>)>,
+) -> Run {
+    let dir = tempfile::tempdir().unwrap();
+    let scan = parts_file(dir.path(), parts);
+    let mut reqs = String::new();
+    let mut id = 1;
+    let mut all: Vec<(usize, Request)> = Vec::new();
+    let own_flash = dir.path().join("bank2.bin");
+    let flash = match (mode, flash) {
+        (Mode::Row, None) => Some((own_flash.as_path(), None)),
+        (_, f) => f,
+    };
+    if mode == Mode::Row {
+        all.push((0, Request::Set(Key::Pulse, 200)));
+        all.push((0, Request::Set(Key::RejectMode, 1)));
+        all.push((0, Request::Save));
+    }
+    all.extend(requests.iter().cloned());
+    for (beam, r) in &all {
+        reqs.push_str(&format!("{beam} {}\n", hex_request(id, r)));
+        id += 1;
+    }
+    let req_file = dir.path().join("requests.txt");
+    std::fs::write(&req_file, reqs).unwrap();
+    let twin = Path::new(env!("CARGO_MANIFEST_DIR")).join("../twin");
+    let mut cmd = Command::new("python3");
+    cmd.args(["-m", "h743twin"])
+        .arg(elf())
+        .arg("--scan")
+        .arg(&scan)
+        .args(["--beam-us", &beam_us.to_string()])
+        .args(["--scans", "1", "--settle-ms", "5"])
+        .arg("--requests")
+        .arg(&req_file)
+        .env("PYTHONPATH", &twin);
+    for f in faults {
+        cmd.args(["--fault", f]);
+    }
+    if let Some((f, cut)) = flash {
+        cmd.arg("--flash").arg(f);
+        if let Some(n) = cut {
+            cmd.args(["--power-cut", &n.to_string()]);
+        }
+    }
+    let out = cmd.output().expect("running the chip model");
+    let c = counters(&out);
+    assert_eq!(c["fault"], serde_json::Value::Null, "{c}");
+    assert_eq!(c["clock_enable_drops"].as_array().map(Vec::len), Some(0));
+    Run::from(&out.stdout, c)
+}
+
+/// The DRDY time of beam `b`, µs.
+fn beam_us(b: usize, period: f64) -> f64 {
+    START_US + b as f64 * period
+}
+
+/// The matrix's assertions for an event at `t` (µs) in `run`, with a
+/// beam period `period`: READY never reads ready from `t + slack` to the
+/// first clean end line after it, and reads ready at that line; in part
+/// mode REJECT reads "reject" from `t + slack` until the next scan's
+/// header. `slack`: the time the firmware may take to react (0 for a
+/// reset, which takes the pins to Hi-Z at once). Returns the times (µs)
+/// of READY's return and REJECT's release, for the table.
+fn judged_safe(r: &Run, what: &str, mode: Mode, t: f64, slack: f64, period: f64) -> (f64, f64) {
+    let t0 = t + slack;
+    let clean = r
+        .first_clean_end(t0)
+        .unwrap_or_else(|| panic!("{what}: no clean scan after the event:\n{}", r.stdout));
+    // The pins move ahead of the line that carries the verdict (within
+    // one beam period of its frame's read).
+    let high = r.high_within("READY", t0, clean - 2.0 * period);
+    assert!(
+        high.is_empty(),
+        "{what}: READY reads ready at {high:?} µs, before the first clean scan after the event at {t:.1} µs (its end line at {clean:.1} µs)"
+    );
+    assert!(
+        r.level("READY", clean).reads_high(),
+        "{what}: READY is not back with the first clean scan (end line at {clean:.1} µs)"
+    );
+    let back = r
+        .pins
+        .iter()
+        .find(|e| e.1 == "READY" && e.0 > t0 && e.2.reads_high())
+        .map_or(f64::NAN, |e| e.0);
+    let mut released = f64::NAN;
+    if mode == Mode::Part {
+        let next = r
+            .first_header(t0)
+            .unwrap_or_else(|| panic!("{what}: no scan after the event"));
+        let pass = r.high_within("REJECT", t0, next - 2.0 * period);
+        assert!(
+            pass.is_empty(),
+            "{what}: REJECT reads \"pass\" at {pass:?} µs for the part on the line at the event ({t:.1} µs), before the next scan ({next:.1} µs)"
+        );
+        released = r
+            .pins
+            .iter()
+            .find(|e| e.1 == "REJECT" && e.0 > t0 && e.2.reads_high())
+            .map_or(f64::NAN, |e| e.0);
+    }
+    (back, released)
+}
+
+/// The beam of the event: in the middle of the third part, so that two
+/// clean parts came before it (row mode is in effect from the second).
+const AT: usize = 2 * BEAMS + 13;
+
+fn both_modes(f: impl Fn(Mode)) {
+    f(Mode::Part);
+    f(Mode::Row);
+}
+
+/// A reset event injected by the model at beam AT: the pins go Hi-Z with
+/// the reset and READY waits for a clean scan.
+fn reset_event(fault: &str, rst: &str) {
+    both_modes(|mode| {
+        let period = 1000.0;
+        let r = run(mode, 10, period, &[format!("{fault}@{AT}")], &[], None);
+        let what = format!("{fault} ({mode:?} mode)");
+        assert_eq!(r.resets.len(), 1, "{what}: {}", r.counters);
+        let t = r.resets[0];
+        assert!(
+            r.stdout.contains(&format!(",rst={rst},")),
+            "{what}: {}",
+            r.stdout
+        );
+        let (back, released) = judged_safe(&r, &what, mode, t, 0.0, period);
+        println!("{what}: event {t:.1} µs, READY back {back:.1} µs, REJECT released {released:.1} µs");
+    });
+}
+
+#[test]
+fn power_on_drives_not_ready_and_reject_until_the_firmware_runs() {
+    both_modes(|mode| {
+        let r = run(mode, 4, 1000.0, &[], &[], None);
+        // Hi-Z out of reset, then driven low ("not ready", "reject") first
+        // thing, then the power-on's levels: READY up, REJECT released.
+        for pin in ["READY", "REJECT"] {
+            let e: Vec<Level> = r
+                .pins
+                .iter()
+                .filter(|e| e.1 == pin)
+                .map(|e| e.2)
+                .collect();
+            assert_eq!(e.first(), Some(&Level::Z), "{pin}: {e:?}");
+            assert_eq!(e.get(1), Some(&Level::Low), "{pin}: {e:?}");
+            assert_eq!(e.get(2), Some(&Level::High), "{pin}: {e:?}");
+        }
+        let low = |pin: &str| {
+            r.pins
+                .iter()
+                .find(|e| e.1 == pin && e.2 == Level::Low)
+                .unwrap()
+                .0
+        };
+        // Within microseconds of reset, before clocks and embassy's init.
+        assert!(low("READY") < 50.0 && low("REJECT") < 50.0, "{:?}", r.pins);
+        assert!(!r.stdout.contains("verdict=fault"), "{}", r.stdout);
+    });
+}
+
+#[test]
+fn pin_reset_is_judged_safe() {
+    reset_event("pin-reset", "pin");
+}
+
+#[test]
+fn brown_out_is_judged_safe() {
+    reset_event("bor", "other");
+}
+
+#[test]
+fn hardfault_drives_the_safe_state_and_resets() {
+    both_modes(|mode| {
+        let period = 1000.0;
+        let r = run(mode, 10, period, &[format!("hardfault@{AT}")], &[], None);
+        let what = format!("HardFault ({mode:?} mode)");
+        assert_eq!(r.resets.len(), 1, "{what}: {}", r.counters);
+        let t = beam_us(AT, period);
+        // The handler drives the pins at once, then resets.
+        assert!(r.resets[0] - t < 50.0, "{what}: reset at {} µs", r.resets[0]);
+        assert!(r.stdout.contains(",rst=sw,"), "{what}: {}", r.stdout);
+        judged_safe(&r, &what, mode, t, 5.0, period);
+    });
+}
+
+#[test]
+fn panic_drives_the_safe_state_and_resets() {
+    both_modes(|mode| {
+        let period = 1000.0;
+        let r = run(mode, 10, period, &[format!("panic@{AT}")], &[], None);
+        let what = format!("panic ({mode:?} mode)");
+        assert_eq!(r.resets.len(), 1, "{what}: {}", r.counters);
+        let t = beam_us(AT, period);
+        assert!(r.stdout.contains(",rst=sw,"), "{what}: {}", r.stdout);
+        judged_safe(&r, &what, mode, t, 50.0, period);
+    });
+}
+
+#[test]
+fn watchdog_reset_is_judged_safe() {
+    // The watchdog (1 s) resets a wedged firmware: beams 8 ms apart.
+    both_modes(|mode| {
+        let period = 8000.0;
+        let r = run(mode, 12, period, &[format!("wedge@{AT}")], &[], None);
+        let what = format!("watchdog ({mode:?} mode)");
+        assert_eq!(r.resets.len(), 1, "{what}: {}", r.counters);
+        assert!(r.stdout.contains(",rst=wdg,"), "{what}: {}", r.stdout);
+        judged_safe(&r, &what, mode, r.resets[0], 0.0, period);
+    });
+}
+
+#[test]
+fn reset_command_is_judged_safe() {
+    both_modes(|mode| {
+        let period = 1000.0;
+        let r = run(mode, 10, period, &[], &[(AT, Request::Reset)], None);
+        let what = format!("reset command ({mode:?} mode)");
+        assert_eq!(r.resets.len(), 1, "{what}: {}", r.counters);
+        assert!(r.stdout.contains(",rst=sw,"), "{what}: {}", r.stdout);
+        judged_safe(&r, &what, mode, r.resets[0], 0.0, period);
+    });
+}
+
+#[test]
+fn detector_fault_mid_scan_is_judged_safe() {
+    both_modes(|mode| {
+        let period = 1000.0;
+        let r = run(mode, 6, period, &[format!("dma-stall@{AT}")], &[], None);
+        let what = format!("detector fault ({mode:?} mode)");
+        assert!(r.resets.is_empty(), "{what}");
+        // READY drops within the faulty scan (after the read's deadline);
+        // its end line says fault and, in part mode, REJECT holds until
+        // the next scan begins.
+        let end = r
+            .lines
+            .iter()
+            .find(|(_, l)| l.starts_with("E,") && l.contains("verdict=fault"))
+            .unwrap_or_else(|| panic!("{what}: no faulty scan:\n{}", r.stdout))
+            .0;
+        assert!(!r.level("READY", end).reads_high(), "{what}");
+        judged_safe(&r, &what, mode, end, 0.0, period);
+    });
+}
+
+/// A bank whose first page is full of records (of another build: the
+/// scan's firmware ignores them, `store=foreign`), so that the next save
+/// erases a sector.
+fn full_page_bank(path: &Path) {
+    use cvm_fw_app::settings_store::{VALUES, Values};
+    use cvm_fw_app_tests::bank::{self, Bank, SECTOR};
+    let tag = cvm_core::record::Tag::new(&cvm_core::Config::paper(
+        cvm_core::Geometry::new(15, 15).unwrap(),
+    ));
+    let b = Bank::erased();
+    let item = cvm_fw_app::flash_words::WORD
+        + cvm_core::record::encoded_len(VALUES).next_multiple_of(cvm_fw_app::flash_words::WORD);
+    let per_page = (SECTOR - 2 * cvm_fw_app::flash_words::WORD) / item;
+    let mut v: Values = [0; VALUES];
+    for n in 0..per_page {
+        v[Key::Threshold.index()] = 1000 + n as u32;
+        embassy_futures::block_on(bank::h743_store(&b).save(&tag, &v)).unwrap();
+    }
+    b.save(path).unwrap();
+}
+
+/// A `save` whose sector erase (up to 2 s at x64, the model's time for
+/// it) outlasts the whole demo scan at the 9x9 SPI-limit beam rate
+/// (53 µs): no beam is lost and the lines are `dmap stream`'s; a `reset`
+/// sent while the save runs is refused `busy` and nothing resets.
+#[test]
+fn a_save_erases_while_the_demo_scans_at_the_spi_limit_and_reset_waits() {
+    let dir = tempfile::tempdir().unwrap();
+    let scan = dir.path().join("demo.npy");
+    let p = |x: &Path| x.to_str().unwrap().to_string();
+    common::dmap_ok(&[
+        "simulate",
+        "--preset",
+        "prototype",
+        "--seed",
+        "1",
+        "-o",
+        &p(&scan),
+    ]);
+    let flash = dir.path().join("bank2.bin");
+    full_page_bank(&flash);
+    let host = common::dmap_ok(&["stream", &p(&scan), "--scores", "--threshold", "0.5"]);
+    let twin = common::dmap_ok(&[
+        "twin",
+        &p(&scan),
+        "--scores",
+        "--threshold",
+        "0.5",
+        "--beam-us",
+        "53",
+        "--flash",
+        &p(&flash),
+        "--command",
+        "5:save",
+        "--command",
+        "20:reset",
+    ]);
+    let c = counters(&twin);
+    let err = String::from_utf8_lossy(&twin.stderr);
+    let (host, out) = (
+        String::from_utf8(host.stdout).unwrap(),
+        String::from_utf8(twin.stdout).unwrap(),
+    );
+    // The erase was under way for the whole scan.
+    assert!(
+        c["flash_erases"].as_u64() >= Some(1) || c["flash_operations"].as_u64() > Some(4),
+        "no erase: {c}"
+    );
+    let lines: Vec<&str> = out.lines().filter(|l| !l.starts_with("A,")).collect();
+    let want: Vec<&str> = host.lines().collect();
+    assert_eq!(lines.len(), want.len(), "{out}");
+    // The header differs only in the store's state (a foreign record).
+    assert_eq!(
+        lines[0].split(",store=").next(),
+        want[0].split(",store=").next()
+    );
+    assert!(lines[0].contains(",store=foreign"), "{}", lines[0]);
+    assert!(lines[1..] == want[1..], "the lines differ from dmap stream's");
+    assert!(out.contains(",missing=0,"), "{out}");
+    assert!(
+        out.lines().any(|l| l.starts_with("A,2,err,busy")),
+        "reset during the save: {out}\n{err}"
+    );
+    assert!(c["resets"].as_array().unwrap().is_empty(), "{c}");
+}
+
+/// The power goes during a `save` (the model cuts it at the save's second
+/// flash operation: a flash word half programmed); the board then starts
+/// again from power-on with that flash. The part on the line was never
+/// judged: READY must wait for a clean scan although the start is a
+/// power-on (the flash shows the cut save).
+#[test]
+fn power_cut_during_a_save_is_judged_safe() {
+    both_modes(|mode| {
+        let dir = tempfile::tempdir().unwrap();
+        let flash = dir.path().join("bank2.bin");
+        let period = 1000.0;
+        // The flash operations before the save at AT (row mode saves its
+        // settings at beam 0).
+        let before = run(mode, 3, period, &[], &[], Some((&flash, None)));
+        let ops = before.counters["flash_operations"].as_u64().unwrap() as u32;
+        std::fs::remove_file(&flash).unwrap();
+        let cut = run(
+            mode,
+            10,
+            period,
+            &[],
+            &[(AT, Request::Save)],
+            Some((&flash, Some(ops + 2))),
+        );
+        let what = format!("power cut during a save ({mode:?} mode)");
+        assert_eq!(cut.counters["status"], "power cut", "{what}: {}", cut.counters);
+        let after = run(mode, 6, period, &[], &[], Some((&flash, None)));
+        assert!(after.stdout.contains(",rst=por,"), "{what}: {}", after.stdout);
+        judged_safe(&after, &what, mode, 0.0, 0.0, period);
+    });
+}
