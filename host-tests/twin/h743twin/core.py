@@ -408,6 +408,16 @@ class Core:
             self._uncount_after(self.pc & ~1)
             self.sleeping = "wfi"
 
+    def cycle_at(self, pc):
+        """The model cycle of the instruction at `pc` in the running block.
+        The block hook counts a block whole when it starts, so `cycles` is
+        the block's end; the instructions after `pc` have not run yet.
+        (Used where a few cycles matter: the clock-enable delay.)"""
+        addr, size = self.last_block
+        if self.uc is None or not addr <= pc < addr + size:
+            return self.cycles
+        return self.cycles - count_thumb(bytes(self.uc.mem_read(pc, addr + size - pc))) + 1
+
     def _uncount_after(self, pc):
         """The block that was counted whole stopped at `pc` (after a WFE or
         WFI): its instructions from `pc` on have not run yet."""

@@ -11,7 +11,7 @@ from . import system
 from .bus import Bus
 from .core import CLOCK_HZ, Core, Reset, Stop
 from .dma import STREAM_IRQS, Dma, Dmamux
-from .flash import BANK2_BASE, BANK2_SIZE, FLASH_IRQ, Bank2, Bank2Window, FlashInterface
+from .flash import BANK2_BASE, BANK2_SIZE, FLASH_IRQ, PSIZE_X64, Bank2, Bank2Window, FlashInterface
 from .serial import Spi, Usart
 
 # The embassy time driver runs on TIM12 (time-driver-any picks it on this chip).
@@ -30,9 +30,17 @@ RECORDED_PINS = {("E", 14): "READY", ("E", 13): "REJECT", ("B", 0): "LD1", ("B",
 
 
 class Machine:
-    def __init__(self, elf_path, debugger=False, bank2=None):
+    # Model settings (h743twin's options); class defaults so that a machine
+    # built without __init__ (the tests' bare_machine) has them too.
+    psize = PSIZE_X64        # the parallelism the product means (--psize; None: any)
+    clock_drops_stop = True  # an access lost to the clock-enable delay stops the run
+
+    def __init__(self, elf_path, debugger=False, bank2=None, psize=PSIZE_X64,
+                 clock_drops_stop=True):
         self.debugger = debugger
         self.bank2 = bank2
+        self.psize = psize
+        self.clock_drops_stop = clock_drops_stop
         self.bus = Bus()
         self.core = Core(self.bus)
         self.elf_path = elf_path
@@ -59,6 +67,8 @@ class Machine:
         bus, nvic = self.bus, self.core.nvic
         bus.periphs = []
         bus.clocks = {}
+        bus.enabling = {}
+        bus.clock_drops_stop = self.clock_drops_stop
         self.rcc = bus.add(0x5802_4400, 0x400, system.Rcc(rsr))
         bus.rcc = self.rcc
         self.rcc.on_ahb2enr = bus.sram_clocks_changed
@@ -66,7 +76,7 @@ class Machine:
         self.pwr = bus.add(0x5802_4800, 0x400, system.Pwr())
         if getattr(self, "bank2", None) is None:
             self.bank2 = Bank2()  # kept across resets: see flash.py
-        self.flash = bus.add(0x5200_2000, 0x1000, FlashInterface(bus, nvic, self.bank2))
+        self.flash = bus.add(0x5200_2000, 0x1000, FlashInterface(bus, nvic, self.bank2, self.psize))
         bus.add(BANK2_BASE, BANK2_SIZE, Bank2Window(self.flash))
         self.syscfg = bus.add(0x5800_0400, 0x400, system.Syscfg(), clock=(0xF4, 1, "SYSCFG"))
         self.exti = bus.add(0x5800_0000, 0x400, system.Exti(nvic))
@@ -348,6 +358,12 @@ def _stats(self):
         # Interrupts unpended while a write to their peripheral may still
         # be in the write buffer (no read-back, no DSB): see bus.posted_write.
         "unordered_unpends": len(self.bus.unordered_unpends),
+        # Accesses lost to the clock-enable delay (bus._check_clock).
+        "clock_enable_drops": [
+            {**d, "pc": f"{d['pc']:#010x}", "enable_pc": f"{d['enable_pc']:#010x}",
+             "offset": f"{d['offset']:#05x}", "us": round(d["cycle"] * 1e6 / CLOCK_HZ, 3),
+             **({"value": f"{d['value']:#x}"} if "value" in d else {})}
+            for d in self.bus.clock_drops],
         "sysclk_hz": self.rcc.sysclk_hz(),
         "fault": core.fault,
         "stack_bytes": self.stack[1] - self.stack[0] if self.stack else None,

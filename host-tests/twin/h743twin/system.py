@@ -187,6 +187,29 @@ class Rcc(Registers):
     def pclk1_hz(self):
         return self.hclk_hz() / self._apb_div((self.r[0x1C] >> 4) & 7)
 
+    def pclk2_hz(self):
+        return self.hclk_hz() / self._apb_div((self.r[0x1C] >> 8) & 7)
+
+    def pclk4_hz(self):
+        return self.hclk_hz() / self._apb_div((self.r[0x20] >> 4) & 7)
+
+    # The bus each RCC enable register's peripherals sit on (RM0433 §8,
+    # the RCC_xxxENR registers): AHB1-4 at HCLK, APB1-4 at their PCLK.
+    ENABLE_BUS = {0xD4: "AHB3", 0xD8: "AHB1", 0xDC: "AHB2", 0xE0: "AHB4", 0xE4: "APB3",
+                  0xE8: "APB1", 0xEC: "APB1", 0xF0: "APB2", 0xF4: "APB4"}
+
+    def bus_hz(self, reg):
+        bus = self.ENABLE_BUS[reg]
+        if bus == "APB1":
+            return self.pclk1_hz()
+        if bus == "APB2":
+            return self.pclk2_hz()
+        if bus == "APB4":
+            return self.pclk4_hz()
+        if bus == "APB3":
+            return self.hclk_hz() / self._apb_div((self.r[0x18] >> 4) & 7)
+        return self.hclk_hz()
+
     def apb1_timer_hz(self):
         """Timers on APB1 run at PCLK1, or twice PCLK1 when the APB1
         prescaler divides (RCC_CFGR.TIMPRE = 0)."""
