@@ -12,12 +12,11 @@ and the PC, so the model never returns made-up values.
 import heapq
 import sys
 
-from unicorn import (UC_HOOK_MEM_PROT, UC_HOOK_MEM_READ, UC_HOOK_MEM_WRITE,
-                     UC_MEM_FETCH_PROT, UC_MEM_WRITE_PROT, UC_PROT_ALL,
+from unicorn import (UC_HOOK_MEM_PROT, UC_MEM_FETCH_PROT, UC_MEM_WRITE_PROT, UC_PROT_ALL,
                      UC_PROT_NONE)
 from unicorn.arm_const import UC_ARM_REG_PC
 
-from .core import Reset, Stop
+from .core import BusFault, Reset, Stop
 from .flash import BANK2_BASE, BANK2_SIZE
 
 MEMORIES = (
@@ -97,7 +96,7 @@ class Bus:
         if clock is None or self.rcc is None:
             return True
         reg, bit, name = clock
-        pc = uc.reg_read(UC_ARM_REG_PC)
+        pc = self._pc(uc)
         if not self.rcc.enabled(reg, bit):
             raise Stop(f"{name} register {addr:#010x} accessed while its clock is off "
                        f"(RCC register {reg:#x} bit {bit}) at pc {pc:#010x}")
@@ -136,7 +135,7 @@ class Bus:
         rising = self.rcc.r[word] & ~before
         if not rising or word not in self.rcc.ENABLE_BUS:
             return
-        pc = uc.reg_read(UC_ARM_REG_PC)
+        pc = self._pc(uc)
         now = self.core.cycle_at(pc)
         # Model cycles are instructions: the delay in instructions at the
         # current core clock (8 at 400 MHz with APB1 at 100 MHz).
@@ -144,6 +143,10 @@ class Bus:
         for bit in range(32):
             if rising >> bit & 1:
                 self.enabling[(word, bit)] = (now + int(delay), pc, now)
+
+    def _pc(self, uc):
+        exact = getattr(self.core, "insn_pc", None)
+        return exact() if exact else uc.reg_read(UC_ARM_REG_PC)
 
     def _rcc_read(self):
         self.enabling.clear()
@@ -163,12 +166,6 @@ class Bus:
                     self._write, PERIPH_BASE)
         uc.mmio_map(PPB_BASE, PPB_SIZE, self._read, PPB_BASE, self._write, PPB_BASE)
         uc.hook_add(UC_HOOK_MEM_PROT, self._on_gated)
-        # A memory hook on the peripheral space makes Unicorn keep PC exact
-        # at each of its accesses (without one, PC reads as the start of the
-        # translated block inside the MMIO callbacks): the clock-enable
-        # delay counts instructions between two accesses of one block.
-        uc.hook_add(UC_HOOK_MEM_READ | UC_HOOK_MEM_WRITE, lambda *a: None,
-                    begin=PERIPH_BASE, end=PERIPH_BASE + PERIPH_SIZE - 1)
 
     def sram_clocks_changed(self):
         """Applies RCC_AHB2ENR.SRAMxEN to SRAM1-3 (all off without an RCC)."""
@@ -234,6 +231,8 @@ class Bus:
             if model is self.rcc:
                 self._rcc_read()
             return model.read(addr - base, size) & ((1 << (8 * size)) - 1)
+        except BusFault as e:
+            self.core.bus_fault(e)
         except KeyError:
             self._fail(Unmodelled(f"read of unmodelled register {addr:#010x} "
                                   f"({size} bytes) at pc {uc.reg_read(UC_ARM_REG_PC):#010x}"))
@@ -263,6 +262,8 @@ class Bus:
                 self._enable_written(word, before, uc)
                 return
             model.write(addr - base, size, value)
+        except BusFault as e:
+            self.core.bus_fault(e)
         except KeyError:
             self._fail(Unmodelled(f"write of {value:#x} to unmodelled register {addr:#010x} "
                                   f"({size} bytes) at pc {uc.reg_read(UC_ARM_REG_PC):#010x}"))

@@ -51,7 +51,7 @@ an erase has erased the first half of its sector, a program has written
 the first half of its flash word (whose ECC is then wrong, as above).
 """
 
-from .core import CLOCK_HZ, Stop
+from .core import CLOCK_HZ, BusFault, Stop
 
 BANK2_BASE = 0x0810_0000
 BANK2_SIZE = 1 << 20
@@ -288,8 +288,9 @@ class FlashInterface:
             where = f"flash word {BANK2_BASE + word * WORD:#010x}"
             if dma:
                 raise EccError(f"double ECC error reading {where}")
-            raise Stop(f"bus fault: double ECC error reading {where} "
-                       "(programmed twice, or cut while programming, since its erase)")
+            raise BusFault(f"bus fault: double ECC error reading {where} "
+                           "(programmed twice, or cut while programming, since its erase)",
+                           BANK2_BASE + off)
         return int.from_bytes(self.bank.data[off:off + size], "little")
 
     def mem_write(self, off, size, value):

@@ -59,6 +59,17 @@ RSR_D1 = 1 << 19
 RSR_CPU = 1 << 17
 RSR_RMVF = 1 << 16
 POWER_ON_FLAGS = RSR_POR | RSR_PIN | RSR_BOR | RSR_D2 | RSR_D1 | RSR_CPU
+# RM0433 §8.4 (reset source identification, the RCC_RSR table): the flags
+# each reset the model produces sets. Every system reset also pulls NRST
+# low (PINRSTF) and resets the CPU (CPURSTF); a brown-out sets BORRSTF
+# without PORRSTF (VDD fell below the BOR threshold, not below the POR one).
+RESET_FLAGS = {
+    "power-on": POWER_ON_FLAGS,
+    "pin": RSR_PIN | RSR_CPU,
+    "bor": RSR_BOR | RSR_PIN | RSR_CPU,
+    "software": RSR_SFT | RSR_PIN | RSR_CPU,
+    "watchdog": RSR_IWDG1 | RSR_PIN | RSR_CPU,
+}
 
 
 class Rcc(Registers):
