@@ -9,7 +9,7 @@ import json
 import sys
 
 from .core import Stop
-from .flash import Bank2, PowerCut
+from .flash import PSIZE_NAMES, Bank2, PowerCut
 from .usart_rx import parse_requests
 from .detector import Detector, Scan, parse_fault
 from .machine import Machine, cycles_of_ms
@@ -33,6 +33,14 @@ def main(argv=None):
     ap.add_argument("--requests", help="what the host sends on USART3 and at which beams (usart_rx.py)")
     ap.add_argument("--flash", help="bank 2's contents: loaded if the file exists, saved at the end")
     ap.add_argument("--power-cut", type=int, metavar="N", help="cut power at the N-th flash operation")
+    ap.add_argument("--psize", choices=["x8", "x16", "x32", "x64", "any"], default="x64",
+                    help="the flash parallelism (FLASH_CR2.PSIZE) the firmware means: an erase or "
+                         "program started with another stops the run (default x64, the fastest "
+                         "the 3.3 V supply allows; any: no check)")
+    ap.add_argument("--clock-drops", choices=["stop", "count"], default="stop",
+                    help="a peripheral access within two bus clock cycles of its RCC enable is lost "
+                         "on silicon: stop the run there (default) or drop it, count it "
+                         "(clock_enable_drops) and go on")
     args = ap.parse_args(argv)
 
     try:
@@ -49,7 +57,9 @@ def main(argv=None):
     # Whatever a damaged file makes the loaders raise is one line, not a
     # traceback.
     try:
-        m = Machine(args.elf, debugger=args.debugger, bank2=bank2)
+        psize = None if args.psize == "any" else PSIZE_NAMES.index(args.psize)
+        m = Machine(args.elf, debugger=args.debugger, bank2=bank2, psize=psize,
+                    clock_drops_stop=args.clock_drops == "stop")
     except Exception as e:  # noqa: BLE001
         print(f"h743twin: cannot load the ELF {args.elf}: {type(e).__name__}: {e}", file=sys.stderr)
         return 4

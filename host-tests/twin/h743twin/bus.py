@@ -12,10 +12,11 @@ and the PC, so the model never returns made-up values.
 import heapq
 import sys
 
-from unicorn import UC_HOOK_MEM_PROT, UC_MEM_FETCH_PROT, UC_MEM_WRITE_PROT, UC_PROT_ALL, UC_PROT_NONE
+from unicorn import (UC_HOOK_MEM_PROT, UC_MEM_FETCH_PROT, UC_MEM_WRITE_PROT, UC_PROT_ALL,
+                     UC_PROT_NONE)
 from unicorn.arm_const import UC_ARM_REG_PC
 
-from .core import Reset, Stop
+from .core import BusFault, Reset, Stop
 from .flash import BANK2_BASE, BANK2_SIZE
 
 MEMORIES = (
@@ -40,6 +41,17 @@ class Unmodelled(Stop):
     pass
 
 
+# Register names for the clock-enable drop report (the others by offset).
+TIMER_REGS = {0x00: "CR1", 0x04: "CR2", 0x0C: "DIER", 0x10: "SR", 0x14: "EGR", 0x18: "CCMR1",
+              0x20: "CCER", 0x24: "CNT", 0x28: "PSC", 0x2C: "ARR", 0x34: "CCR1", 0x38: "CCR2"}
+
+
+def register_name(peripheral, off):
+    if peripheral.startswith("TIM") and off in TIMER_REGS:
+        return TIMER_REGS[off]
+    return f"{off:#05x}"
+
+
 import os
 
 TRACE = int(os.environ.get("H743TWIN_TRACE", "0"))
@@ -60,6 +72,12 @@ class Bus:
         self.posted = {}
         self.irq_owner = {}
         self.unordered_unpends = []  # (irq, pc of the NVIC write, pc of the peripheral write)
+        # The clock-enable delay (see `_enable_written`): (RCC register,
+        # bit) -> (cycle the enable takes effect, pc of the RCC write), and
+        # every access that came before it.
+        self.enabling = {}
+        self.clock_drops = []
+        self.clock_drops_stop = True  # a drop stops the run (h743twin --clock-drops)
 
     def add(self, base, size, model, clock=None):
         """`clock`: (RCC enable register offset, bit, name) that must be set
@@ -69,14 +87,69 @@ class Bus:
             self.clocks[base] = clock
         return model
 
-    def _check_clock(self, base, addr, uc):
+    def _check_clock(self, base, addr, uc, access, value=None):
+        """Whether an access to a clock-gated peripheral reaches it. With
+        the enable bit clear the run stops; with the bit set too recently
+        (the clock-enable delay) the access is lost: counted, and the run
+        stops unless `clock_drops_stop` is off."""
         clock = self.clocks.get(base)
         if clock is None or self.rcc is None:
-            return
+            return True
         reg, bit, name = clock
+        pc = self._pc(uc)
         if not self.rcc.enabled(reg, bit):
             raise Stop(f"{name} register {addr:#010x} accessed while its clock is off "
-                       f"(RCC register {reg:#x} bit {bit}) at pc {uc.reg_read(UC_ARM_REG_PC):#010x}")
+                       f"(RCC register {reg:#x} bit {bit}) at pc {pc:#010x}")
+        pending = self.enabling.get((reg, bit))
+        if pending is None:
+            return True
+        effective, enable_pc, enable_cycle = pending
+        now = self.core.cycle_at(pc)
+        if now >= effective:
+            del self.enabling[(reg, bit)]
+            return True
+        off = addr - base
+        drop = {"peripheral": name, "register": register_name(name, off), "offset": off,
+                "access": access, "pc": pc, "enable_pc": enable_pc,
+                "cycles_after_enable": now - enable_cycle, "cycle": now}
+        if value is not None:
+            drop["value"] = value
+        self.clock_drops.append(drop)
+        if self.clock_drops_stop:
+            raise Stop(f"clock-enable delay: {access} of {name}_{drop['register']} ({addr:#010x}"
+                       + (f" <- {value:#x}" if value is not None else "")
+                       + f") at pc {pc:#010x}, {now - enable_cycle} cycles after its RCC enable "
+                       f"(pc {enable_pc:#010x}); the clock starts {effective - enable_cycle} cycles "
+                       "(two bus clock cycles) after the enable lands, so silicon loses this "
+                       "access: read the enable register back first (h743twin --clock-drops count "
+                       "to go on with the access dropped)")
+        return False
+
+    def _enable_written(self, word, before, uc):
+        """RM0433 §8 (RCC, peripheral clock enable): a peripheral's clock
+        starts two cycles of its bus clock after the enable bit is set;
+        an access before then is lost. The delay runs from the RCC write;
+        a read of RCC after it (the read-back the HAL and embassy do)
+        cannot complete before the write has landed and the clock runs,
+        so it ends every pending delay (`_rcc_read`)."""
+        rising = self.rcc.r[word] & ~before
+        if not rising or word not in self.rcc.ENABLE_BUS:
+            return
+        pc = self._pc(uc)
+        now = self.core.cycle_at(pc)
+        # Model cycles are instructions: the delay in instructions at the
+        # current core clock (8 at 400 MHz with APB1 at 100 MHz).
+        delay = -(-2 * self.rcc.sysclk_hz() // self.rcc.bus_hz(word))
+        for bit in range(32):
+            if rising >> bit & 1:
+                self.enabling[(word, bit)] = (now + int(delay), pc, now)
+
+    def _pc(self, uc):
+        exact = getattr(self.core, "insn_pc", None)
+        return exact() if exact else uc.reg_read(UC_ARM_REG_PC)
+
+    def _rcc_read(self):
+        self.enabling.clear()
 
     def attach(self, core):
         self.core = core
@@ -152,9 +225,14 @@ class Bus:
             base, model = self._find(addr)
             if model is None:
                 raise KeyError
-            self._check_clock(base, addr, uc)
+            if not self._check_clock(base, addr, uc, "read"):
+                return 0  # the peripheral did not answer: the bus reads 0
             self.landed(base)
+            if model is self.rcc:
+                self._rcc_read()
             return model.read(addr - base, size) & ((1 << (8 * size)) - 1)
+        except BusFault as e:
+            self.core.bus_fault(e)
         except KeyError:
             self._fail(Unmodelled(f"read of unmodelled register {addr:#010x} "
                                   f"({size} bytes) at pc {uc.reg_read(UC_ARM_REG_PC):#010x}"))
@@ -174,9 +252,18 @@ class Bus:
             base, model = self._find(addr)
             if model is None:
                 raise KeyError
-            self._check_clock(base, addr, uc)
+            if not self._check_clock(base, addr, uc, "write", value):
+                return
             self.posted_write(base, uc.reg_read(UC_ARM_REG_PC))
+            if model is self.rcc:
+                word = (addr - base) & ~3
+                before = model.r.get(word, 0)
+                model.write(addr - base, size, value)
+                self._enable_written(word, before, uc)
+                return
             model.write(addr - base, size, value)
+        except BusFault as e:
+            self.core.bus_fault(e)
         except KeyError:
             self._fail(Unmodelled(f"write of {value:#x} to unmodelled register {addr:#010x} "
                                   f"({size} bytes) at pc {uc.reg_read(UC_ARM_REG_PC):#010x}"))

@@ -10,8 +10,10 @@ M7's timing: no dual issue, no wait states, no cache misses.
 
 import struct
 
-from unicorn import (UC_ARCH_ARM, UC_ERR_EXCEPTION, UC_ERR_INSN_INVALID,
-                     UC_HOOK_BLOCK, UC_HOOK_CODE, UC_HOOK_INTR, UC_MODE_MCLASS,
+from unicorn import (UC_ARCH_ARM, UC_ERR_EXCEPTION, UC_ERR_FETCH_UNMAPPED,
+                     UC_ERR_INSN_INVALID, UC_ERR_READ_UNMAPPED, UC_ERR_WRITE_UNMAPPED,
+                     UC_HOOK_BLOCK, UC_HOOK_CODE, UC_HOOK_INTR, UC_HOOK_MEM_UNMAPPED,
+                     UC_MEM_FETCH_UNMAPPED, UC_MEM_WRITE_UNMAPPED, UC_MODE_MCLASS,
                      UC_MODE_THUMB, Uc, UcError)
 from unicorn.arm_const import (UC_ARM_REG_BASEPRI, UC_ARM_REG_CONTROL,
                                UC_ARM_REG_FPSCR, UC_ARM_REG_LR, UC_ARM_REG_MSP,
@@ -21,6 +23,7 @@ from unicorn.arm_const import (UC_ARM_REG_BASEPRI, UC_ARM_REG_CONTROL,
                                UC_ARM_REG_SP, UC_ARM_REG_XPSR, UC_CPU_ARM_CORTEX_M7)
 
 CLOCK_HZ = 400_000_000
+UNMAPPED = (UC_ERR_READ_UNMAPPED, UC_ERR_WRITE_UNMAPPED, UC_ERR_FETCH_UNMAPPED)
 
 # Exception numbers.
 HARDFAULT = 3
@@ -47,6 +50,26 @@ FP_REGS = tuple(UC_ARM_REG_S0 + i for i in range(16))
 class Stop(Exception):
     """The run cannot go on: an access to something the model does not
     model, a fault the model cannot deliver, or a limit reached."""
+
+
+class BusFault(Stop):
+    """A bus error answered to a CPU access (a flash word whose ECC is
+    broken, ...): taken as a precise bus fault (`Core.take_fault`), not a
+    stop. `addr`: the faulting address (BFAR)."""
+
+    def __init__(self, msg, addr=None):
+        super().__init__(msg)
+        self.addr = addr
+
+
+# SCB fault status (ARMv7-M B3.2.15-B3.2.17): CFSR's BusFault and
+# UsageFault bits and HFSR.FORCED (a configurable fault escalated).
+CFSR_IBUSERR = 1 << 8
+CFSR_PRECISERR = 1 << 9
+CFSR_IMPRECISERR = 1 << 10
+CFSR_BFARVALID = 1 << 15
+CFSR_UNDEFINSTR = 1 << 16
+HFSR_FORCED = 1 << 30
 
 
 class Reset(Exception):
@@ -185,7 +208,8 @@ class Scb:
             0xD14: 0x00000200,   # CCR: STKALIGN
             0xD18: 0, 0xD1C: 0, 0xD20: 0,  # SHPR1-3
             0xD24: 0,            # SHCSR
-            0xD28: 0, 0xD2C: 0,  # CFSR, HFSR
+            0xD28: 0, 0xD2C: 0,  # CFSR, HFSR (write 1 to clear)
+            0xD34: 0, 0xD38: 0, 0xD3C: 0,  # MMFAR, BFAR, AFSR
             0xD88: 0,            # CPACR
             0xD84: 0,            # CSSELR
             0xF34: 0xC0000000,   # FPCCR (ASPEN, LSPEN)
@@ -230,6 +254,9 @@ class Scb:
             return
         if 0xF50 <= off <= 0xF78:  # cache maintenance: no caches are modelled
             return
+        if off in (0xD28, 0xD2C):  # CFSR, HFSR: write 1 to clear
+            self.regs[off] &= ~value
+            return
         if off in self.regs:
             self.regs[off] = value
             return
@@ -253,7 +280,10 @@ class Core:
         self.check = False       # an interrupt may have to be taken
         self.irq_entries = 0
         self.wfe = 0
-        self.fault = None
+        self.fault = None        # the latest fault, as text
+        self.hardfaults = 0      # HardFault entries
+        self.lockups = 0         # faults inside the HardFault handler
+        self.pending_fault = None  # a bus fault raised inside an MMIO callback
         self.block_counts = {}
         self.on_exception = None  # callback(exc) for counters
         self.uc = None
@@ -273,6 +303,8 @@ class Core:
             uc.mem_write(addr, data)
         uc.hook_add(UC_HOOK_BLOCK, self._on_block)
         uc.hook_add(UC_HOOK_INTR, self._on_intr)
+        uc.hook_add(UC_HOOK_MEM_UNMAPPED, self._on_unmapped)
+        self.unmapped = None
         return uc
 
     def watch_opcodes(self, text_ranges):
@@ -328,6 +360,7 @@ class Core:
         self.scb.__init__(self)
         self.event = False
         self.sleeping = False
+        self.track_pc()
 
     def request_check(self):
         """Stops the run at the next block boundary. (Never emu_stop from a
@@ -366,25 +399,111 @@ class Core:
             self._exception_return(uc.reg_read(UC_ARM_REG_PC))
             return
         pc = uc.reg_read(UC_ARM_REG_PC)
-        if intno == 1:  # undefined instruction (UDF, a panic's end)
-            self.fault = f"undefined instruction at {pc:#010x}"
+        if intno == 1:  # undefined instruction
+            self.take_fault(pc, CFSR_UNDEFINSTR, f"undefined instruction at {pc:#010x}")
         else:
-            self.fault = f"CPU exception {intno} at {pc:#010x}"
-        self.enter(HARDFAULT)
+            raise Stop(f"CPU exception {intno} at {pc:#010x} is not modelled")
         self.request_check()
+
+    # --- faults
+    def bus_fault(self, e):
+        """From an MMIO callback: the access got a bus error. Stops Unicorn
+        at once, before the instruction completes, with PC at it (checked:
+        the load's register keeps its value); `run_until` then takes it."""
+        self.pending_fault = (CFSR_PRECISERR | CFSR_BFARVALID, str(e), e.addr)
+        self.uc.emu_stop()
+
+    # --- the exact PC, for a while after each reset
+    # Inside an MMIO callback Unicorn's PC is the start of the translated
+    # block, not the accessing instruction. The clock-enable delay counts
+    # instructions between two accesses, so for PRECISE_CYCLES after each
+    # reset (the start-up code, which enables the peripherals) a code hook
+    # records each instruction's address; then it goes (it slows the model
+    # about four times), and an enable is judged per block (`insn_pc`).
+    PRECISE_CYCLES = 100 * CLOCK_HZ // 1000
+    CODE_RANGE = (0x0000_0000, 0x080F_FFFF)  # ITCM and flash bank 1
+
+    def _on_insn(self, uc, addr, size, _):
+        self.exact_pc = addr
+
+    def track_pc(self):
+        """From a reset: the exact PC for the next PRECISE_CYCLES."""
+        self.untrack_pc()
+        self.exact_pc = None
+        self.precise_until = self.cycles + self.PRECISE_CYCLES
+        self.pc_hook = self.uc.hook_add(UC_HOOK_CODE, self._on_insn,
+                                        begin=self.CODE_RANGE[0], end=self.CODE_RANGE[1])
+
+    def untrack_pc(self):
+        if getattr(self, "pc_hook", None) is not None:
+            self.uc.hook_del(self.pc_hook)
+            self.pc_hook = None
+            self.exact_pc = None
+            try:  # retranslate without the hook's calls
+                self.uc.ctl_remove_cache(self.CODE_RANGE[0], self.CODE_RANGE[1] + 1)
+            except Exception:  # noqa: BLE001 (older Unicorn: the calls stay, unused)
+                pass
+
+    def insn_pc(self):
+        """The accessing instruction's address when known, else the block's."""
+        if getattr(self, "pc_hook", None) is not None and self.exact_pc is not None:
+            return self.exact_pc
+        return self.uc.reg_read(UC_ARM_REG_PC)
+
+    def take_fault(self, pc, cfsr, detail, bfar=None):
+        """A fault at the instruction at `pc` (its address is stacked: the
+        handler returns to it), or an imprecise one taken at `pc`. With
+        SHCSR's BusFault and UsageFault handlers disabled (the reset state,
+        which the firmware keeps) it escalates to HardFault, exception 3
+        (ARMv7-M B1.5.8: HFSR.FORCED); CFSR says which fault, BFAR where.
+        A fault inside the HardFault handler is a lockup: the core stops
+        executing until a reset (the watchdog's)."""
+        if self.scb.regs[0xD24] & (7 << 16):
+            raise Stop(f"{detail}: SHCSR enables a configurable fault handler, not modelled")
+        self.fault = detail
+        self.scb.regs[0xD28] |= cfsr
+        self.scb.regs[0xD2C] |= HFSR_FORCED
+        if bfar is not None:
+            self.scb.regs[0xD38] = bfar
+        if HARDFAULT in self.nvic.active:
+            self.lockups += 1
+            self.sleeping = "stuck"
+            return
+        self.hardfaults += 1
+        self.pc = pc | 1
+        self.enter(HARDFAULT)
 
     # --- running
     def run_until(self, limit):
         """Runs the CPU until `limit` cycles, a sleep, or a check request."""
         uc = self.uc
+        if getattr(self, "pc_hook", None) is not None and self.cycles >= self.precise_until:
+            self.untrack_pc()
         self.deadline = min(limit, self.cycles + self.MAX_SLICE)
         self.check = False
         try:
             uc.emu_start(self.pc, 0xFFFFFFFF)
         except UcError as e:
             pc = uc.reg_read(UC_ARM_REG_PC)
+            if e.errno in UNMAPPED:
+                # A precise bus fault: PC is the faulting instruction's (checked).
+                self._uncount_from(pc)
+                kind, addr = self.unmapped or ("access", None)
+                self.take_fault(pc, CFSR_IBUSERR if e.errno == UC_ERR_FETCH_UNMAPPED
+                                else CFSR_PRECISERR | CFSR_BFARVALID,
+                                f"bus fault: {kind} of unmapped address "
+                                f"{addr if addr is None else f'{addr:#010x}'} at pc {pc:#010x}",
+                                None if e.errno == UC_ERR_FETCH_UNMAPPED else addr)
+                self.unmapped = None
+                return
             if e.errno == UC_ERR_INSN_INVALID:
                 hw = struct.unpack("<H", uc.mem_read(pc - 2, 2))[0]
+                if hw != OP_WFE:
+                    # PC is the undefined instruction's own (UDF, an
+                    # encoding Unicorn does not know): a UsageFault.
+                    self._uncount_from(pc)
+                    self.take_fault(pc, CFSR_UNDEFINSTR, f"undefined instruction at {pc:#010x}")
+                    return
                 if hw == OP_WFE:
                     self._uncount_after(pc)
                     self.pc = pc | 1
@@ -394,12 +513,18 @@ class Core:
                     else:
                         self.sleeping = "wfe"
                     return
-                raise Stop(f"invalid instruction near {pc:#010x}")
             if e.errno == UC_ERR_EXCEPTION:
                 raise Stop(f"unhandled CPU exception at {pc:#010x}: {e}")
             if self.bus.error is not None:
                 raise self.bus.error  # a memory hook said why
             raise Stop(f"{e} at pc {pc:#010x}") from None
+        if self.pending_fault is not None:
+            cfsr, detail, bfar = self.pending_fault
+            self.pending_fault = None
+            pc = uc.reg_read(UC_ARM_REG_PC)
+            self._uncount_from(pc)
+            self.take_fault(pc, cfsr, detail, bfar)
+            return
         self.pc = uc.reg_read(UC_ARM_REG_PC) | 1
         if self.sleeping == "stuck":
             return
@@ -407,6 +532,29 @@ class Core:
         if hw == OP_WFI:
             self._uncount_after(self.pc & ~1)
             self.sleeping = "wfi"
+
+    def cycle_at(self, pc):
+        """The model cycle of the instruction at `pc` in the running block.
+        The block hook counts a block whole when it starts, so `cycles` is
+        the block's end; the instructions after `pc` have not run yet.
+        (Used where a few cycles matter: the clock-enable delay.)"""
+        addr, size = self.last_block
+        if self.uc is None or not addr <= pc < addr + size:
+            return self.cycles
+        return self.cycles - count_thumb(bytes(self.uc.mem_read(pc, addr + size - pc))) + 1
+
+    def _uncount_from(self, pc):
+        """The block stopped at the instruction at `pc`, which did not run."""
+        addr, size = self.last_block
+        if addr <= pc < addr + size:
+            rest = count_thumb(bytes(self.uc.mem_read(pc, addr + size - pc)))
+            self.cycles -= rest
+            self.instructions -= rest
+
+    def _on_unmapped(self, uc, access, addr, size, value, _):
+        self.unmapped = ({UC_MEM_WRITE_UNMAPPED: "write", UC_MEM_FETCH_UNMAPPED: "fetch"}
+                         .get(access, "read"), addr)
+        return False
 
     def _uncount_after(self, pc):
         """The block that was counted whole stopped at `pc` (after a WFE or

@@ -16,6 +16,10 @@ Faults (`--fault KIND@BEAM[:ARG[:ARG]]`, beams counted from 0):
   halt@B:MS          a debugger halts the core for MS milliseconds at beam B
   wedge@B            the firmware is wedged at beam B (thread mode spins with interrupts off)
   drdy-miss@B        beam B raises no DRDY (the detector's frame is never announced)
+  pin-reset@B        NRST is pulled at beam B (RCC_RSR: PINRSTF)
+  bor@B              the supply dips below the BOR threshold at beam B (BORRSTF, PINRSTF)
+  hardfault@B        the core takes an imprecise bus fault at beam B (escalated to HardFault)
+  panic@B            the core is FORCED into core::panicking::panic at beam B (machine.py)
 """
 
 from .core import CLOCK_HZ
@@ -25,7 +29,7 @@ DRDY_WIDTH = 200  # DRDY and LINE_SYNC stay high 500 ns
 
 KINDS = {"gap": 1, "burst": 2, "sync-glitch": 0, "sync-miss": 0, "overrun": 0,
          "dma-error": 0, "dma-stall": 0, "uart-busy": 1, "halt": 1, "wedge": 0,
-         "drdy-miss": 0}
+         "drdy-miss": 0, "pin-reset": 0, "bor": 0, "hardfault": 0, "panic": 0}
 
 
 def parse_fault(spec):
@@ -151,6 +155,15 @@ class Detector:
             elif kind == "wedge":
                 self._count(kind)
                 m.wedge()
+            elif kind in ("hardfault", "panic"):
+                self._count(kind)
+                getattr(m, kind)()
+            elif kind in ("pin-reset", "bor"):
+                # The chip resets at this beam; the detector goes on (its
+                # DRDY edge comes, into a chip that is booting).
+                self._count(kind)
+                reset = "pin" if kind == "pin-reset" else "bor"
+                m.bus.at(m.core.cycles, lambda: m.raise_reset(reset), owner="world")
             elif kind == "drdy-miss":
                 self._count(kind)
                 # The beam passes without its edge (nor its LINE_SYNC).

@@ -32,9 +32,17 @@ What silicon does and the model follows:
   goes on: that is how a firmware can read a flash that a power cut may
   have left with such a word.
 
-The model's operation times are its own (PROGRAM_US, ERASE_US), an
-erase far shorter than the datasheet's sector erase time, so that runs
-stay short; nothing about the board's timing may rest on them.
+Operation times are the datasheet's maximum for the parallelism that
+FLASH_CR2.PSIZE selects when the operation starts (DS12110, table "Flash
+memory programming": a 128 KB sector erase and a 256-bit flash word
+program, per x8/x16/x32/x64; `erase_us`, `program_us`): a firmware must
+budget the maximum, not the typical (ST's answer in the forum thread
+"STM32H743 Flash EraseSector Reset Problem": x32 erases a sector in 1.1 s
+typical, 2.2 s at most). An erase or program that starts with another
+PSIZE than the product means (`FlashInterface.intended_psize`, the
+model's `--psize`, x64 by default) stops the run: a slower parallelism
+than intended is a firmware bug that would only show on a bench as a
+watchdog reset during a save.
 
 Power cuts: `Bank2.cut_at = N` ends the run at the N-th flash operation
 (erase or flash-word program, counted from 1 across resets) with
@@ -43,7 +51,7 @@ an erase has erased the first half of its sector, a program has written
 the first half of its flash word (whose ECC is then wrong, as above).
 """
 
-from .core import CLOCK_HZ, Stop
+from .core import CLOCK_HZ, BusFault, Stop
 
 BANK2_BASE = 0x0810_0000
 BANK2_SIZE = 1 << 20
@@ -62,8 +70,30 @@ EOP, WRPERR, PGSERR, STRBERR, INCERR, OPERR = 1 << 16, 1 << 17, 1 << 18, 1 << 19
 RDPERR, RDSERR, SNECCERR, DBECCERR, CRCEND = 1 << 23, 1 << 24, 1 << 25, 1 << 26, 1 << 27
 CLEARABLE = 0x0FEF_0000  # CCR2: CLR_EOP .. CLR_CRCEND, bit 20 reserved
 
-PROGRAM_US = 16.0
-ERASE_US = 2000.0
+# DS12110 "Flash memory programming", maximum values, indexed by PSIZE
+# (00 x8, 01 x16, 10 x32, 11 x64): t_ERASE128KB (one 128 KB sector) and
+# t_PROG (one 256-bit flash word), in µs. The x32 erase (2.2 s max, 1.1 s
+# typical) is also ST's figure in the forum thread quoted above.
+ERASE_MAX_US = (4_000_000.0, 3_600_000.0, 2_200_000.0, 2_000_000.0)
+PROGRAM_MAX_US = (580.0, 360.0, 260.0, 200.0)
+PSIZE_NAMES = ("x8", "x16", "x32", "x64")
+# The product's parallelism: the fastest, which the NUCLEO's 3.3 V supply
+# allows (DS12110 programs at every parallelism from 1.62 V to 3.6 V; the
+# H743 has no external VPP requirement for x64, unlike the F4/F7).
+PSIZE_X64 = 3
+
+
+def erase_us(psize, sectors=1):
+    """A bank erase (BER) counts as its eight sectors."""
+    return ERASE_MAX_US[psize] * sectors
+
+
+def program_us(psize):
+    return PROGRAM_MAX_US[psize]
+
+
+class ParallelismError(Stop):
+    """An erase or program started with a PSIZE the product does not mean."""
 
 
 class PowerCut(Stop):
@@ -153,8 +183,10 @@ class FlashInterface:
     """FLASH registers at 0x5200_2000: ACR, and bank 2's KEYR2, CR2, SR2,
     CCR2; and bank 2's memory window (`memory()`), which writes go through."""
 
-    def __init__(self, bus, nvic, bank):
+    def __init__(self, bus, nvic, bank, intended_psize=PSIZE_X64):
         self.bus = bus
+        # None: any parallelism is accepted (the run only times it).
+        self.intended_psize = intended_psize
         self.nvic = nvic
         self.bank = bank
         self.acr = 0x0000_0037  # 7 wait states, WRHIGHFREQ 3
@@ -256,8 +288,9 @@ class FlashInterface:
             where = f"flash word {BANK2_BASE + word * WORD:#010x}"
             if dma:
                 raise EccError(f"double ECC error reading {where}")
-            raise Stop(f"bus fault: double ECC error reading {where} "
-                       "(programmed twice, or cut while programming, since its erase)")
+            raise BusFault(f"bus fault: double ECC error reading {where} "
+                           "(programmed twice, or cut while programming, since its erase)",
+                           BANK2_BASE + off)
         return int.from_bytes(self.bank.data[off:off + size], "little")
 
     def mem_write(self, off, size, value):
@@ -287,12 +320,32 @@ class FlashInterface:
         self.buf = bytearray(b"\xff" * WORD)
         self.buf_filled = set()
 
+    def psize(self):
+        return self.cr >> 4 & 3
+
+    def _check_psize(self, what):
+        psize, want = self.psize(), self.intended_psize
+        if want is not None and psize != want:
+            raise ParallelismError(
+                f"FLASH_CR2.PSIZE = {psize:02b} ({PSIZE_NAMES[psize]}) when a {what} starts, "
+                f"the product means {want:02b} ({PSIZE_NAMES[want]}): at the datasheet's maximum "
+                f"this {what} takes {self._duration(what, psize) / 1e3:g} ms instead of "
+                f"{self._duration(what, want) / 1e3:g} ms (h743twin --psize to change what is meant)")
+
+    def _duration(self, what, psize):
+        if what == "program":
+            return program_us(psize)
+        return erase_us(psize, 8 if self.cr & BER else 1)
+
     def _queue_word(self):
+        self._check_psize("program")
         word, buf = self.buf_word, bytes(self.buf)
         self._drop_buffer()
-        self._operation(PROGRAM_US, lambda half: self.bank.program(word, buf, WORD // 2 if half else WORD))
+        self._operation(self._duration("program", self.psize()),
+                        lambda half: self.bank.program(word, buf, WORD // 2 if half else WORD))
 
     def _erase(self):
+        self._check_psize("erase")
         sectors = range(8) if self.cr & BER else [self.cr >> 8 & 7]
         self.erasing = True
 
@@ -300,7 +353,7 @@ class FlashInterface:
             for s in sectors:
                 self.bank.erase(s, SECTOR // 2 if half else SECTOR)
             self.erasing = False
-        self._operation(ERASE_US, done)
+        self._operation(self._duration("erase", self.psize()), done)
 
     def _operation(self, us, apply):
         """`apply(half)`: the operation's effect, whole or (power cut) half."""

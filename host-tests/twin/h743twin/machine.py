@@ -5,13 +5,14 @@ advances the model clock from event to event."""
 import struct
 
 from elftools.elf.elffile import ELFFile
-from unicorn.arm_const import UC_ARM_REG_PC, UC_ARM_REG_PRIMASK
+from unicorn.arm_const import (UC_ARM_REG_LR, UC_ARM_REG_PC, UC_ARM_REG_PRIMASK, UC_ARM_REG_R0,
+                               UC_ARM_REG_R1, UC_ARM_REG_R2)
 
 from . import system
 from .bus import Bus
-from .core import CLOCK_HZ, Core, Reset, Stop
+from .core import CFSR_IMPRECISERR, CLOCK_HZ, Core, Reset, Stop
 from .dma import STREAM_IRQS, Dma, Dmamux
-from .flash import BANK2_BASE, BANK2_SIZE, FLASH_IRQ, Bank2, Bank2Window, FlashInterface
+from .flash import BANK2_BASE, BANK2_SIZE, FLASH_IRQ, PSIZE_X64, Bank2, Bank2Window, FlashInterface
 from .serial import Spi, Usart
 
 # The embassy time driver runs on TIM12 (time-driver-any picks it on this chip).
@@ -30,9 +31,17 @@ RECORDED_PINS = {("E", 14): "READY", ("E", 13): "REJECT", ("B", 0): "LD1", ("B",
 
 
 class Machine:
-    def __init__(self, elf_path, debugger=False, bank2=None):
+    # Model settings (h743twin's options); class defaults so that a machine
+    # built without __init__ (the tests' bare_machine) has them too.
+    psize = PSIZE_X64        # the parallelism the product means (--psize; None: any)
+    clock_drops_stop = True  # an access lost to the clock-enable delay stops the run
+
+    def __init__(self, elf_path, debugger=False, bank2=None, psize=PSIZE_X64,
+                 clock_drops_stop=True):
         self.debugger = debugger
         self.bank2 = bank2
+        self.psize = psize
+        self.clock_drops_stop = clock_drops_stop
         self.bus = Bus()
         self.core = Core(self.bus)
         self.elf_path = elf_path
@@ -51,6 +60,7 @@ class Machine:
         self.detector = None
         self.halted_until = 0
         self.spi_rx_stream = 1
+        self.panics = 0
         self._build(system.POWER_ON_FLAGS)
         self.core.reset()
 
@@ -59,6 +69,8 @@ class Machine:
         bus, nvic = self.bus, self.core.nvic
         bus.periphs = []
         bus.clocks = {}
+        bus.enabling = {}
+        bus.clock_drops_stop = self.clock_drops_stop
         self.rcc = bus.add(0x5802_4400, 0x400, system.Rcc(rsr))
         bus.rcc = self.rcc
         self.rcc.on_ahb2enr = bus.sram_clocks_changed
@@ -66,7 +78,7 @@ class Machine:
         self.pwr = bus.add(0x5802_4800, 0x400, system.Pwr())
         if getattr(self, "bank2", None) is None:
             self.bank2 = Bank2()  # kept across resets: see flash.py
-        self.flash = bus.add(0x5200_2000, 0x1000, FlashInterface(bus, nvic, self.bank2))
+        self.flash = bus.add(0x5200_2000, 0x1000, FlashInterface(bus, nvic, self.bank2, self.psize))
         bus.add(BANK2_BASE, BANK2_SIZE, Bank2Window(self.flash))
         self.syscfg = bus.add(0x5800_0400, 0x400, system.Syscfg(), clock=(0xF4, 1, "SYSCFG"))
         self.exti = bus.add(0x5800_0000, 0x400, system.Exti(nvic))
@@ -143,10 +155,42 @@ class Machine:
         self.core.uc.reg_write(UC_ARM_REG_PC, self.core.pc)
         self.core.sleeping = False
 
+    def hardfault(self):
+        """An imprecise bus fault (a buffered write that the bus answered
+        with an error, ARMv7-M B3.2.15: IMPRECISERR) taken at the current
+        instruction boundary; with BusFault disabled it escalates to
+        HardFault."""
+        core = self.core
+        core.take_fault(core.pc & ~1, CFSR_IMPRECISERR, f"injected imprecise bus fault at pc {core.pc & ~1:#010x}")
+        core.request_check()
+
+    def panic(self):
+        """A FORCED entry into the firmware's panic path: the core calls
+        `core::panicking::panic("")` at the current instruction, as an
+        `unwrap()` or an assertion failing there would (the location "":0:0,
+        16 zero bytes of flash), so the firmware's own #[panic_handler] runs.
+        Not a fault the silicon makes: a way into a path the firmware does
+        not otherwise take on the model."""
+        sym, zeros = panic_entry(self.elf_path, self.image)
+        uc, core = self.core.uc, self.core
+        uc.reg_write(UC_ARM_REG_R0, zeros)
+        uc.reg_write(UC_ARM_REG_R1, 0)
+        uc.reg_write(UC_ARM_REG_R2, zeros)
+        uc.reg_write(UC_ARM_REG_LR, core.pc | 1)
+        core.pc = sym | 1
+        uc.reg_write(UC_ARM_REG_PC, core.pc)
+        core.sleeping = False
+        self.panics += 1
+
     def dma_stall(self, stream):
         self.dma.stalled.add(stream)
 
     # --- reset
+    @staticmethod
+    def raise_reset(cause):
+        """From an event: the chip resets (caught by `run`)."""
+        raise Reset(cause)
+
     def reset(self, cause):
         self.resets.append((cause, self.core.cycles))
         # A reset returns every pin to an input: a driven-high output falls
@@ -157,7 +201,9 @@ class Machine:
                 det = self.detector
                 self.pin_edges.append((self.core.cycles, name, 0, det.beam if det else -1,
                                        getattr(det, "read_end", (-1, -1))))
-        flags = system.RSR_PIN | (system.RSR_IWDG1 if cause == "watchdog" else system.RSR_SFT)
+        # The flags add to those not yet cleared (RMVF): RCC_RSR is reset
+        # by a power-on reset only.
+        flags = system.RESET_FLAGS[cause] | self.rcc.r[0xD0]
         self.bus.drop_chip_events()
         self.bus.error = None
         self.halted_until = 0
@@ -283,6 +329,25 @@ def load_elf(path):
 STACK_PAINT = b"\xa5\x5a\xc3\x3c"
 
 
+def panic_entry(path, image):
+    """(address of `core::panicking::panic`, address of 16 zero bytes in
+    flash) of the ELF."""
+    with open(path, "rb") as f:
+        symtab = ELFFile(f).get_section_by_name(".symtab")
+        syms = [s["st_value"] for s in symtab.iter_symbols()
+                if s["st_info"]["type"] == "STT_FUNC" and s.name.endswith("4core9panicking5panic")]
+    if not syms:
+        raise Stop("panic: the ELF has no core::panicking::panic")
+    for addr, data in image:
+        if 0x0800_0000 <= addr < 0x0810_0000:
+            i = data.find(bytes(16))
+            while i >= 0 and (addr + i) % 4:
+                i = data.find(bytes(16), i + 1)
+            if i >= 0:
+                return syms[0] & ~1, addr + i
+    raise Stop("panic: no 16 zero bytes in flash for the panic's location")
+
+
 def stack_range(path):
     """(_stack_end, _stack_start) of a cortex-m-rt ELF whose memory map
     bounds the stack (the H743's: DTCM above `.dtcm`), or None."""
@@ -348,8 +413,18 @@ def _stats(self):
         # Interrupts unpended while a write to their peripheral may still
         # be in the write buffer (no read-back, no DSB): see bus.posted_write.
         "unordered_unpends": len(self.bus.unordered_unpends),
+        # Accesses lost to the clock-enable delay (bus._check_clock).
+        "clock_enable_drops": [
+            {**d, "pc": f"{d['pc']:#010x}", "enable_pc": f"{d['enable_pc']:#010x}",
+             "offset": f"{d['offset']:#05x}", "us": round(d["cycle"] * 1e6 / CLOCK_HZ, 3),
+             **({"value": f"{d['value']:#x}"} if "value" in d else {})}
+            for d in self.bus.clock_drops],
         "sysclk_hz": self.rcc.sysclk_hz(),
         "fault": core.fault,
+        "hardfaults": core.hardfaults,
+        "lockups": core.lockups,
+        "panics_forced": self.panics,
+        "rcc_rsr": f"{self.rcc.r[0xD0]:#010x}",
         "stack_bytes": self.stack[1] - self.stack[0] if self.stack else None,
         "stack_free_bytes": self.stack_free(),
     }

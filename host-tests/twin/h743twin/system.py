@@ -59,6 +59,17 @@ RSR_D1 = 1 << 19
 RSR_CPU = 1 << 17
 RSR_RMVF = 1 << 16
 POWER_ON_FLAGS = RSR_POR | RSR_PIN | RSR_BOR | RSR_D2 | RSR_D1 | RSR_CPU
+# RM0433 §8.4 (reset source identification, the RCC_RSR table): the flags
+# each reset the model produces sets. Every system reset also pulls NRST
+# low (PINRSTF) and resets the CPU (CPURSTF); a brown-out sets BORRSTF
+# without PORRSTF (VDD fell below the BOR threshold, not below the POR one).
+RESET_FLAGS = {
+    "power-on": POWER_ON_FLAGS,
+    "pin": RSR_PIN | RSR_CPU,
+    "bor": RSR_BOR | RSR_PIN | RSR_CPU,
+    "software": RSR_SFT | RSR_PIN | RSR_CPU,
+    "watchdog": RSR_IWDG1 | RSR_PIN | RSR_CPU,
+}
 
 
 class Rcc(Registers):
@@ -186,6 +197,29 @@ class Rcc(Registers):
 
     def pclk1_hz(self):
         return self.hclk_hz() / self._apb_div((self.r[0x1C] >> 4) & 7)
+
+    def pclk2_hz(self):
+        return self.hclk_hz() / self._apb_div((self.r[0x1C] >> 8) & 7)
+
+    def pclk4_hz(self):
+        return self.hclk_hz() / self._apb_div((self.r[0x20] >> 4) & 7)
+
+    # The bus each RCC enable register's peripherals sit on (RM0433 §8,
+    # the RCC_xxxENR registers): AHB1-4 at HCLK, APB1-4 at their PCLK.
+    ENABLE_BUS = {0xD4: "AHB3", 0xD8: "AHB1", 0xDC: "AHB2", 0xE0: "AHB4", 0xE4: "APB3",
+                  0xE8: "APB1", 0xEC: "APB1", 0xF0: "APB2", 0xF4: "APB4"}
+
+    def bus_hz(self, reg):
+        bus = self.ENABLE_BUS[reg]
+        if bus == "APB1":
+            return self.pclk1_hz()
+        if bus == "APB2":
+            return self.pclk2_hz()
+        if bus == "APB4":
+            return self.pclk4_hz()
+        if bus == "APB3":
+            return self.hclk_hz() / self._apb_div((self.r[0x18] >> 4) & 7)
+        return self.hclk_hz()
 
     def apb1_timer_hz(self):
         """Timers on APB1 run at PCLK1, or twice PCLK1 when the APB1

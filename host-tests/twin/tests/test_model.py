@@ -361,9 +361,9 @@ class ClockGating(unittest.TestCase):
         bus.rcc = rcc
         bus.add(0x4001_3000, 0x400, object(), clock=(0xF0, 12, "SPI1"))
         with self.assertRaises(Stop):
-            bus._check_clock(0x4001_3000, 0x4001_3000, core.uc)
+            bus._check_clock(0x4001_3000, 0x4001_3000, core.uc, "read")
         rcc.write(0xF0, 4, 1 << 12)
-        bus._check_clock(0x4001_3000, 0x4001_3000, core.uc)
+        self.assertTrue(bus._check_clock(0x4001_3000, 0x4001_3000, core.uc, "read"))
 
 
 if __name__ == "__main__":
