@@ -35,9 +35,11 @@ class Machine:
     # built without __init__ (the tests' bare_machine) has them too.
     psize = PSIZE_X64        # the parallelism the product means (--psize; None: any)
     clock_drops_stop = True  # an access lost to the clock-enable delay stops the run
+    ecc = "double"           # what a broken flash word reads as (--ecc, flash.ECC_MODES)
 
     def __init__(self, elf_path, debugger=False, bank2=None, psize=PSIZE_X64,
-                 clock_drops_stop=True):
+                 clock_drops_stop=True, ecc="double"):
+        self.ecc = ecc
         self.debugger = debugger
         self.bank2 = bank2
         self.psize = psize
@@ -78,7 +80,7 @@ class Machine:
         self.pwr = bus.add(0x5802_4800, 0x400, system.Pwr())
         if getattr(self, "bank2", None) is None:
             self.bank2 = Bank2()  # kept across resets: see flash.py
-        self.flash = bus.add(0x5200_2000, 0x1000, FlashInterface(bus, nvic, self.bank2, self.psize))
+        self.flash = bus.add(0x5200_2000, 0x1000, FlashInterface(bus, nvic, self.bank2, self.psize, self.ecc))
         bus.add(BANK2_BASE, BANK2_SIZE, Bank2Window(self.flash))
         self.syscfg = bus.add(0x5800_0400, 0x400, system.Syscfg(), clock=(0xF4, 1, "SYSCFG"))
         self.exti = bus.add(0x5800_0000, 0x400, system.Exti(nvic))
@@ -409,6 +411,7 @@ def _stats(self):
         "flash_operations": self.bank2.ops,
         "flash_double_programs": self.bank2.double_programs,
         "flash_ecc_errors": self.bank2.ecc_errors,
+        "flash_ecc_mode": self.ecc,
         "flash_dma_reads": self.bank2.dma_reads,
         # Interrupts unpended while a write to their peripheral may still
         # be in the write buffer (no read-back, no DSB): see bus.posted_write.
