@@ -357,7 +357,7 @@ class FlashInterface:
         psize, want = self.psize(), self.intended_psize
         if want is not None and psize != want:
             raise ParallelismError(
-                f"FLASH_CR2.PSIZE = {psize:02b} ({PSIZE_NAMES[psize]}) when a {what} starts, "
+                f"FLASH_CR2.PSIZE = {psize:02b} ({PSIZE_NAMES[psize]}) when {'an' if what == 'erase' else 'a'} {what} starts, "
                 f"the product means {want:02b} ({PSIZE_NAMES[want]}): at the datasheet's maximum "
                 f"this {what} takes {self._duration(what, psize) / 1e3:g} ms instead of "
                 f"{self._duration(what, want) / 1e3:g} ms (h743twin --psize to change what is meant)")
