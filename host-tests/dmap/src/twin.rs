@@ -58,13 +58,19 @@ Faults (--fault KIND@BEAM[:ARG...], repeatable; beams count from 0 in raster ord
   halt@B:MS        a debugger halts the core for MS milliseconds at beam B
   wedge@B          the firmware wedges at beam B (interrupts off; the watchdog must reset it)
   drdy-miss@B      beam B raises no DRDY
+  pin-reset@B      NRST is pulled at beam B (RCC_RSR: PINRSTF)
+  bor@B            the supply dips below the brown-out threshold at beam B (BORRSTF, PINRSTF)
+  hardfault@B      the core takes a bus fault at beam B (HardFault; counted in `hardfaults`)
+  panic@B          the core is forced into core::panicking::panic at beam B (the firmware's
+                   own panic handler runs; a forced entry, not a fault silicon makes)
 
 A burst must end by the scan's last beam, a sync-miss falls on a row start, a
 sync-glitch mid-row. A run's model time (--start-ms, the beams at --beam-us, the
 faults' pauses, --settle-ms) is at most 600 s.
 
 Standard output: the bytes the firmware sent on its UART, as they come. Standard error: the model's
-counters as one JSON object (last line; `resets` lists watchdog resets). Needs python3
+counters as one JSON object (last line; `resets` lists the resets with their causes,
+`clock_enable_drops` the register accesses lost to a clock enable not yet in effect). Needs python3
 with unicorn 2.1.4 and pyelftools 0.33 (scripts/setup.sh installs them).";
 
 #[derive(Args, Clone, Debug)]

@@ -8,7 +8,7 @@ use std::path::Path;
 
 /// The fault kinds of the detector model and how many numbers follow the
 /// beam in each (`host-tests/twin/h743twin/detector.py`).
-pub const FAULT_KINDS: [(&str, usize); 11] = [
+pub const FAULT_KINDS: [(&str, usize); 15] = [
     ("gap", 1),
     ("burst", 2),
     ("sync-glitch", 0),
@@ -20,6 +20,10 @@ pub const FAULT_KINDS: [(&str, usize); 11] = [
     ("halt", 1),
     ("wedge", 0),
     ("drdy-miss", 0),
+    ("pin-reset", 0),
+    ("bor", 0),
+    ("hardfault", 0),
+    ("panic", 0),
 ];
 
 /// The most model time a run may take, in milliseconds: far beyond any
@@ -170,6 +174,10 @@ mod tests {
         assert_eq!(check_fault("burst@0:4:20.5", 2, 5).unwrap(), 0.0);
         assert_eq!(check_fault("halt@2:7.5", 2, 5).unwrap(), 7.5);
         assert!(check_fault("wedge@9", 2, 5).is_ok());
+        for kind in ["pin-reset", "bor", "hardfault", "panic"] {
+            assert!(check_fault(&format!("{kind}@3"), 2, 5).is_ok(), "{kind}");
+            assert!(check_fault(&format!("{kind}@3:1"), 2, 5).is_err(), "{kind}");
+        }
         assert!(check_fault("wedge@10", 2, 5).is_err());
         assert!(check_fault("gap@3", 2, 5).is_err());
         assert!(check_fault("wedge@3:1", 2, 5).is_err());

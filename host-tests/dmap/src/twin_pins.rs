@@ -10,7 +10,8 @@ use std::path::PathBuf;
 #[derive(Args, Clone, Debug)]
 pub struct PinArgs {
     /// Write the output pins' timeline to FILE (CSV:
-    /// us,pin,level,beam,row,read_end_us,read_beam; each edge with its
+    /// us,pin,level,beam,row,read_end_us,read_beam; level 0, 1 or z
+    /// (Hi-Z: not configured as an output); each edge with its
     /// model time in µs, the last beam whose DRDY came before it, and the
     /// end of the last frame read before it and its beam; -1 before the
     /// first)
@@ -48,12 +49,44 @@ impl PinArgs {
     }
 }
 
+/// A pin's level as the chip model records it: driven low, driven high,
+/// or Hi-Z (`"z"` in the counters: analog or input mode, every pin's state
+/// from a reset until the firmware makes it an output; what a PLC input
+/// then reads is its own pull).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Level {
+    Low,
+    High,
+    HiZ,
+}
+
+impl Level {
+    /// From the counters' `level`: 0, 1 or "z".
+    pub fn from_json(v: &serde_json::Value) -> Option<Level> {
+        match (v.as_u64(), v.as_str()) {
+            (Some(0), _) => Some(Level::Low),
+            (Some(1), _) => Some(Level::High),
+            (_, Some("z")) => Some(Level::HiZ),
+            _ => None,
+        }
+    }
+
+    /// As the timeline file writes it: 0, 1 or z.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Level::Low => "0",
+            Level::High => "1",
+            Level::HiZ => "z",
+        }
+    }
+}
+
 /// One recorded change of an output pin.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Edge {
     pub us: f64,
     pub pin: String,
-    pub level: u8,
+    pub level: Level,
     pub beam: i64,
     pub row: i64,
     /// When the last frame read before the edge ended (its last sample
@@ -81,7 +114,7 @@ pub fn edges(counters: &serde_json::Value) -> Vec<Edge> {
                     Some(Edge {
                         us: e["us"].as_f64()?,
                         pin: e["pin"].as_str()?.to_string(),
-                        level: u8::try_from(e["level"].as_u64()?).ok()?,
+                        level: Level::from_json(&e["level"])?,
                         beam: e["beam"].as_i64()?,
                         row: e["row"].as_i64()?,
                         read_end_us: e["read_end_us"].as_f64()?,
@@ -99,7 +132,13 @@ pub fn timeline_csv(edges: &[Edge]) -> String {
     for e in edges {
         s += &format!(
             "{:.3},{},{},{},{},{:.3},{}\n",
-            e.us, e.pin, e.level, e.beam, e.row, e.read_end_us, e.read_beam
+            e.us,
+            e.pin,
+            e.level.as_str(),
+            e.beam,
+            e.row,
+            e.read_end_us,
+            e.read_beam
         );
     }
     s
@@ -143,11 +182,36 @@ pub fn report(args: &PinArgs, counters: &serde_json::Value, uart: &[u8]) -> Resu
             err,
             "pin {} {} at {:.3} us after beam {} (row {}){read}",
             e.pin,
-            if e.level == 1 { "high" } else { "low" },
+            match e.level {
+                Level::High => "high",
+                Level::Low => "low",
+                Level::HiZ => "Hi-Z",
+            },
             e.us,
             e.beam,
             e.row
         );
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hi_z_is_a_level_of_its_own() {
+        let edge = |us: f64, level: serde_json::Value| {
+            serde_json::json!({"us": us, "pin": "READY", "level": level, "beam": -1,
+                               "row": -1, "read_end_us": -1, "read_beam": -1})
+        };
+        let c = serde_json::json!({"pins": [edge(0.0, "z".into()), edge(535.4, 1.into()),
+                                            edge(900.0, 0.into()), edge(901.0, "x".into())]});
+        let e = edges(&c);
+        let levels: Vec<Level> = e.iter().map(|e| e.level).collect();
+        assert_eq!(levels, [Level::HiZ, Level::High, Level::Low], "an unknown level is skipped");
+        let csv = timeline_csv(&e);
+        assert!(csv.contains("\n0.000,READY,z,-1,"), "{csv}");
+        assert!(csv.contains("\n535.400,READY,1,-1,"), "{csv}");
+    }
 }

@@ -22,7 +22,11 @@ fn counters(stderr: &[u8]) -> serde_json::Value {
     serde_json::from_str(last).unwrap_or_else(|e| panic!("no JSON counters ({e}) in:\n{err}"))
 }
 
-/// Recorded edges of `pin`: (µs, level, beam).
+/// A recorded level of Hi-Z (`"z"` in the counters: the pin is not an
+/// output, from power-on or a reset until the firmware configures it).
+const Z: u64 = 2;
+
+/// Recorded edges of `pin`: (µs, level, beam); a level is 0, 1 or [`Z`].
 fn edges(c: &serde_json::Value, pin: &str) -> Vec<(f64, u64, i64)> {
     c["pins"]
         .as_array()
@@ -32,7 +36,12 @@ fn edges(c: &serde_json::Value, pin: &str) -> Vec<(f64, u64, i64)> {
         .map(|e| {
             (
                 e["us"].as_f64().unwrap(),
-                e["level"].as_u64().unwrap(),
+                match dmap::twin_pins::Level::from_json(&e["level"]) {
+                    Some(dmap::twin_pins::Level::Low) => 0,
+                    Some(dmap::twin_pins::Level::High) => 1,
+                    Some(dmap::twin_pins::Level::HiZ) => Z,
+                    None => panic!("level {} of {e}", e["level"]),
+                },
                 e["beam"].as_i64().unwrap(),
             )
         })

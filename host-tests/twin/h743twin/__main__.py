@@ -9,7 +9,7 @@ import json
 import sys
 
 from .core import Stop
-from .flash import PSIZE_NAMES, Bank2, PowerCut
+from .flash import ECC_MODES, PSIZE_NAMES, Bank2, PowerCut
 from .usart_rx import parse_requests
 from .detector import Detector, Scan, parse_fault
 from .machine import Machine, cycles_of_ms
@@ -41,6 +41,10 @@ def main(argv=None):
                     help="a peripheral access within two bus clock cycles of its RCC enable is lost "
                          "on silicon: stop the run there (default) or drop it, count it "
                          "(clock_enable_drops) and go on")
+    ap.add_argument("--ecc", choices=ECC_MODES, default="double",
+                    help="what a flash word programmed twice or cut reads back as: a double ECC "
+                         "error (bus error, DBECCERR; default), a single one corrected into wrong "
+                         "data (SNECCERR, one bit flipped), or no error at all")
     args = ap.parse_args(argv)
 
     try:
@@ -59,7 +63,7 @@ def main(argv=None):
     try:
         psize = None if args.psize == "any" else PSIZE_NAMES.index(args.psize)
         m = Machine(args.elf, debugger=args.debugger, bank2=bank2, psize=psize,
-                    clock_drops_stop=args.clock_drops == "stop")
+                    clock_drops_stop=args.clock_drops == "stop", ecc=args.ecc)
     except Exception as e:  # noqa: BLE001
         print(f"h743twin: cannot load the ELF {args.elf}: {type(e).__name__}: {e}", file=sys.stderr)
         return 4

@@ -92,6 +92,13 @@ def program_us(psize):
     return PROGRAM_MAX_US[psize]
 
 
+# What a broken flash word (programmed twice, or cut while programming)
+# reads back as: a double error (DBECCERR, bus error: the default), a
+# single error that the ECC "corrects" into wrong data (SNECCERR), or
+# cells that pass the ECC unnoticed (nothing). h743twin --ecc.
+ECC_MODES = ("double", "single", "none")
+
+
 class ParallelismError(Stop):
     """An erase or program started with a PSIZE the product does not mean."""
 
@@ -183,8 +190,10 @@ class FlashInterface:
     """FLASH registers at 0x5200_2000: ACR, and bank 2's KEYR2, CR2, SR2,
     CCR2; and bank 2's memory window (`memory()`), which writes go through."""
 
-    def __init__(self, bus, nvic, bank, intended_psize=PSIZE_X64):
+    def __init__(self, bus, nvic, bank, intended_psize=PSIZE_X64, ecc="double"):
         self.bus = bus
+        # What a broken word (programmed twice, cut) reads as (ECC_MODES).
+        self.ecc = ecc
         # None: any parallelism is accepted (the run only times it).
         self.intended_psize = intended_psize
         self.nvic = nvic
@@ -238,6 +247,10 @@ class FlashInterface:
             pass  # SR2 is read-only: flags clear through CCR2
         elif off == 0x114:
             self.flags &= ~(value & CLEARABLE)
+            if value & (SNECCERR | DBECCERR):
+                # RM0433 FLASH_ECC_FA2R: the failing address is reset when
+                # its flag is cleared through CCR2.
+                self.far = 0
             self.update()
         else:
             raise KeyError
@@ -280,6 +293,8 @@ class FlashInterface:
         word = off // WORD
         if dma:
             self.bank.dma_reads += 1
+        if word in self.bank.bad_ecc and self.ecc != "double":
+            return self._mis_read(off, size, word)
         if word in self.bank.bad_ecc:
             self.flags |= DBECCERR
             self.far = word & 0x7FFF
@@ -292,6 +307,21 @@ class FlashInterface:
                            "(programmed twice, or cut while programming, since its erase)",
                            BANK2_BASE + off)
         return int.from_bytes(self.bank.data[off:off + size], "little")
+
+    def _mis_read(self, off, size, word):
+        """A broken word whose cells and ECC happen to differ by one bit
+        ("single": the ECC "corrects" it, wrongly: SNECCERR, ECC_FA2R, the
+        read completes with one bit flipped, bit 0 of the word's first
+        byte) or not at all ("none": the cells are read as they are)."""
+        value = int.from_bytes(self.bank.data[off:off + size], "little")
+        self.bank.ecc_errors += 1
+        if self.ecc == "single":
+            self.flags |= SNECCERR
+            self.far = word & 0x7FFF
+            self.update()
+            if off % WORD == 0:
+                value ^= 1
+        return value
 
     def mem_write(self, off, size, value):
         word = off // WORD
@@ -327,7 +357,7 @@ class FlashInterface:
         psize, want = self.psize(), self.intended_psize
         if want is not None and psize != want:
             raise ParallelismError(
-                f"FLASH_CR2.PSIZE = {psize:02b} ({PSIZE_NAMES[psize]}) when a {what} starts, "
+                f"FLASH_CR2.PSIZE = {psize:02b} ({PSIZE_NAMES[psize]}) when {'an' if what == 'erase' else 'a'} {what} starts, "
                 f"the product means {want:02b} ({PSIZE_NAMES[want]}): at the datasheet's maximum "
                 f"this {what} takes {self._duration(what, psize) / 1e3:g} ms instead of "
                 f"{self._duration(what, want) / 1e3:g} ms (h743twin --psize to change what is meant)")

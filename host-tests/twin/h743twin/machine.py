@@ -35,9 +35,11 @@ class Machine:
     # built without __init__ (the tests' bare_machine) has them too.
     psize = PSIZE_X64        # the parallelism the product means (--psize; None: any)
     clock_drops_stop = True  # an access lost to the clock-enable delay stops the run
+    ecc = "double"           # what a broken flash word reads as (--ecc, flash.ECC_MODES)
 
     def __init__(self, elf_path, debugger=False, bank2=None, psize=PSIZE_X64,
-                 clock_drops_stop=True):
+                 clock_drops_stop=True, ecc="double"):
+        self.ecc = ecc
         self.debugger = debugger
         self.bank2 = bank2
         self.psize = psize
@@ -63,6 +65,8 @@ class Machine:
         self.panics = 0
         self._build(system.POWER_ON_FLAGS)
         self.core.reset()
+        for name in RECORDED_PINS.values():  # at power-on, every pin is Hi-Z
+            self._record_pin(name, "z")
 
     # --- the chip's peripherals, built anew at every reset
     def _build(self, rsr):
@@ -78,7 +82,7 @@ class Machine:
         self.pwr = bus.add(0x5802_4800, 0x400, system.Pwr())
         if getattr(self, "bank2", None) is None:
             self.bank2 = Bank2()  # kept across resets: see flash.py
-        self.flash = bus.add(0x5200_2000, 0x1000, FlashInterface(bus, nvic, self.bank2, self.psize))
+        self.flash = bus.add(0x5200_2000, 0x1000, FlashInterface(bus, nvic, self.bank2, self.psize, self.ecc))
         bus.add(BANK2_BASE, BANK2_SIZE, Bank2Window(self.flash))
         self.syscfg = bus.add(0x5800_0400, 0x400, system.Syscfg(), clock=(0xF4, 1, "SYSCFG"))
         self.exti = bus.add(0x5800_0000, 0x400, system.Exti(nvic))
@@ -105,8 +109,7 @@ class Machine:
             clock=(0xE8, 18, "USART3"))
         self.gpio["D"].listeners.append(self._gpiod_changed)
         for port in {p for p, _ in RECORDED_PINS}:
-            self.gpio[port].listeners.append(
-                lambda pin, level, port=port: self._record_pin(port, pin, level))
+            self.gpio[port].observers.append(lambda port=port: self._observe(port))
         bus.posted = {}
         bus.irq_owner = {TIM12_IRQ: 0x4000_1800, TIM13_IRQ: 0x4000_1C00, TIM14_IRQ: 0x4000_2000, 35: 0x4001_3000,
                          39: 0x4000_4800, FLASH_IRQ: 0x5200_2000, **{irq: 0x4002_0000 for irq in STREAM_IRQS}}
@@ -115,12 +118,21 @@ class Machine:
         if pin == 14 and self.detector:
             self.detector.chip_select(level)
 
-    def _record_pin(self, port, pin, level):
-        name = RECORDED_PINS.get((port, pin))
-        if name:
-            beam = self.detector.beam if self.detector else -1
-            read_end = getattr(self.detector, "read_end", (-1, -1))
-            self.pin_edges.append((self.core.cycles, name, level, beam, read_end))
+    def _observe(self, port):
+        """Records every change of a recorded pin's level (0, 1, "z")."""
+        for (p, pin), name in RECORDED_PINS.items():
+            if p == port:
+                self._record_pin(name, self.gpio[port].level(pin))
+
+    def _record_pin(self, name, level):
+        last = self.__dict__.setdefault("pin_level", {})
+        if last.get(name, "none") == level:
+            return
+        last[name] = level
+        det = self.detector
+        beam = det.beam if det else -1
+        read_end = getattr(det, "read_end", (-1, -1))
+        self.__dict__.setdefault("pin_edges", []).append((self.core.cycles, name, level, beam, read_end))
 
     def start_profile(self):
         """Counts instructions per function from now on."""
@@ -193,14 +205,10 @@ class Machine:
 
     def reset(self, cause):
         self.resets.append((cause, self.core.cycles))
-        # A reset returns every pin to an input: a driven-high output falls
-        # (to the level of the receiver's pull-down).
-        for (port, pin), name in RECORDED_PINS.items():
-            g = self.gpio[port]
-            if g.mode(pin) == 1 and g.r[0x14] >> pin & 1:
-                det = self.detector
-                self.pin_edges.append((self.core.cycles, name, 0, det.beam if det else -1,
-                                       getattr(det, "read_end", (-1, -1))))
+        # A reset returns every pin to analog mode: Hi-Z until the firmware
+        # makes it an output again (what the PLC then reads is its pull).
+        for name in RECORDED_PINS.values():
+            self._record_pin(name, "z")
         # The flags add to those not yet cleared (RMVF): RCC_RSR is reset
         # by a power-on reset only.
         flags = system.RESET_FLAGS[cause] | self.rcc.r[0xD0]
@@ -409,6 +417,7 @@ def _stats(self):
         "flash_operations": self.bank2.ops,
         "flash_double_programs": self.bank2.double_programs,
         "flash_ecc_errors": self.bank2.ecc_errors,
+        "flash_ecc_mode": self.ecc,
         "flash_dma_reads": self.bank2.dma_reads,
         # Interrupts unpended while a write to their peripheral may still
         # be in the write buffer (no read-back, no DSB): see bus.posted_write.

@@ -40,6 +40,8 @@ def main(argv=None):
         problems.append(f"only {s['watchdog_feeds']} watchdog feeds in {RUN_MS} ms")
     if not s["iwdg_frozen_in_debug"]:
         problems.append("the watchdog is not frozen under a debugger (DBGMCU_APB4FZ1.IWDG1)")
+    if s["hardfaults"] or s["lockups"]:
+        problems.append(f"{s['hardfaults']} HardFault(s), {s['lockups']} lockup(s): {s['fault']}")
     if s["sysclk_hz"] != 400e6:
         problems.append(f"core clock {s['sysclk_hz'] / 1e6} MHz, not 400")
     print(f"smoke: {argv[0]}: {s['instructions']} instructions in {RUN_MS} ms, "

@@ -304,6 +304,7 @@ class Gpio(Registers):
             self.r.update(reset)
         self.inputs = 0
         self.listeners = []  # fn(pin, level) on output changes
+        self.observers = []  # fn() after every write (the pins' levels may change)
 
     def read(self, off, size):
         if off & ~3 == 0x10:
@@ -333,6 +334,21 @@ class Gpio(Registers):
             if (before ^ after) >> pin & 1:
                 for fn in self.listeners:
                     fn(pin, after >> pin & 1)
+        for fn in self.observers:
+            fn()
+
+    def level(self, pin):
+        """What the pin drives (RM0433 §11.3): its ODR bit while MODER makes
+        it a general-purpose output (01), except a 1 in open-drain (OTYPER)
+        which only releases the line; "z" (Hi-Z) otherwise: input and
+        analog modes (analog, 11, is every pin's reset state but the debug
+        pins') drive nothing. Alternate functions are not recorded pins."""
+        if self.mode(pin) != 1:
+            return "z"
+        bit = self.r[0x14] >> pin & 1
+        if bit and self.r[0x04] >> pin & 1:
+            return "z"
+        return bit
 
     def mode(self, pin):
         return (self.r[0] >> (2 * pin)) & 3

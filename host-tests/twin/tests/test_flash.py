@@ -17,7 +17,8 @@ from test_model import run_until, world
 KEYR2, CR2, SR2, CCR2 = 0x104, 0x10C, 0x110, 0x114
 LOCK, PG, SER, FW, START = 1, 2, 4, 1 << 6, 1 << 7
 BSY, WBNE, QW, EOP = 1, 2, 4, 1 << 16
-PGSERR, INCERR, DBECCERR = 1 << 18, 1 << 21, 1 << 26
+PGSERR, INCERR, SNECCERR, DBECCERR = 1 << 18, 1 << 21, 1 << 25, 1 << 26
+FA2R = 0x160
 EOPIE = 1 << 16
 X64 = 3 << 4  # CR2.PSIZE: the product's parallelism (the model's default)
 PROGRAM = round(flash.program_us(3) * 400)   # cycles at 400 MHz
@@ -300,6 +301,61 @@ class Parallelism(unittest.TestCase):
         f = FlashInterface(self.bus, self.core.nvic, self.bank)
         self.assertEqual(f.intended_psize, 3)
         self.assertEqual(flash.CR_RESET >> 4 & 3, 3, "PSIZE's reset value is x64 too")
+
+
+class BrokenWords(unittest.TestCase):
+    """RM0433 §4 (FLASH error correction code): each 256-bit flash word
+    carries an ECC that corrects a single error and detects a double one.
+    A single error is corrected on the fly: the read completes, SNECCERR
+    is set and FLASH_ECC_FAxR records the word (an interrupt with
+    SNECCERRIE); a double error sets DBECCERR, records the word, and the
+    read gets a bus error. The failing-address field "is reset when the
+    flag error ... is reset" through CCR (CLR_SNECCERR/CLR_DBECCERR).
+    A word programmed twice or cut mid-program has cells and ECC that
+    disagree by any number of bits: it can read as a double error, as a
+    single error "corrected" into wrong data (the correction flips a bit
+    that was right), or pass unnoticed. `--ecc` picks which."""
+
+    def flash(self, ecc):
+        bus, core = world()
+        bank = Bank2()
+        bank.data[0x40:0x44] = bytes.fromhex("78563412")
+        bank.programmed.add(2)
+        bank.bad_ecc.add(2)
+        return FlashInterface(bus, core.nvic, bank, ecc=ecc), bank
+
+    def test_double_is_a_bus_error(self):
+        f, bank = self.flash("double")
+        with self.assertRaises(Stop):
+            f.mem_read(0x40, 4)
+        self.assertEqual((f.read(SR2, 4) & (SNECCERR | DBECCERR), f.read(FA2R, 4)), (DBECCERR, 2))
+
+    def test_single_corrects_into_wrong_data(self):
+        f, bank = self.flash("single")
+        self.assertEqual(f.mem_read(0x40, 4), 0x1234_5679, "one bit flipped, no bus error")
+        self.assertEqual(f.mem_read(0x44, 4), 0xFFFF_FFFF, "the rest of the word as its cells")
+        self.assertEqual((f.read(SR2, 4) & (SNECCERR | DBECCERR), f.read(FA2R, 4)), (SNECCERR, 2))
+        self.assertEqual(f.mem_read(0x40, 4, dma=True), 0x1234_5679, "DMA reads the same")
+
+    def test_none_reads_the_cells_without_a_flag(self):
+        f, bank = self.flash("none")
+        self.assertEqual(f.mem_read(0x40, 4), 0x1234_5678)
+        self.assertEqual((f.read(SR2, 4), f.read(FA2R, 4)), (0, 0))
+
+    def test_clearing_the_flag_clears_the_failing_address(self):
+        for ecc, flag in (("single", SNECCERR), ("double", DBECCERR)):
+            f, bank = self.flash(ecc)
+            try:
+                f.mem_read(0x40, 4)
+            except Stop:
+                pass
+            self.assertEqual(f.read(FA2R, 4), 2, "read it before clearing the flag")
+            f.write(CCR2, 4, flag)
+            self.assertEqual((f.read(SR2, 4), f.read(FA2R, 4)), (0, 0), ecc)
+
+    def test_the_default_is_a_double_error(self):
+        bus, core = world()
+        self.assertEqual(FlashInterface(bus, core.nvic, Bank2()).ecc, "double")
 
 
 if __name__ == "__main__":

@@ -23,6 +23,7 @@ class Pins(unittest.TestCase):
         e.write(MODER, 4, (e.read(MODER, 4) & ~(0xF << 26)) | (0b0101 << 26))
         b = m.gpio["B"]
         b.write(MODER, 4, (b.read(MODER, 4) & ~0b11) | 0b01)
+        m.pin_edges.clear()  # the z -> 0 of each new output (see HiZ)
 
     def edges(self):
         return [(name, level, beam) for _, name, level, beam, _ in self.m.pin_edges]
@@ -48,8 +49,40 @@ class Pins(unittest.TestCase):
         self.m.core.cycles = 8000
         self.m.core.reset = lambda: None
         self.m.reset("watchdog")
-        self.assertEqual(self.edges(), [("READY", 0, 41)])
+        # Every recorded output goes Hi-Z (LD3, PB14, was never an output).
+        self.assertEqual(self.edges(), [("READY", "z", 41), ("REJECT", "z", 41), ("LD1", "z", 41)])
         self.assertEqual(self.m.pin_edges[0][0], 8000)
+
+
+class HiZ(unittest.TestCase):
+    def setUp(self):
+        m = bare_machine()
+        m.pin_edges = []
+        m.resets = []
+        m.detector = types.SimpleNamespace(beam=-1)
+        self.m = m
+
+    def levels(self, name):
+        return [level for _, n, level, _, _ in self.m.pin_edges if n == name]
+
+    def test_a_pin_is_z_until_its_moder_makes_it_an_output(self):
+        e = self.m.gpio["E"]
+        self.m._observe("E")
+        self.assertEqual(self.levels("READY"), ["z"], "analog at reset")
+        e.write(BSRR, 4, 1 << 14)  # ODR set first: still not driven
+        self.assertEqual(self.levels("READY"), ["z"])
+        e.write(MODER, 4, (e.read(MODER, 4) & ~(3 << 28)) | (1 << 28))
+        self.assertEqual(self.levels("READY"), ["z", 1], "output: the ODR level")
+        e.write(MODER, 4, e.read(MODER, 4) & ~(3 << 28))  # input mode
+        self.assertEqual(self.levels("READY"), ["z", 1, "z"])
+
+    def test_open_drain_high_is_z(self):
+        e = self.m.gpio["E"]
+        e.write(0x04, 4, 1 << 13)  # OTYPER: open-drain
+        e.write(MODER, 4, (e.read(MODER, 4) & ~(3 << 26)) | (1 << 26))
+        e.write(BSRR, 4, 1 << 13)
+        e.write(BSRR, 4, 1 << (16 + 13))
+        self.assertEqual(self.levels("REJECT"), ["z", 0, "z", 0])
 
 
 if __name__ == "__main__":
