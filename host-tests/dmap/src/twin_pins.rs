@@ -209,7 +209,11 @@ mod tests {
                                             edge(900.0, 0.into()), edge(901.0, "x".into())]});
         let e = edges(&c);
         let levels: Vec<Level> = e.iter().map(|e| e.level).collect();
-        assert_eq!(levels, [Level::HiZ, Level::High, Level::Low], "an unknown level is skipped");
+        assert_eq!(
+            levels,
+            [Level::HiZ, Level::High, Level::Low],
+            "an unknown level is skipped"
+        );
         let csv = timeline_csv(&e);
         assert!(csv.contains("\n0.000,READY,z,-1,"), "{csv}");
         assert!(csv.contains("\n535.400,READY,1,-1,"), "{csv}");

@@ -37,10 +37,11 @@ def main(argv=None):
                     help="the flash parallelism (FLASH_CR2.PSIZE) the firmware means: an erase or "
                          "program started with another stops the run (default x64, the fastest "
                          "the 3.3 V supply allows; any: no check)")
-    ap.add_argument("--clock-drops", choices=["stop", "count"], default="stop",
+    ap.add_argument("--clock-drops", choices=["stop", "count", "keep"], default="stop",
                     help="a peripheral access within two bus clock cycles of its RCC enable is lost "
-                         "on silicon: stop the run there (default) or drop it, count it "
-                         "(clock_enable_drops) and go on")
+                         "on silicon: stop the run there (default), drop it, count it "
+                         "(clock_enable_drops) and go on, or count it and let it through (keep: "
+                         "to see an earlier firmware's other faults)")
     ap.add_argument("--ecc", choices=ECC_MODES, default="double",
                     help="what a flash word programmed twice or cut reads back as: a double ECC "
                          "error (bus error, DBECCERR; default), a single one corrected into wrong "
@@ -67,6 +68,7 @@ def main(argv=None):
     except Exception as e:  # noqa: BLE001
         print(f"h743twin: cannot load the ELF {args.elf}: {type(e).__name__}: {e}", file=sys.stderr)
         return 4
+    m.bus.clock_drops_keep = args.clock_drops == "keep"
     try:
         scan = Scan.read_raw(args.scan) if args.scan else None
     except Exception as e:  # noqa: BLE001

@@ -78,6 +78,9 @@ class Bus:
         self.enabling = {}
         self.clock_drops = []
         self.clock_drops_stop = True  # a drop stops the run (h743twin --clock-drops)
+        # An access within the delay is counted but let through (`keep`:
+        # to see what else an earlier firmware does, past this rule).
+        self.clock_drops_keep = False
 
     def add(self, base, size, model, clock=None):
         """`clock`: (RCC enable register offset, bit, name) that must be set
@@ -115,6 +118,8 @@ class Bus:
         if value is not None:
             drop["value"] = value
         self.clock_drops.append(drop)
+        if self.clock_drops_keep:
+            return True
         if self.clock_drops_stop:
             raise Stop(f"clock-enable delay: {access} of {name}_{drop['register']} ({addr:#010x}"
                        + (f" <- {value:#x}" if value is not None else "")

@@ -114,6 +114,15 @@ class ClockEnableDelay(unittest.TestCase):
         self.assertIn("TIM14_PSC", str(bus.error))
         self.assertIn("2 cycles after its RCC enable", str(bus.error))
 
+    def test_keep_counts_the_access_and_lets_it_through(self):
+        # `--clock-drops keep`: an earlier firmware's other faults can be
+        # seen past this one (tests/twin_failsafe.rs's FAILSAFE_MODEL_ARGS).
+        bus, core, tim = machine(b"")
+        bus.clock_drops_keep = True
+        core.run_until(2_000)
+        self.assertEqual(tim.psc, 199)
+        self.assertEqual(len(bus.clock_drops), 1)
+
 
 if __name__ == "__main__":
     unittest.main()
