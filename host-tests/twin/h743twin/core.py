@@ -401,8 +401,8 @@ class Core:
         pc = uc.reg_read(UC_ARM_REG_PC)
         if intno == 1:  # undefined instruction
             self.take_fault(pc, CFSR_UNDEFINSTR, f"undefined instruction at {pc:#010x}")
-        else:
-            raise Stop(f"CPU exception {intno} at {pc:#010x} is not modelled")
+        else:  # (never raise from a hook: the bus carries it out of emu_start)
+            self.bus._fail(Stop(f"CPU exception {intno} at {pc:#010x} is not modelled"))
         self.request_check()
 
     # --- faults

@@ -64,5 +64,14 @@ class ResetFlags(unittest.TestCase):
         self.assertEqual(bytes(m.core.uc.mem_read(0x2400_0000, 4)), b"kept")
 
 
+class Events(unittest.TestCase):
+    def test_reset_and_fault_events_are_beam_counted_kinds(self):
+        from h743twin.detector import parse_fault
+        for kind in ("pin-reset", "bor", "hardfault", "panic"):
+            self.assertEqual(parse_fault(f"{kind}@7"), (kind, 7, []))
+            with self.assertRaises(ValueError):
+                parse_fault(f"{kind}@7:1")
+
+
 if __name__ == "__main__":
     unittest.main()
