@@ -178,9 +178,18 @@ pub fn report(args: &PinArgs, counters: &serde_json::Value, uart: &[u8]) -> Resu
             .after_read_us()
             .map(|d| format!(", {d:.1} us after beam {}'s read", e.read_beam))
             .unwrap_or_default();
+        // What a PLC input that reads low when undriven makes of it:
+        // READY active high, REJECT active low (docs/firmware.md).
+        let reads_high = e.level == Level::High;
+        let meaning = match (e.pin.as_str(), reads_high) {
+            ("READY", true) => "ready",
+            ("READY", false) => "not ready",
+            (_, true) => "pass",
+            (_, false) => "reject",
+        };
         let _ = writeln!(
             err,
-            "pin {} {} at {:.3} us after beam {} (row {}){read}",
+            "pin {} {} ({meaning}) at {:.3} us after beam {} (row {}){read}",
             e.pin,
             match e.level {
                 Level::High => "high",

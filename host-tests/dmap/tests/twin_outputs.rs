@@ -22,30 +22,69 @@ fn counters(stderr: &[u8]) -> serde_json::Value {
     serde_json::from_str(last).unwrap_or_else(|e| panic!("no JSON counters ({e}) in:\n{err}"))
 }
 
-/// A recorded level of Hi-Z (`"z"` in the counters: the pin is not an
-/// output, from power-on or a reset until the firmware configures it).
-const Z: u64 = 2;
+/// Whether `pin` at a recorded level is asserted as a PLC input reads
+/// it: Hi-Z reads low (the input's pull-down); READY and the LEDs are
+/// asserted (lit) high, REJECT low (docs/firmware.md, "Fail-safe").
+fn asserted(pin: &str, level: &serde_json::Value) -> bool {
+    let high = matches!(
+        dmap::twin_pins::Level::from_json(level),
+        Some(dmap::twin_pins::Level::High)
+    );
+    assert!(
+        dmap::twin_pins::Level::from_json(level).is_some(),
+        "level {level}"
+    );
+    if pin == "REJECT" { !high } else { high }
+}
 
-/// Recorded edges of `pin`: (µs, level, beam); a level is 0, 1 or [`Z`].
+/// The changes of `pin`'s asserted state after power-on: (µs, 1 when
+/// asserted, beam). Every pin is Hi-Z at power-on (READY not ready,
+/// REJECT reject, the LEDs dark); a level that reads as the one before
+/// (Hi-Z, then driven low) is no change.
 fn edges(c: &serde_json::Value, pin: &str) -> Vec<(f64, u64, i64)> {
-    c["pins"]
+    let mut now = asserted(pin, &serde_json::json!("z"));
+    let mut out = Vec::new();
+    for e in c["pins"]
         .as_array()
         .expect("pins in the counters")
         .iter()
         .filter(|e| e["pin"] == pin)
-        .map(|e| {
-            (
+    {
+        let a = asserted(pin, &e["level"]);
+        if a != now {
+            out.push((
                 e["us"].as_f64().unwrap(),
-                match dmap::twin_pins::Level::from_json(&e["level"]) {
-                    Some(dmap::twin_pins::Level::Low) => 0,
-                    Some(dmap::twin_pins::Level::High) => 1,
-                    Some(dmap::twin_pins::Level::HiZ) => Z,
-                    None => panic!("level {} of {e}", e["level"]),
-                },
+                a as u64,
                 e["beam"].as_i64().unwrap(),
-            )
-        })
-        .collect()
+            ));
+            now = a;
+        }
+    }
+    out
+}
+
+/// The same from a `--pins` CSV: its rows where `pin`'s asserted state
+/// changes, the level field replaced by 1 (asserted) or 0.
+fn csv_changes(csv: &str, pin: &str) -> Vec<Vec<String>> {
+    let mut now = asserted(pin, &serde_json::json!("z"));
+    let mut out = Vec::new();
+    for l in csv.lines().skip(1) {
+        let mut f: Vec<String> = l.split(',').map(str::to_string).collect();
+        if f[1] != pin {
+            continue;
+        }
+        let level = match f[2].as_str() {
+            "z" => serde_json::json!("z"),
+            v => serde_json::json!(v.parse::<u64>().unwrap()),
+        };
+        let a = asserted(pin, &level);
+        if a != now {
+            f[2] = (a as u8).to_string();
+            out.push(f);
+            now = a;
+        }
+    }
+    out
 }
 
 /// The verdicts of the end lines, in order.
@@ -139,8 +178,12 @@ fn five_good_parts_never_reject_and_ready_stays_up() {
     assert_eq!(ready.len(), 1, "{ready:?}");
     assert_eq!((ready[0].1, ready[0].2), (1, -1));
     assert_eq!(edges(&c, "LD1").len(), 1);
-    assert!(edges(&c, "REJECT").is_empty(), "{:?}", edges(&c, "REJECT"));
-    assert!(edges(&c, "LD3").is_empty());
+    // REJECT reads "reject" (Hi-Z, then driven low) until the firmware's
+    // start releases it, and never again; LD3 lit for that time.
+    let reject: Vec<(u64, i64)> = edges(&c, "REJECT").iter().map(|e| (e.1, e.2)).collect();
+    assert_eq!(reject, [(0, -1)]);
+    let ld3: Vec<(u64, i64)> = edges(&c, "LD3").iter().map(|e| (e.1, e.2)).collect();
+    assert_eq!(ld3, [(1, -1), (0, -1)]);
 }
 
 /// A fault in the first of three parts at beam `at`: READY drops within
@@ -169,7 +212,11 @@ fn fault_drops_ready_until_a_clean_scan(fault: &str, at: i64, verdict: &str) {
         "{fault}: {ready:?}"
     );
     let reject = edges(&c, "REJECT");
-    let r: Vec<(u64, i64)> = reject.iter().map(|e| (e.1, e.2)).collect();
+    // After the start's release (before the first beam).
+    let after_start = |e: &[(f64, u64, i64)]| -> Vec<(u64, i64)> {
+        e.iter().filter(|x| x.2 >= 0).map(|x| (x.1, x.2)).collect()
+    };
+    let r = after_start(&reject);
     assert_eq!(r, [(1, b - 1), (0, b)], "{fault}");
     // The pins agree with each scan's verdict at its end.
     for (k, v) in verdicts(&out).iter().enumerate() {
@@ -184,7 +231,7 @@ fn fault_drops_ready_until_a_clean_scan(fault: &str, at: i64, verdict: &str) {
     // The LEDs mirror the pins edge for edge.
     let times = |e: Vec<(f64, u64, i64)>| e.iter().map(|x| (x.1, x.2)).collect::<Vec<_>>();
     assert_eq!(times(edges(&c, "LD1")), times(ready), "{fault}");
-    assert_eq!(times(edges(&c, "LD3")), r, "{fault}");
+    assert_eq!(after_start(&edges(&c, "LD3")), r, "{fault}");
 }
 
 #[test]
@@ -223,14 +270,22 @@ fn reset_mid_scan_rejects_the_part_and_ready_waits_for_a_clean_scan() {
         "{text}"
     );
     let ready = edges(&c, "READY");
-    let reject = edges(&c, "REJECT");
+    // After the start's release of REJECT (before the first beam).
+    let reject: Vec<(f64, u64, i64)> = edges(&c, "REJECT")
+        .into_iter()
+        .filter(|e| e.2 >= 0)
+        .collect();
     // Up at power-on, down with the reset, up again once.
     let levels: Vec<u64> = ready.iter().map(|e| e.1).collect();
     assert_eq!(levels, [1, 0, 1], "{ready:?}");
     assert!((ready[1].0 - reset_us).abs() < 1.0, "{ready:?} {reset_us}");
-    // REJECT goes up at the restart, before any scan ends after it.
+    // REJECT reads "reject" from the reset on (Hi-Z, then driven low at
+    // the restart), before any scan ends after it.
     assert_eq!(reject[0].1, 1, "{reject:?}");
-    assert!(reject[0].0 > reset_us && reject[0].2 > 13, "{reject:?}");
+    assert!(
+        (reject[0].0 - reset_us).abs() < 1.0 && reject[0].2 > 13,
+        "{reject:?}"
+    );
     // The part in progress at the reset has no end line; READY comes back
     // with the first end line after it that is not a fault, and only then.
     let v = verdicts(&out);
@@ -298,27 +353,32 @@ fn demo_part_is_rejected_at_the_scans_end() {
     let text = String::from_utf8_lossy(&host.stdout);
     assert_eq!(text.lines().filter(|l| l.starts_with("O,")).count(), 2);
     let csv = std::fs::read_to_string(&pins).unwrap();
-    let rows: Vec<Vec<&str>> = csv
-        .lines()
-        .skip(1)
-        .map(|l| l.split(',').collect())
-        .collect();
-    let of =
-        |pin: &str| -> Vec<Vec<&str>> { rows.iter().filter(|r| r[1] == pin).cloned().collect() };
-    let ready = of("READY");
+    // Changes of the asserted states (1: asserted), once the start has
+    // set the pins (beam -1: before the first beam).
+    let of = |pin: &str| -> Vec<Vec<String>> {
+        csv_changes(&csv, pin)
+            .into_iter()
+            .filter(|r| r[3] != "-1")
+            .collect()
+    };
+    let ready = csv_changes(&csv, "READY");
     assert_eq!(ready.len(), 1, "{csv}");
-    assert_eq!((ready[0][2], ready[0][3]), ("1", "-1"));
+    assert_eq!((ready[0][2].as_str(), ready[0][3].as_str()), ("1", "-1"));
     let reject = of("REJECT");
     assert_eq!(reject.len(), 1, "{csv}");
     // After the last beam (39 x 39), in the last row.
     assert_eq!(
-        (reject[0][2], reject[0][3], reject[0][4]),
+        (
+            reject[0][2].as_str(),
+            reject[0][3].as_str(),
+            reject[0][4].as_str()
+        ),
         ("1", "1520", "38")
     );
     // The summary on standard error.
     let err = String::from_utf8_lossy(&twin.stderr);
     assert!(err.contains("scan 1: verdict obj"), "{err}");
-    assert!(err.contains("pin REJECT high at"), "{err}");
+    assert!(err.contains("pin REJECT low (reject) at"), "{err}");
     let us: f64 = reject[0][0].parse().unwrap();
     // The last beam's DRDY: 20 ms after reset, then 1 520 periods of 53 µs.
     let latency = us - (20_000.0 + 1520.0 * 53.0);
@@ -370,11 +430,10 @@ fn demo_in_row_mode_pulses_once_per_object() {
         .collect();
     assert_eq!(last_rows.len(), 2, "{text}");
     let csv = std::fs::read_to_string(&pins).unwrap();
-    let reject: Vec<(f64, u8, i64, f64, i64)> = csv
-        .lines()
-        .skip(1)
-        .map(|l| l.split(',').collect::<Vec<_>>())
-        .filter(|f| f[1] == "REJECT")
+    // REJECT's asserted state (1: asserted, its pin low), after the start.
+    let reject: Vec<(f64, u8, i64, f64, i64)> = csv_changes(&csv, "REJECT")
+        .into_iter()
+        .filter(|f| f[3] != "-1")
         .map(|f| {
             (
                 f[0].parse().unwrap(),
@@ -441,11 +500,9 @@ fn a_15x15_part_is_rejected_within_a_beam_period_of_its_last_read() {
     ]);
     assert_eq!(verdicts(&twin.stdout), ["obj"]);
     let csv = std::fs::read_to_string(&pins).unwrap();
-    let up: Vec<Vec<&str>> = csv
-        .lines()
-        .skip(1)
-        .map(|l| l.split(',').collect())
-        .filter(|f: &Vec<&str>| f[1] == "REJECT" && f[2] == "1")
+    let up: Vec<Vec<String>> = csv_changes(&csv, "REJECT")
+        .into_iter()
+        .filter(|f| f[2] == "1" && f[3] != "-1")
         .collect();
     assert_eq!(up.len(), 1, "{csv}");
     assert_eq!(up[0][6], "1999", "{csv}");
