@@ -3,8 +3,10 @@
 //! the register ledger: docs/registers.md, "FLASH bank 2").
 //!
 //! The code runs from bank 1, which stays readable while bank 2 erases or
-//! programs, and every wait for bank 2 yields to the executor: the scoring
-//! task keeps scoring (and feeding the watchdog) through a save.
+//! programs, and every wait for an operation is an interrupt: the scoring task
+//! keeps scoring (and feeding the watchdog) through a save, and the core
+//! sleeps when it has nothing else to do: an operation's end (EOP, or an
+//! error) raises the FLASH interrupt, which wakes the waiting task.
 //!
 //! - Program: unlock FLASH_KEYR2 (only when CR2 is locked: a key written
 //!   to an unlocked bank is a bus error), clear the errors through
@@ -25,7 +27,13 @@
 use core::sync::atomic::{Ordering, compiler_fence};
 
 use cvm_fw_app::flash_words::{Fault, FlashWords, WORD};
+use core::future::poll_fn;
+use core::task::Poll;
+
 use embassy_futures::yield_now;
+use embassy_stm32::interrupt;
+use embassy_stm32::interrupt::InterruptExt;
+use embassy_sync::waitqueue::AtomicWaker;
 use embassy_stm32::Peri;
 use embassy_stm32::pac;
 use embassy_stm32::pac::dma::vals::{Dir, Dmdis, Fth, Pl, Size};
@@ -103,6 +111,11 @@ impl Bank2 {
             return None;
         }
         enable_clock(pac::RCC.ahb1enr(), |w| w.set_dma1en(true));
+        // The lowest priority: an operation's end can wait for anything.
+        interrupt::FLASH.set_priority(interrupt::Priority::P7);
+        // SAFETY: the handler touches only FLASH_CR2's interrupt enables
+        // and DONE.
+        unsafe { interrupt::FLASH.enable() };
         pac::DMAMUX1
             .ccr(STREAM)
             .write(|w| w.set_dmareq_id(REQ_NONE));
@@ -204,6 +217,48 @@ fn clear_ecc() {
         .write_value(pac::flash::regs::Ccr(DBECCERR | SNECCERR));
 }
 
+/// Wakes the task waiting for bank 2's operation (the FLASH interrupt).
+static DONE: AtomicWaker = AtomicWaker::new();
+
+/// The end of an operation (EOP) or its error: the interrupt sources are
+/// masked again (the flags stay for `finish` to read) and the waiting task
+/// woken. A flash word takes up to 200 µs at x64 and a sector erase up to
+/// 2 s: waiting on the interrupt, the executor runs the other tasks or
+/// sleeps meanwhile, where a loop of `yield_now` would poll for the whole
+/// erase.
+#[interrupt]
+fn FLASH() {
+    pac::FLASH.bank(1).cr().modify(|w| done_interrupts(w, false));
+    DONE.wake();
+}
+
+fn done_interrupts(w: &mut pac::flash::regs::Cr, on: bool) {
+    w.set_eopie(on);
+    w.set_wrperrie(on);
+    w.set_pgserrie(on);
+    w.set_strberrie(on);
+    w.set_incerrie(on);
+    w.set_operrie(on);
+}
+
+/// Whether bank 2 is erasing or programming (`main` sleeps while it is).
+pub fn busy() -> bool {
+    pac::FLASH.bank(1).sr().read().0 & (QW | BSY) != 0
+}
+
+/// Until no operation is queued or running.
+async fn idle() {
+    poll_fn(|cx| {
+        DONE.register(cx.waker());
+        if busy() {
+            Poll::Pending
+        } else {
+            Poll::Ready(())
+        }
+    })
+    .await
+}
+
 /// Unlocks CR2 (when locked) and waits until no operation is queued.
 async fn begin() {
     let bank = pac::FLASH.bank(1);
@@ -211,7 +266,9 @@ async fn begin() {
         bank.keyr().write_value(0x4567_0123);
         bank.keyr().write_value(0xCDEF_89AB);
     }
-    while bank.sr().read().qw() {
+    // Nothing runs here (`finish` waited for every operation): a poll,
+    // not the interrupt, which is off between operations.
+    while busy() {
         yield_now().await;
     }
     bank.ccr().write_value(pac::flash::regs::Ccr(CLEAR_ALL));
@@ -223,17 +280,15 @@ async fn begin() {
 /// as an error: PG must not be cleared over it.
 async fn finish() -> u32 {
     let bank = pac::FLASH.bank(1);
-    let idle = || bank.sr().read().0 & (QW | BSY) == 0;
-    while !idle() {
-        yield_now().await;
-    }
+    idle().await;
     let mut partial = 0;
     if bank.sr().read().0 & WBNE != 0 {
         partial = WBNE;
-        bank.cr().modify(|w| w.set_fw(true));
-        while !idle() {
-            yield_now().await;
-        }
+        bank.cr().modify(|w| {
+            w.set_fw(true);
+            done_interrupts(w, true);
+        });
+        idle().await;
     }
     let errors = bank.sr().read().0 & OP_ERRORS | partial;
     bank.ccr().write_value(pac::flash::regs::Ccr(CLEAR_ALL));
@@ -267,6 +322,7 @@ impl FlashWords for Bank2 {
         bank.cr().write(|w| {
             w.set_pg(true);
             w.set_psize(PSIZE);
+            done_interrupts(w, true);
         });
         cortex_m::asm::dsb();
         let dst = (self.base + offset) as *mut u32;
@@ -292,11 +348,13 @@ impl FlashWords for Bank2 {
             w.set_ser(true);
             w.set_psize(PSIZE);
             w.set_snb(snb);
+            done_interrupts(w, true);
         });
         bank.cr().write(|w| {
             w.set_ser(true);
             w.set_psize(PSIZE);
             w.set_snb(snb);
+            done_interrupts(w, true);
             w.set_start(true);
         });
         cortex_m::asm::dsb();

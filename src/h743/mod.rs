@@ -158,7 +158,7 @@ fn main() -> ! {
 }
 
 /// Runs `f` to its end before the executor starts, feeding the watchdog
-/// each time it waits (every flash wait of the store yields).
+/// each time it waits (the store's flash waits return to here).
 fn block_on_fed<F: core::future::Future>(
     f: F,
     wdg: &mut IndependentWatchdog<'_, IWDG1>,
@@ -170,6 +170,12 @@ fn block_on_fed<F: core::future::Future>(
             return v;
         }
         wdg.pet();
+        if flash_bank2::busy() {
+            // An erase (up to 2 s) or a flash word: sleep until its end's
+            // interrupt, or the time driver's next one (every 33 ms at
+            // most), which feeds the watchdog again.
+            cortex_m::asm::wfe();
+        }
     }
 }
 

@@ -135,12 +135,16 @@ fn twin_scans_with(
     let scan = tmp_in(tag, "scan.npy");
     write_scan(&scan);
     let host = dmap(&[&["stream", s(&scan)], stream_opts].concat());
-    // A status request at the first beam: its reply says the same.
+    // A status request at the first beam: its reply says the same. The
+    // first beam 2.5 s after reset: a start that repairs the store erases
+    // a sector first (up to 2 s at x64, the model's time for it).
     let twin = dmap(&[
         "twin",
         s(&scan),
         "--flash",
         s(flash),
+        "--start-ms",
+        "2500",
         "--command",
         "0:status",
     ]);
@@ -380,11 +384,13 @@ fn save_requests(tag: &str, sets: &[String]) -> std::path::PathBuf {
     path
 }
 
-/// `dmap twin` over the scan with `extra` options; its output and counters.
+/// `dmap twin` over the scan with `extra` options; its output and
+/// counters. Beams 60 ms apart: the scan lasts 3 s, longer than a save
+/// that erases a sector (up to 2 s at x64, the model's time for it).
 fn twin(tag: &str, extra: &[&str]) -> (String, serde_json::Value) {
     let scan = tmp_in(tag, "scan.npy");
     write_scan(&scan);
-    let out = dmap(&[&["twin", s(&scan)], extra].concat());
+    let out = dmap(&[&["twin", s(&scan), "--beam-us", "60000"], extra].concat());
     (
         String::from_utf8(out.stdout.clone()).unwrap(),
         counters(&out),
