@@ -83,6 +83,7 @@ pub struct SensorArgs {
     #[arg(long, global = true)]
     pub json: bool,
     /// Copy the lines that are not replies (the result lines arriving meanwhile) to FILE
+    /// (begun once the port is open, put in place when the run ends, also on a signal)
     #[arg(long, value_name = "FILE", global = true)]
     pub pass_through: Option<PathBuf>,
     /// Id of the first request, the next ones counting up (default: a random one)
