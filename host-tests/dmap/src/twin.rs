@@ -225,7 +225,6 @@ pub fn build_elf(config: &str) -> Result<PathBuf> {
 /// copying each other's build. The build ends with `dmap`
 /// ([`crate::child::run_build`]).
 pub fn build_elf_in(root: &Path, config: &str) -> Result<PathBuf> {
-    let root = root.to_path_buf();
     let target_dir = root.join("target/twin");
     let cache = target_dir.join("elf");
     std::fs::create_dir_all(&cache).with_context(|| format!("creating {}", cache.display()))?;
@@ -237,7 +236,7 @@ pub fn build_elf_in(root: &Path, config: &str) -> Result<PathBuf> {
     let elf = cache.join(format!("{name}.elf"));
     let built_at = std::fs::metadata(&elf).and_then(|m| m.modified()).ok();
     if let Some(t) = built_at
-        && newest_source(&root).is_some_and(|s| s < t)
+        && newest_source(root).is_some_and(|s| s < t)
     {
         return Ok(elf);
     }
@@ -246,7 +245,7 @@ pub fn build_elf_in(root: &Path, config: &str) -> Result<PathBuf> {
     let started = SystemTime::now();
     let mut cargo = Command::new(std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into()));
     cargo
-        .current_dir(&root)
+        .current_dir(root)
         .args(["build", "--release", "--target-dir"])
         .arg(&target_dir)
         .env("CVM_H743_SCAN", config)
