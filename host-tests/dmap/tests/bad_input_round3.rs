@@ -341,8 +341,9 @@ fn npy_readers_stop_at_a_bad_signature_or_size_without_reading_on() {
     let dir = tempfile::tempdir().unwrap();
     let o = dir.path().join("z.npy");
     let png = dir.path().join("z.png");
-    let cases: [Vec<&str>; 6] = [
+    let cases: [Vec<&str>; 7] = [
         vec!["score", "/dev/zero", "-o", s(&o)],
+        vec!["twin", "/dev/zero"],
         vec!["stream", "/dev/zero"],
         vec!["calibrate", "/dev/zero", "-o", s(&o)],
         vec!["render", "/dev/zero", "-o", s(&png)],
