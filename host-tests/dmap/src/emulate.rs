@@ -33,20 +33,23 @@ pub struct EmulateArgs {
     /// Count instructions (QEMU -icount shift=0); the firmware reports instructions per beam on stderr
     #[arg(long)]
     pub icount: bool,
+    #[command(flatten)]
+    pub repo: crate::repo::RepoArgs,
 }
 
-/// The repository root (this crate lives in host-tests/dmap).
-fn repo_root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
-
-/// Builds the emulated board (incremental, so cheap when up to date) into
-/// its own target directory, apart from the H743 build.
+/// [`build_elf_in`] the repository [`crate::repo::find`] finds.
 pub fn build_elf() -> Result<PathBuf> {
-    let root = repo_root();
+    build_elf_in(&crate::repo::find(None)?)
+}
+
+/// Builds the emulated board of the repository `root` (incremental, so
+/// cheap when up to date) into its own target directory, apart from the
+/// H743 build. The build ends with `dmap` ([`crate::child::run_build`]).
+pub fn build_elf_in(root: &Path) -> Result<PathBuf> {
     let target_dir = root.join("target/emulated");
-    let status = Command::new(std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into()))
-        .current_dir(&root)
+    let mut cargo = Command::new(std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into()));
+    cargo
+        .current_dir(root)
         .args([
             "build",
             "--release",
@@ -59,8 +62,8 @@ pub fn build_elf() -> Result<PathBuf> {
         .env_remove("CARGO_TARGET_DIR")
         .env_remove("CARGO_BUILD_TARGET")
         .env_remove("RUSTFLAGS")
-        .stdout(Stdio::null())
-        .status()
+        .stdout(Stdio::null());
+    let status = crate::child::run_build(&mut cargo)
         .context("running cargo to build the emulated firmware")?;
     if !status.success() {
         bail!(
@@ -274,7 +277,7 @@ pub fn run(args: &EmulateArgs) -> Result<()> {
     let (file, warnings) = scan_file_and_warnings(args)?;
     let elf = match &args.elf {
         Some(p) => p.clone(),
-        None => build_elf()?,
+        None => build_elf_in(&args.repo.root()?)?,
     };
     // QEMU given a damaged ELF dumps its registers, or waits forever.
     crate::elf::read(&elf)?;

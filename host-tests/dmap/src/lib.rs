@@ -18,6 +18,7 @@ pub mod objects;
 pub mod options;
 pub mod out;
 pub mod render;
+pub mod repo;
 pub mod score;
 pub mod sensor;
 pub mod settings;

@@ -138,48 +138,105 @@ pub fn same_destination(a: &Path, b: &Path) -> bool {
     a.file_name() == b.file_name() && a.file_name().is_some() && dir(a) == dir(b)
 }
 
-/// Writes a file through `write`. A regular file or a new name: into a
-/// temporary file in the same directory, renamed over the file once
-/// complete (through a symbolic link, over the file it points to); on any
+/// Writes a file through `write` ([`OutFile`]): a regular file or a new
+/// name is written beside it and renamed over it once complete; on any
 /// error the temporary file is removed and the file is left as it was.
 /// A device or FIFO: written in place, as a shell's `>` would.
 pub fn write_file(path: &Path, write: impl FnOnce(&mut dyn Write) -> Result<()>) -> Result<()> {
-    let p = path.display();
-    if let Ok(meta) = std::fs::metadata(path) {
-        use std::os::unix::fs::FileTypeExt;
-        let t = meta.file_type();
-        if t.is_dir() {
-            bail!("{p}: is a directory");
-        }
-        if t.is_socket() {
-            bail!("{p}: is a socket, not a file dmap can write");
-        }
-        if !t.is_file() {
-            return write_in_place(path, write);
-        }
-    }
-    let target = resolve_links(path)?;
-    replace_file(&target, &p.to_string(), write)
+    let mut out = OutFile::create(path)?;
+    write(&mut out)?;
+    out.commit()
 }
 
-/// A device or FIFO, opened for writing only (a FIFO waits for its
-/// reader) and written through; nothing is created or renamed.
-fn write_in_place(path: &Path, write: impl FnOnce(&mut dyn Write) -> Result<()>) -> Result<()> {
-    let p = path.display();
-    let file = std::fs::OpenOptions::new()
-        .write(true)
-        .open(path)
-        .map_err(|e| anyhow!("{p}: cannot open for writing: {e}"))?;
-    let mut out = BufWriter::new(file);
-    write(&mut out)?;
-    out.flush().map_err(|e| anyhow!("{p}: cannot write: {e}"))?;
-    Ok(())
+/// An output file being written, for outputs that grow as a run goes
+/// (`sensor --pass-through`): the same rule as [`write_file`]. Nothing
+/// reaches a regular file's name until [`OutFile::commit`]; dropped
+/// without it, the temporary file is removed and the file keeps its bytes.
+pub struct OutFile {
+    /// The name the user gave, for messages.
+    name: String,
+    to: Dest,
+}
+
+enum Dest {
+    /// A temporary file beside the target and the path it replaces.
+    Temp(BufWriter<tempfile::NamedTempFile>, PathBuf),
+    /// A device or FIFO, written through.
+    InPlace(BufWriter<std::fs::File>),
+}
+
+impl OutFile {
+    /// Checks `path` and opens what will be written: a directory or
+    /// socket is refused; a device or FIFO is opened for writing (a FIFO
+    /// waits for its reader); a regular file (through its links) or a new
+    /// name gets a temporary file beside it.
+    pub fn create(path: &Path) -> Result<OutFile> {
+        let name = path.display().to_string();
+        if let Ok(meta) = std::fs::metadata(path) {
+            use std::os::unix::fs::FileTypeExt;
+            let t = meta.file_type();
+            if t.is_dir() {
+                bail!("{name}: is a directory");
+            }
+            if t.is_socket() {
+                bail!("{name}: is a socket, not a file dmap can write");
+            }
+            if !t.is_file() {
+                let file = std::fs::OpenOptions::new()
+                    .write(true)
+                    .open(path)
+                    .map_err(|e| anyhow!("{name}: cannot open for writing: {e}"))?;
+                return Ok(OutFile {
+                    name,
+                    to: Dest::InPlace(BufWriter::new(file)),
+                });
+            }
+        }
+        let target = resolve_links(path)?;
+        let tmp = temp_beside(&target, &name)?;
+        Ok(OutFile {
+            name,
+            to: Dest::Temp(BufWriter::new(tmp), target),
+        })
+    }
+
+    /// Flushes what was written and, for a regular file, renames it into
+    /// place.
+    pub fn commit(self) -> Result<()> {
+        let name = self.name;
+        let bad = |e: std::io::Error| anyhow!("{name}: cannot write: {e}");
+        match self.to {
+            Dest::InPlace(mut w) => w.flush().map_err(bad),
+            Dest::Temp(w, target) => {
+                let tmp = w.into_inner().map_err(|e| bad(e.into_error()))?;
+                tmp.as_file().sync_all().map_err(bad)?;
+                tmp.persist(&target).map_err(|e| bad(e.error))?;
+                Ok(())
+            }
+        }
+    }
+}
+
+impl Write for OutFile {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        match &mut self.to {
+            Dest::Temp(w, _) => w.write(buf),
+            Dest::InPlace(w) => w.write(buf),
+        }
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        match &mut self.to {
+            Dest::Temp(w, _) => w.flush(),
+            Dest::InPlace(w) => w.flush(),
+        }
+    }
 }
 
 /// The path a chain of symbolic links ends at (which may not exist yet:
 /// a dangling link names the file to create); the path itself if it is
 /// not a link.
-fn resolve_links(path: &Path) -> Result<PathBuf> {
+pub(crate) fn resolve_links(path: &Path) -> Result<PathBuf> {
     let mut at = path.to_path_buf();
     // The kernel's own limit on links followed in one lookup.
     for _ in 0..40 {
@@ -198,13 +255,10 @@ fn resolve_links(path: &Path) -> Result<PathBuf> {
     bail!("{}: too many levels of symbolic links", path.display())
 }
 
-/// [`write_file`] of a regular file or a new name (`p`: the name the user
-/// gave, for messages).
-fn replace_file(
-    path: &Path,
-    p: &str,
-    write: impl FnOnce(&mut dyn Write) -> Result<()>,
-) -> Result<()> {
+/// A temporary file in the directory of `path` (a regular file or a new
+/// name), with the mode the file has or a new one would get (`p`: the
+/// name the user gave, for messages).
+fn temp_beside(path: &Path, p: &str) -> Result<tempfile::NamedTempFile> {
     let dir = match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d,
         _ => Path::new("."),
@@ -227,20 +281,9 @@ fn replace_file(
             .map_or(0o666, |m| m.permissions().mode() & 0o7777);
         builder.permissions(std::fs::Permissions::from_mode(mode));
     }
-    let mut tmp = builder
+    builder
         .tempfile_in(dir)
-        .map_err(|e| anyhow!("{p}: cannot create: {}", without_temp_path(&e)))?;
-    {
-        let mut out = BufWriter::new(tmp.as_file_mut());
-        write(&mut out)?;
-        out.flush().map_err(|e| anyhow!("{p}: cannot write: {e}"))?;
-    }
-    tmp.as_file()
-        .sync_all()
-        .map_err(|e| anyhow!("{p}: cannot write: {e}"))?;
-    tmp.persist(path)
-        .map_err(|e| anyhow!("{p}: cannot write: {}", e.error))?;
-    Ok(())
+        .map_err(|e| anyhow!("{p}: cannot create: {}", without_temp_path(&e)))
 }
 
 /// The system's reason, without the temporary file's name that `tempfile`

@@ -184,7 +184,7 @@ pub struct SimulateArgs {
 /// `values` of `flag`, split by clap, if there are `min..=max` of them.
 fn count(values: &[f64], flag: &str, min: usize, max: usize) -> Result<()> {
     if !(min..=max).contains(&values.len()) {
-        let given: Vec<String> = values.iter().map(f64::to_string).collect();
+        let given: Vec<String> = values.iter().map(|&v| crate::fmt::fmt_num(v)).collect();
         bail!(
             "{flag} {}: expected {min}{} comma-separated numbers, got {}",
             given.join(","),
@@ -206,25 +206,33 @@ pub const DEFAULT_HALO_RAD: f64 = 0.06;
 /// One `--scatter X,Y,SIZE,SHARE[,WIDTH]` on a raster of `pitch` mm.
 fn scatterer(v: &[f64], pitch: f64) -> Result<Scatterer> {
     count(v, "--scatter", 4, 5)?;
-    let given = || v.iter().map(f64::to_string).collect::<Vec<_>>().join(",");
+    let given = || {
+        v.iter()
+            .map(|&x| crate::fmt::fmt_num(x))
+            .collect::<Vec<_>>()
+            .join(",")
+    };
     let (size, share) = (v[2], v[3]);
     let width = v.get(4).copied().unwrap_or(DEFAULT_HALO_RAD);
     if size <= 0.0 {
         bail!(
-            "--scatter {}: the disc's size must be positive (raster positions across), got {size}",
-            given()
+            "--scatter {}: the disc's size must be positive (raster positions across), got {}",
+            given(),
+            crate::fmt::fmt_num(size)
         );
     }
     if !(share > 0.0 && share <= 1.0) {
         bail!(
-            "--scatter {}: the scattered share must be in (0, 1], got {share}",
-            given()
+            "--scatter {}: the scattered share must be in (0, 1], got {}",
+            given(),
+            crate::fmt::fmt_num(share)
         );
     }
     if !(width > 0.0 && width < 0.5) {
         bail!(
-            "--scatter {}: the halo width must be in (0, 0.5) rad, got {width}",
-            given()
+            "--scatter {}: the halo width must be in (0, 0.5) rad, got {}",
+            given(),
+            crate::fmt::fmt_num(width)
         );
     }
     // The radius follows the pitch, which the configuration's check refuses
@@ -380,7 +388,10 @@ pub fn config(a: &SimulateArgs) -> Result<Config> {
         if let Some(v) = v
             && !(v.is_finite() && (0.0..max).contains(&v))
         {
-            bail!("{flag} must be at least 0 and under {max} (percent), got {v}");
+            bail!(
+                "{flag} must be at least 0 and under {max} (percent), got {}",
+                crate::fmt::fmt_num(v)
+            );
         }
     }
     let l = &mut c.laser;
@@ -393,7 +404,9 @@ pub fn config(a: &SimulateArgs) -> Result<Config> {
         };
     }
     c.footprint = a.footprint.unwrap_or(c.footprint);
-    c.validate().map_err(|e| anyhow::anyhow!(e))?;
+    // The simulator writes numbers out in full: 1e300 would be 300 digits.
+    c.validate()
+        .map_err(|e| anyhow::anyhow!(crate::fmt::short_numbers(&e)))?;
     Ok(c)
 }
 

@@ -111,11 +111,8 @@ pub struct TwinArgs {
     pub link: crate::twin_requests::TwinRequestArgs,
     #[command(flatten)]
     pub pins: crate::twin_pins::PinArgs,
-}
-
-/// The repository root (this crate lives in host-tests/dmap).
-fn repo_root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+    #[command(flatten)]
+    pub repo: crate::repo::RepoArgs,
 }
 
 /// The `CVM_H743_SCAN` value that builds the H743 firmware for the
@@ -222,13 +219,18 @@ fn newest_source(root: &Path) -> Option<SystemTime> {
     .max()
 }
 
-/// The H743 release ELF for `config` (a `CVM_H743_SCAN` value): the cached
-/// copy in `target/twin/elf` if it is newer than every firmware source,
-/// else a fresh `cargo build --release --target-dir target/twin`, copied
-/// there. A lock file keeps concurrent runs from copying each other's
-/// build.
+/// [`build_elf_in`] the repository [`crate::repo::find`] finds.
 pub fn build_elf(config: &str) -> Result<PathBuf> {
-    let root = repo_root();
+    build_elf_in(&crate::repo::find(None)?, config)
+}
+
+/// The H743 release ELF for `config` (a `CVM_H743_SCAN` value): the cached
+/// copy in `target/twin/elf` of the repository `root` if it is newer than
+/// every firmware source, else a fresh `cargo build --release --target-dir
+/// target/twin`, copied there. A lock file keeps concurrent runs from
+/// copying each other's build. The build ends with `dmap`
+/// ([`crate::child::run_build`]).
+pub fn build_elf_in(root: &Path, config: &str) -> Result<PathBuf> {
     let target_dir = root.join("target/twin");
     let cache = target_dir.join("elf");
     std::fs::create_dir_all(&cache).with_context(|| format!("creating {}", cache.display()))?;
@@ -240,15 +242,16 @@ pub fn build_elf(config: &str) -> Result<PathBuf> {
     let elf = cache.join(format!("{name}.elf"));
     let built_at = std::fs::metadata(&elf).and_then(|m| m.modified()).ok();
     if let Some(t) = built_at
-        && newest_source(&root).is_some_and(|s| s < t)
+        && newest_source(root).is_some_and(|s| s < t)
     {
         return Ok(elf);
     }
     // The cached copy is dated from before the build, so that a source
     // edited while cargo runs makes it stale.
     let started = SystemTime::now();
-    let status = Command::new(std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into()))
-        .current_dir(&root)
+    let mut cargo = Command::new(std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into()));
+    cargo
+        .current_dir(root)
         .args(["build", "--release", "--target-dir"])
         .arg(&target_dir)
         .env("CVM_H743_SCAN", config)
@@ -256,9 +259,9 @@ pub fn build_elf(config: &str) -> Result<PathBuf> {
         .env_remove("CARGO_BUILD_TARGET")
         .env_remove("RUSTFLAGS")
         .env_remove("CARGO_ENCODED_RUSTFLAGS")
-        .stdout(Stdio::null())
-        .status()
-        .context("running cargo to build the H743 firmware")?;
+        .stdout(Stdio::null());
+    let status =
+        crate::child::run_build(&mut cargo).context("running cargo to build the H743 firmware")?;
     if !status.success() {
         bail!(
             "building the H743 firmware with CVM_H743_SCAN=\"{config}\" failed (needs `rustup target add thumbv7em-none-eabihf`); see the cargo output above"
@@ -405,13 +408,14 @@ fn pass_stderr(stderr: ChildStderr) -> std::thread::JoinHandle<String> {
 /// printing that line, if the model fails or stops on something it does
 /// not model.
 pub fn run_model(
+    root: &Path,
     elf: &Path,
     scan: &Path,
     dir: tempfile::TempDir,
     args: &TwinArgs,
     out: &mut dyn FnMut(&[u8]) -> Result<()>,
 ) -> Result<(serde_json::Value, String)> {
-    let twin = repo_root().join("host-tests/twin");
+    let twin = root.join("host-tests/twin");
     let mut pythonpath = std::ffi::OsString::from(twin.as_os_str());
     if let Some(p) = std::env::var_os("PYTHONPATH").filter(|p| !p.is_empty()) {
         pythonpath.push(":");
@@ -482,6 +486,31 @@ pub fn run_model(
     }
 }
 
+/// Refuses, before anything runs, an output over an input: `--pins` (a
+/// file written) over the scan, `--flash`, `--requests`, `--calibration`
+/// or `--elf`, and `--flash` (read and written back) over the others.
+fn check_files(args: &TwinArgs) -> Result<()> {
+    let mut inputs = vec![args.scan.as_path()];
+    inputs.extend(args.link.requests.as_deref());
+    inputs.extend(args.output.calibration.as_deref());
+    inputs.extend(args.elf.as_deref());
+    if let Some(flash) = &args.link.flash {
+        crate::out::refuse_inputs(flash, &inputs)?;
+    }
+    if let Some(pins) = &args.pins.pins {
+        crate::out::refuse_inputs(pins, &inputs)?;
+        if let Some(flash) = &args.link.flash
+            && crate::out::same_destination(pins, flash)
+        {
+            bail!(
+                "--pins {} is the --flash file: refusing to overwrite it (choose another path)",
+                pins.display()
+            );
+        }
+    }
+    Ok(())
+}
+
 pub fn run(args: &TwinArgs) -> Result<()> {
     if !(args.beam_us.is_finite() && args.beam_us > 0.0) {
         bail!("--beam-us must be a positive number of microseconds");
@@ -492,6 +521,11 @@ pub fn run(args: &TwinArgs) -> Result<()> {
     if !(args.start_ms.is_finite() && args.start_ms >= 0.0) {
         bail!("--start-ms must be a non-negative number of milliseconds");
     }
+    let root = args.repo.root()?;
+    check_files(args)?;
+    // Checked and locked before anything is read or built; written back
+    // after the run.
+    let flash = args.link.prepare_flash()?;
     // The emulated board's scan file: the same reading, validation,
     // settings and warnings as `dmap emulate` and `dmap stream`.
     let scan = read_scan(&args.scan)?;
@@ -511,7 +545,8 @@ pub fn run(args: &TwinArgs) -> Result<()> {
     for f in &args.faults {
         faults_ms += check_fault(f, u64::from(header.rows), u64::from(header.cols))?;
     }
-    args.link.check(beams)?;
+    // Read once: a pipe (`--requests <(...)`) cannot be read again.
+    let requests = args.link.check(beams)?;
     check_model_time(
         beams,
         [args.start_ms, args.beam_us, faults_ms, args.settle_ms],
@@ -537,7 +572,7 @@ pub fn run(args: &TwinArgs) -> Result<()> {
     }
     let elf = match &args.elf {
         Some(p) => p.clone(),
-        None => build_elf(&config)?,
+        None => build_elf_in(&root, &config)?,
     };
     let image = crate::elf::read(&elf)?;
     check_built_for(&elf, &image, &config)?;
@@ -550,15 +585,22 @@ pub fn run(args: &TwinArgs) -> Result<()> {
     std::fs::write(&scan_path, &file)
         .with_context(|| format!("writing {}", scan_path.display()))?;
     let planned = args.link.planned(beams)?;
-    let with_commands = TwinArgs {
-        link: args.link.with_commands(&planned, dir.path())?,
+    let for_model = TwinArgs {
+        link: args
+            .link
+            .for_model(&planned, requests.as_deref(), dir.path(), flash.as_ref())?,
         ..args.clone()
     };
     let mut uart = Vec::new();
-    let (stats, line) = run_model(&elf, &scan_path, dir, &with_commands, &mut |bytes| {
+    let ran = run_model(&root, &elf, &scan_path, dir, &for_model, &mut |bytes| {
         uart.extend_from_slice(bytes);
         crate::out::stdout(bytes)
-    })?;
+    });
+    // The bank as the run left it, even a failed run's (the model saves it
+    // whatever stopped it).
+    let saved = flash.as_ref().map_or(Ok(()), |f| f.write_back());
+    let (stats, line) = ran?;
+    saved?;
     crate::twin_pins::report(&args.pins, &stats, &uart)?;
     for l in crate::sensor::twin::summary(&planned, &uart) {
         let _ = writeln!(std::io::stderr(), "dmap: {l}");
@@ -566,6 +608,14 @@ pub fn run(args: &TwinArgs) -> Result<()> {
     // The counters stay the last line the model prints, before dmap's
     // own verdict.
     let _ = writeln!(std::io::stderr(), "{line}");
+    if let Some(n) = args.link.power_cut
+        && stats["status"] != "power cut"
+    {
+        bail!(
+            "--power-cut {n}: no power cut happened: the run made {} flash operations (erases and programs)",
+            stats["flash_operations"]
+        );
+    }
     if stats["status"] == "time" {
         bail!(
             "the firmware sent no complete end line within --settle-ms {} after the last beam: the scan did not finish",

@@ -2,7 +2,7 @@
 //! outputs (and the LEDs that mirror them) as the chip model recorded it,
 //! and the summary of every scan's verdict beside the pins' edges.
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use clap::Args;
 use std::io::Write;
 use std::path::PathBuf;
@@ -163,8 +163,9 @@ pub fn verdicts(uart: &[u8]) -> Vec<String> {
 pub fn report(args: &PinArgs, counters: &serde_json::Value, uart: &[u8]) -> Result<()> {
     let edges = edges(counters);
     if let Some(path) = &args.pins {
-        std::fs::write(path, timeline_csv(&edges))
-            .with_context(|| format!("writing {}", path.display()))?;
+        // The output rule (checked against the inputs before the run).
+        let csv = timeline_csv(&edges);
+        crate::out::write_file(path, |w| Ok(w.write_all(csv.as_bytes())?))?;
     }
     let mut err = std::io::stderr();
     for (k, v) in verdicts(uart).iter().enumerate() {

@@ -540,6 +540,7 @@ fn calibration_reaches_the_emulated_board_and_the_h743_build() {
         },
         elf: None,
         icount: false,
+        repo: Default::default(),
     };
     let (file, _) = dmap::emulate::scan_file_and_warnings(&args).unwrap();
     let header = cvm_fw_app::emufile::ScanHeader::parse(&file).unwrap();

@@ -54,6 +54,9 @@ enum Mode {
     /// Sends each reply line first with a bad checksum, then as the reply
     /// to another id, then as it is.
     Damage,
+    /// Answers every request, but a calibration's result is for 1 scan
+    /// at the default rate, whatever was asked.
+    WrongCalibration,
 }
 
 struct Lines(Vec<Vec<u8>>);
@@ -189,6 +192,7 @@ fn board(
     let mut control = start(flash);
     let mut reader = LineReader::new();
     let mut calibration_due: Option<Instant> = None;
+    let mut armed_scans = 0u16;
     let mut next_result = Instant::now();
     let mut rows = 0u32;
     let mut result_line = |master: &OwnedFd| {
@@ -224,6 +228,7 @@ fn board(
                 }
             }
             if let Some(scans) = control.calibration_to_arm() {
+                armed_scans = scans;
                 calibration_due =
                     Some(Instant::now() + Duration::from_millis(40) * u32::from(scans));
             }
@@ -235,7 +240,19 @@ fn board(
                 Rule::Tail { rate_ppm, .. } => rate_ppm,
                 Rule::Spread { .. } => 0,
             };
-            control.calibrated(&Calibration { rate_ppm, ..CAL }, &mut out);
+            let c = match mode {
+                Mode::WrongCalibration => Calibration {
+                    scans: 1,
+                    rate_ppm: 1000,
+                    ..CAL
+                },
+                _ => Calibration {
+                    scans: armed_scans,
+                    rate_ppm,
+                    ..CAL
+                },
+            };
+            control.calibrated(&c, &mut out);
         }
         for l in &out.0 {
             result_line(&master);
@@ -421,7 +438,8 @@ fn bad_keys_and_values_are_refused_before_anything_is_sent() {
         (&["calibrate", "--scans", "1", "--rate", "2"][..], "got 2"),
         (
             &["calibrate", "--scans", "1", "--rate", "0.0000005"][..],
-            "got 0.0000005",
+            // Numbers in messages as dmap writes them (`fmt_num`).
+            "got 5e-7",
         ),
         (
             &["calibrate", "--scans", "1", "--rate", "often"][..],
@@ -555,7 +573,7 @@ fn calibrate_waits_for_the_result() {
     let s = ok(&fake.dmap(&["calibrate", "--scans", "2", "--rate", "0.0001"]));
     assert!(
         s.starts_with(
-            "calibrated on 3 scans (2700 positions with data), for 0.0001 false positions per part and channel\n"
+            "calibrated on 2 scans (2700 positions with data), for 0.0001 false positions per part and channel\n"
         ),
         "{s}"
     );
@@ -592,4 +610,110 @@ fn a_port_that_cannot_be_opened_is_a_link_error() {
         err.starts_with("dmap: error: cannot open serial port /nonexistent/tty at 921600 baud"),
         "{err}"
     );
+}
+
+/// Issue 47, item 11: a calibration result that is not for the scans and
+/// rate asked for is an error, not the result.
+#[test]
+fn a_calibration_result_for_another_request_is_an_error() {
+    let fake = Fake::start(Mode::WrongCalibration);
+    let out = fake.dmap(&["calibrate", "--scans", "2", "--rate", "0.0001"]);
+    let err = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("the sensor's result is for 1 scans at 0.001 false positions per part, not the 2 at 0.0001 asked for"),
+        "{err}"
+    );
+}
+
+/// Issue 47, item 11: `--baud 0` is a usage error; nothing is sent.
+#[test]
+fn baud_zero_is_refused_before_anything_is_sent() {
+    let fake = Fake::start(Mode::Answer);
+    let out = fake.dmap(&["--baud", "0", "status"]);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
+    assert!(
+        text(&out.stderr).contains("--baud"),
+        "{}",
+        text(&out.stderr)
+    );
+    assert!(fake.requests().is_empty());
+}
+
+/// Issue 47, item 3: the --pass-through file is begun only once the port
+/// is open (a port that fails leaves it whole) ...
+#[test]
+fn pass_through_is_not_touched_when_the_port_fails() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("old.log");
+    std::fs::write(&log, b"yesterday's lines\n").unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_dmap"))
+        .args(["sensor", "--port", "/nonexistent/tty", "--pass-through"])
+        .arg(&log)
+        .arg("status")
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(5), "{}", text(&out.stderr));
+    assert_eq!(std::fs::read(&log).unwrap(), b"yesterday's lines\n");
+    // ... and is never the port itself.
+    let out = Command::new(env!("CARGO_BIN_EXE_dmap"))
+        .args(["sensor", "--port"])
+        .arg(&log)
+        .arg("--pass-through")
+        .arg(&log)
+        .arg("status")
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
+    assert_eq!(std::fs::read(&log).unwrap(), b"yesterday's lines\n");
+}
+
+/// ... and on SIGINT, SIGTERM or SIGHUP the lines received until then
+/// reach it, and `dmap` exits 128 + the signal.
+#[test]
+fn pass_through_keeps_the_lines_received_before_a_signal() {
+    let fake = Fake::start(Mode::Silent);
+    let dir = tempfile::tempdir().unwrap();
+    for sig in [libc::SIGINT, libc::SIGTERM, libc::SIGHUP] {
+        let log = dir.path().join(format!("{sig}.log"));
+        let child = Command::new(env!("CARGO_BIN_EXE_dmap"))
+            .args([
+                "sensor",
+                "--port",
+                &fake.path,
+                "--timeout",
+                "30",
+                "--pass-through",
+            ])
+            .arg(&log)
+            .arg("status")
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        // Result lines come every 5 ms.
+        std::thread::sleep(Duration::from_millis(400));
+        // SAFETY: a signal to our own child.
+        unsafe { libc::kill(child.id() as i32, sig) };
+        let out = child.wait_with_output().unwrap();
+        assert_eq!(
+            out.status.code(),
+            Some(128 + sig),
+            "signal {sig}: {}",
+            text(&out.stderr)
+        );
+        let passed = std::fs::read(&log).unwrap_or_default();
+        assert!(
+            passed.len() > 5 * 10,
+            "signal {sig}: {} bytes passed through",
+            passed.len()
+        );
+        let written = fake.written.lock().unwrap().concat();
+        assert!(
+            written
+                .windows(passed.len())
+                .any(|w| w == passed.as_slice()),
+            "signal {sig}: the lines passed through are not the board's"
+        );
+    }
 }

@@ -15,7 +15,7 @@ pub struct ListenArgs {
     #[arg(long, value_name = "DEV")]
     pub port: Option<String>,
     /// Serial baud rate
-    #[arg(long, default_value_t = 921600)]
+    #[arg(long, default_value_t = 921600, value_parser = clap::value_parser!(u32).range(1..))]
     pub baud: u32,
     /// With --port: stop after this many scans have ended (0 = run until interrupted: Ctrl-C
     /// or SIGTERM ends the stream, the scans complete by then are reported and written, a

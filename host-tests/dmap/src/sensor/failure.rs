@@ -18,7 +18,9 @@ pub const EXIT_HELP: &str = "\
 Exit status: 0 done; 1 another error (e.g. the --pass-through file); 2 bad
 arguments, an unknown key or a bad value (checked before anything is sent);
 3 the sensor refused a request (its reason on stderr); 4 no reply within the
-timeout; 5 the serial port could not be opened, read or written.";
+timeout; 5 the serial port could not be opened, read or written; 128 + the
+signal's number after SIGINT, SIGTERM or SIGHUP (the --pass-through file then
+holds the lines received until then).";
 
 /// A failure with its exit status.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -53,6 +55,21 @@ impl Failure {
         Failure {
             code: EXIT_TIMEOUT,
             message,
+        }
+    }
+
+    /// Ended by SIGINT, SIGTERM or SIGHUP while waiting for the reply to
+    /// `words`: the status a shell gives a process the signal ended.
+    pub fn interrupted(words: &str, signal: i32) -> Self {
+        let name = match signal {
+            libc::SIGINT => "SIGINT",
+            libc::SIGTERM => "SIGTERM",
+            libc::SIGHUP => "SIGHUP",
+            _ => "a signal",
+        };
+        Failure {
+            code: 128 + signal,
+            message: format!("{words}: interrupted by {name} while waiting for the reply"),
         }
     }
 

@@ -73,7 +73,10 @@ pub struct Link<P> {
     partial: Vec<u8>,
     overlong: bool,
     lines: VecDeque<Vec<u8>>,
-    pass: Option<Box<dyn Write>>,
+    pass: Option<crate::out::OutFile>,
+    /// The termination signal that arrived (0: none), set by the handlers
+    /// `dmap sensor` installs; the wait for a reply ends on it.
+    pub signal: std::sync::Arc<std::sync::atomic::AtomicUsize>,
     /// Lines that were not replies (result lines), ignored.
     pub result_lines: u64,
     /// Reply lines skipped: damaged, or answering another id.
@@ -83,7 +86,7 @@ pub struct Link<P> {
 impl<P: Read + Write> Link<P> {
     /// `name` and `baud` are for messages; `pass` receives every line that
     /// is not a reply, as it came.
-    pub fn new(port: P, name: &str, baud: u32, pass: Option<Box<dyn Write>>) -> Self {
+    pub fn new(port: P, name: &str, baud: u32, pass: Option<crate::out::OutFile>) -> Self {
         Link {
             port,
             name: name.to_string(),
@@ -92,6 +95,7 @@ impl<P: Read + Write> Link<P> {
             overlong: false,
             lines: VecDeque::new(),
             pass,
+            signal: Default::default(),
             result_lines: 0,
             skipped: 0,
         }
@@ -161,12 +165,13 @@ impl<P: Read + Write> Link<P> {
         crate::out::warn(&what);
     }
 
-    /// Flushes the pass-through file.
+    /// Puts the pass-through file in place, with every line received
+    /// (however the session ended).
     pub fn finish(&mut self) -> Result<(), Failure> {
-        match self.pass.as_mut() {
-            Some(w) => w
-                .flush()
-                .map_err(|e| Failure::other(format!("writing the --pass-through file: {e}"))),
+        match self.pass.take() {
+            Some(f) => f
+                .commit()
+                .map_err(|e| Failure::other(format!("the --pass-through file: {e}"))),
             None => Ok(()),
         }
     }
@@ -176,6 +181,10 @@ impl<P: Read + Write> Link<P> {
         loop {
             if let Some(l) = self.lines.pop_front() {
                 return Ok(Some(l));
+            }
+            let signal = self.signal.load(std::sync::atomic::Ordering::Relaxed);
+            if signal != 0 {
+                return Err(Failure::interrupted(words, signal as i32));
             }
             if Instant::now() >= deadline {
                 return Ok(None);

@@ -71,7 +71,8 @@ pub struct SensorArgs {
     #[arg(long, value_name = "DEV", global = true)]
     pub port: Option<String>,
     /// Serial baud rate (the firmware's: 921600)
-    #[arg(long, default_value_t = 921_600, global = true)]
+    #[arg(long, default_value_t = 921_600, global = true,
+          value_parser = clap::value_parser!(u32).range(1..))]
     pub baud: u32,
     /// Wait at most SECS for each reply
     #[arg(long, value_name = "SECS", default_value_t = 2.0, global = true,
@@ -82,6 +83,7 @@ pub struct SensorArgs {
     #[arg(long, global = true)]
     pub json: bool,
     /// Copy the lines that are not replies (the result lines arriving meanwhile) to FILE
+    /// (begun once the port is open, put in place when the run ends, also on a signal)
     #[arg(long, value_name = "FILE", global = true)]
     pub pass_through: Option<PathBuf>,
     /// Id of the first request, the next ones counting up (default: a random one)
@@ -189,7 +191,9 @@ impl<P: Read + Write> Session<'_, P> {
                         source,
                     }
                 }
-                Request::Calibrate { .. } => self.calibrate(id, w, deadline, scan_timeout)?,
+                Request::Calibrate { scans, rate_ppm } => {
+                    self.calibrate(id, w, deadline, scan_timeout, (scans, rate_ppm))?
+                }
                 Request::Save | Request::Defaults | Request::Reset => {
                     let want = match ask.request {
                         Request::Save => Answer::Saved,
@@ -216,12 +220,20 @@ impl<P: Read + Write> Session<'_, P> {
         w: &str,
         deadline: Instant,
         per_scan: Duration,
+        (scans, rate_ppm): (u16, u32),
     ) -> Result<Done, Failure> {
         let n = self.wait(id, w, deadline, |a| match *a {
             Answer::Calibrating(n) => Some(n),
             _ => None,
         })?;
         let n = n.ok_or_else(|| self.no_reply(w, self.timeout))?;
+        // A reply that is not for what was asked (a board that read the
+        // request otherwise) must not pass for its result.
+        if n != scans {
+            return Err(Failure::other(format!(
+                "{w}: the sensor answered that it calibrates on {n} scans, not the {scans} asked for"
+            )));
+        }
         let within = per_scan * u32::from(n);
         let _ = writeln!(
             std::io::stderr(),
@@ -239,8 +251,45 @@ impl<P: Read + Write> Session<'_, P> {
                 secs(per_scan)
             ))
         })?;
+        if (c.scans, c.rate_ppm) != (scans, rate_ppm) {
+            let per_part = |ppm: u32| fmt_num(f64::from(ppm) / 1e6);
+            return Err(Failure::other(format!(
+                "{w}: the sensor's result is for {} scans at {} false positions per part, not the {scans} at {} asked for",
+                c.scans,
+                per_part(c.rate_ppm),
+                per_part(rate_ppm)
+            )));
+        }
         Ok(Done::Calibrated { id, c })
     }
+}
+
+/// Records which of SIGINT, SIGTERM and SIGHUP arrived first; the link's
+/// wait ends on it. A second signal ends `dmap` at once.
+fn watch_signals() -> Result<std::sync::Arc<std::sync::atomic::AtomicUsize>> {
+    use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
+    use std::sync::Arc;
+    use std::sync::atomic::{AtomicBool, AtomicUsize};
+    let seen = Arc::new(AtomicBool::new(false));
+    let which = Arc::new(AtomicUsize::new(0));
+    for sig in [SIGINT, SIGTERM, SIGHUP] {
+        signal_hook::flag::register_conditional_default(sig, Arc::clone(&seen))?;
+        signal_hook::flag::register(sig, Arc::clone(&seen))?;
+        // Only the first signal is kept (a store would overwrite it).
+        let which = Arc::clone(&which);
+        // SAFETY: the handler only does an atomic compare-exchange.
+        unsafe {
+            signal_hook::low_level::register(sig, move || {
+                let _ = which.compare_exchange(
+                    0,
+                    sig as usize,
+                    std::sync::atomic::Ordering::Relaxed,
+                    std::sync::atomic::Ordering::Relaxed,
+                );
+            })?;
+        }
+    }
+    Ok(which)
 }
 
 pub fn run(args: &SensorArgs) -> Result<()> {
@@ -256,13 +305,13 @@ pub fn run(args: &SensorArgs) -> Result<()> {
         )
         .into());
     };
-    let pass: Option<Box<dyn Write>> = match &args.pass_through {
-        Some(p) => Some(Box::new(std::io::BufWriter::new(
-            std::fs::File::create(p)
-                .map_err(|e| Failure::other(format!("cannot create {}: {e}", p.display())))?,
-        ))),
-        None => None,
-    };
+    if let Some(p) = &args.pass_through {
+        crate::out::refuse_inputs(p, &[std::path::Path::new(dev)])
+            .map_err(|e| Failure::usage(e.to_string()))?;
+    }
+    // The handlers go in before the port opens, so that no signal between
+    // the two ends `dmap` without the --pass-through file written.
+    let signal = watch_signals().map_err(|e| Failure::other(e.to_string()))?;
     // A short read timeout: the session keeps its own deadlines.
     let port = serialport::new(dev, args.baud)
         .timeout(Duration::from_millis(20))
@@ -273,9 +322,17 @@ pub fn run(args: &SensorArgs) -> Result<()> {
                 args.baud
             ))
         })?;
+    // Only once the port is open is the --pass-through file begun (as the
+    // output rule writes every file: beside it, renamed into place at the
+    // end, whatever the end), so that a port that fails leaves it whole.
+    let pass = match &args.pass_through {
+        Some(p) => Some(crate::out::OutFile::create(p).map_err(|e| Failure::other(e.to_string()))?),
+        None => None,
+    };
     // Bytes already waiting are older output: no reply to this run.
     let _ = port.clear(serialport::ClearBuffer::Input);
     let mut link = Link::new(port, dev, args.baud, pass);
+    link.signal = signal;
     let mut session = Session {
         link: &mut link,
         next_id: args.id.unwrap_or_else(random_id),
@@ -284,7 +341,10 @@ pub fn run(args: &SensorArgs) -> Result<()> {
     };
     let result = session.perform(&asks, Duration::from_secs_f64(scan_timeout));
     let done = std::mem::take(&mut session.done);
-    let result = result.and(link.finish());
+    // The file is put in place even when the session failed or was
+    // interrupted: the lines received so far are the board's.
+    let finished = link.finish();
+    let result = result.and(finished);
     let action = args.action.name();
     let text = if args.json {
         let error = result.as_ref().err().map(|f| f.message.as_str());

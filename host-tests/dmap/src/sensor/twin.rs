@@ -26,6 +26,9 @@ struct Words {
     action: Action,
 }
 
+/// What a request is, for messages.
+const ACTIONS: &str = "one of: status, get KEY, set KEY=VALUE..., calibrate --scans N [--rate RATE], save, defaults, reset";
+
 /// A request of a `--command`: its beam, its id and its words.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Planned {
@@ -52,14 +55,30 @@ pub fn plan(commands: &[String], beams: u64) -> Result<Vec<Planned>> {
                 )));
             }
         };
+        if request.trim().is_empty() {
+            return Err(bad(format!("no request after `{beam}:` ({ACTIONS})")));
+        }
         let words = Words::try_parse_from(request.split_whitespace()).map_err(|e| {
-            let text = e.to_string();
-            let first = text
-                .lines()
-                .next()
-                .unwrap_or("")
-                .trim_start_matches("error: ");
-            bad(first.to_string())
+            use clap::error::ErrorKind;
+            match e.kind() {
+                // Help is no answer to a request: say what a request is.
+                ErrorKind::DisplayHelp
+                | ErrorKind::DisplayVersion
+                | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand => {
+                    bad(format!("`{}` is not a request ({ACTIONS})", request.trim()))
+                }
+                // The message up to the usage, on one line: it names what
+                // is missing or wrong ("... not provided: <KEY=VALUE>...").
+                _ => {
+                    let text = e.to_string();
+                    let said: Vec<&str> = text
+                        .lines()
+                        .take_while(|l| !l.trim().is_empty() && !l.starts_with("Usage"))
+                        .map(str::trim)
+                        .collect();
+                    bad(said.join(" ").trim_start_matches("error: ").to_string())
+                }
+            }
         })?;
         if let Action::Calibrate {
             scan_timeout: Some(_),

@@ -173,13 +173,14 @@ impl Action {
                     None => DEFAULT_RATE_PPM,
                     Some(r) => crate::calibrate::rule::rate_ppm(*r).ok_or_else(|| {
                         Failure::usage(format!(
-                            "--rate must be a multiple of 0.000001 in (0, 1] false positions per part, got {r}"
+                            "--rate must be a multiple of 0.000001 in (0, 1] false positions per part, got {}",
+                            crate::fmt::fmt_num(*r)
                         ))
                     })?,
                 };
                 let words = match rate {
                     None => format!("calibrate {scans}"),
-                    Some(r) => format!("calibrate {scans} at {r} per part"),
+                    Some(r) => format!("calibrate {scans} at {} per part", crate::fmt::fmt_num(*r)),
                 };
                 one(
                     &words,

@@ -110,6 +110,77 @@ pub fn compare(dir: &Path) -> Result<Vec<String>> {
     Ok(diffs)
 }
 
+/// The vectors a previous `dmap vectors` left in `dir`, which may then be
+/// written over. A folder `dmap vectors` may write: one that does not
+/// exist, an empty one, or one that holds nothing but a previous output:
+/// `.gitattributes` as written here, an `index.json` listing vectors
+/// (`name`, `about`, `exit`), `commands.json` with its `requests` and
+/// `replies`, and each listed vector's `NAME.txt` and `NAME.json`. Any
+/// other folder is refused before anything in it is touched: its files
+/// are someone else's.
+fn previous_vectors(dir: &Path) -> Result<Vec<String>> {
+    let d = dir.display();
+    let entries = match std::fs::read_dir(dir) {
+        Ok(e) => e,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
+        Err(e) => bail!("{d}: cannot read the folder: {e}"),
+    };
+    let mut names = Vec::new();
+    for e in entries {
+        let e = e.with_context(|| format!("{d}: cannot read the folder"))?;
+        if !e.file_type().is_ok_and(|t| t.is_file()) {
+            bail!(
+                "{d}: holds {}, which dmap vectors does not write; {REFUSE}",
+                e.file_name().to_string_lossy()
+            );
+        }
+        names.push(e.file_name().to_string_lossy().into_owned());
+    }
+    if names.is_empty() {
+        return Ok(Vec::new());
+    }
+    let json = |name: &str| {
+        std::fs::read(dir.join(name))
+            .ok()
+            .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
+    };
+    let index = json("index.json")
+        .and_then(|v| v.as_array().cloned())
+        .and_then(|a| {
+            a.iter()
+                .map(|e| {
+                    let name = e["name"].as_str()?;
+                    let plain =
+                        !name.is_empty() && !name.starts_with('.') && !name.contains(['/', '\\']);
+                    (plain && e["about"].is_string() && e["exit"].is_u64())
+                        .then(|| name.to_string())
+                })
+                .collect::<Option<Vec<String>>>()
+        });
+    let commands =
+        json("commands.json").is_some_and(|v| v["requests"].is_array() && v["replies"].is_array());
+    let attributes = std::fs::read(dir.join(".gitattributes")).ok();
+    let (Some(index), true, Some(b"* -text\n")) = (index, commands, attributes.as_deref()) else {
+        bail!(
+            "{d}: not empty, and not a previous output of dmap vectors (its .gitattributes, index.json and commands.json); {REFUSE}"
+        );
+    };
+    let ours = |n: &str| {
+        [".gitattributes", "index.json", "commands.json"].contains(&n)
+            || [".txt", ".json"].iter().any(|ext| {
+                n.strip_suffix(ext)
+                    .is_some_and(|stem| index.iter().any(|v| v == stem))
+            })
+    };
+    if let Some(other) = names.iter().find(|n| !ours(n)) {
+        bail!("{d}: holds {other}, which its index.json does not list; {REFUSE}");
+    }
+    Ok(index)
+}
+
+/// The end of every refusal of a folder.
+const REFUSE: &str = "dmap vectors writes only into a new or empty folder, or over its own earlier output (nothing written)";
+
 pub fn run(args: &VectorsArgs) -> Result<()> {
     if args.check {
         let diffs = compare(&args.dir)?;
@@ -128,28 +199,21 @@ pub fn run(args: &VectorsArgs) -> Result<()> {
         )?;
         return Ok(());
     }
+    let old = previous_vectors(&args.dir)?;
     std::fs::create_dir_all(&args.dir)
         .with_context(|| format!("cannot create {}", args.dir.display()))?;
-    // Vectors no longer made go (those the old index names, nothing else):
-    // the directory holds exactly the set.
-    let old: Vec<String> = std::fs::read(args.dir.join("index.json"))
-        .ok()
-        .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
-        .and_then(|v| v.as_array().cloned())
-        .unwrap_or_default()
-        .iter()
-        .filter_map(|e| e["name"].as_str().map(String::from))
-        .filter(|n| !n.is_empty() && !n.contains(['/', '\\']) && n != "..")
-        .collect();
-    for name in old {
-        for ext in ["txt", "json"] {
-            let _ = std::fs::remove_file(args.dir.join(format!("{name}.{ext}")));
-        }
-    }
     let files = files()?;
     for (name, bytes) in &files {
-        let path = args.dir.join(name);
-        std::fs::write(&path, bytes).with_context(|| format!("cannot write {}", path.display()))?;
+        crate::out::write_file(&args.dir.join(name), |w| Ok(w.write_all(bytes)?))?;
+    }
+    // Vectors no longer made go (those the old index names, nothing else),
+    // once the new set is in place: the directory holds exactly the set.
+    for name in old {
+        for file in [format!("{name}.txt"), format!("{name}.json")] {
+            if !files.iter().any(|(n, _)| *n == file) {
+                let _ = std::fs::remove_file(args.dir.join(file));
+            }
+        }
     }
     crate::out::stdout(
         format!("{} files written to {}\n", files.len(), args.dir.display()).as_bytes(),
