@@ -26,18 +26,18 @@
 
 use core::sync::atomic::{Ordering, compiler_fence};
 
-use cvm_fw_app::flash_words::{Fault, FlashWords, WORD};
 use core::future::poll_fn;
 use core::task::Poll;
+use cvm_fw_app::flash_words::{Fault, FlashWords, WORD};
 
 use embassy_futures::yield_now;
+use embassy_stm32::Peri;
 use embassy_stm32::interrupt;
 use embassy_stm32::interrupt::InterruptExt;
-use embassy_sync::waitqueue::AtomicWaker;
-use embassy_stm32::Peri;
 use embassy_stm32::pac;
 use embassy_stm32::pac::dma::vals::{Dir, Dmdis, Fth, Pl, Size};
 use embassy_stm32::peripherals::{DMA1_CH7, FLASH};
+use embassy_sync::waitqueue::AtomicWaker;
 
 use super::clocks::enable_clock;
 use super::memory::Noload;
@@ -228,7 +228,10 @@ static DONE: AtomicWaker = AtomicWaker::new();
 /// erase.
 #[interrupt]
 fn FLASH() {
-    pac::FLASH.bank(1).cr().modify(|w| done_interrupts(w, false));
+    pac::FLASH
+        .bank(1)
+        .cr()
+        .modify(|w| done_interrupts(w, false));
     DONE.wake();
 }
 
