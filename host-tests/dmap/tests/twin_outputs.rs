@@ -92,19 +92,6 @@ fn verdicts(stdout: &[u8]) -> Vec<String> {
     dmap::twin_pins::verdicts(stdout)
 }
 
-/// Defect-free maps: a flat field with a little noise.
-fn flat_samples(beams: usize, cells: usize, seed: u64) -> Vec<u16> {
-    let mut state = seed;
-    (0..beams * cells)
-        .map(|_| {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            600 + (state >> 33) as u16 % 8
-        })
-        .collect()
-}
-
 const J: usize = 3;
 const ROWS: usize = 3;
 const COLS: usize = 9;
@@ -117,7 +104,7 @@ fn parts_on_the_twin(parts: usize, faults: &[&str], beam_us: &str) -> (Vec<u8>, 
     let dir = tempfile::tempdir().unwrap();
     let mut all = Vec::new();
     for k in 0..parts {
-        let data = flat_samples(BEAMS, J * J, 11 + k as u64);
+        let data = common::flat_samples(BEAMS, J * J, 11 + k as u64);
         let scan = dir.path().join(format!("part{k}.npy"));
         write_scan_u16(&scan, ROWS, COLS, Geometry::new(J, J).unwrap(), &data).unwrap();
         let host = dmap(&["stream", scan.to_str().unwrap(), "--scores"]);
@@ -128,15 +115,8 @@ fn parts_on_the_twin(parts: usize, faults: &[&str], beam_us: &str) -> (Vec<u8>, 
         );
         all.extend(data);
     }
-    let mut file = b"CVMTWIN1".to_vec();
-    for v in [parts * ROWS, COLS, J, J] {
-        file.extend_from_slice(&(v as u32).to_le_bytes());
-    }
-    for v in &all {
-        file.extend_from_slice(&v.to_le_bytes());
-    }
     let twin_scan = dir.path().join("parts.twin");
-    std::fs::write(&twin_scan, file).unwrap();
+    common::write_twin_scan(&twin_scan, parts * ROWS, COLS, J, &all);
     let elf = dmap::twin::build_elf(&format!(
         "j1={J} j2={J} cols={COLS} rows={ROWS} scores=true fw={}",
         cvm_core::VERSION

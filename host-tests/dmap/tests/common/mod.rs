@@ -183,3 +183,31 @@ pub fn one_line_error(out: &Output, needle: &str) {
     assert!(err.contains(needle), "{err:?} lacks {needle:?}");
     assert!(!err.contains("panicked"));
 }
+
+/// Defect-free maps: a flat field with a little noise (`beams` maps of
+/// `cells` samples).
+pub fn flat_samples(beams: usize, cells: usize, seed: u64) -> Vec<u16> {
+    let mut state = seed;
+    (0..beams * cells)
+        .map(|_| {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            600 + (state >> 33) as u16 % 8
+        })
+        .collect()
+}
+
+/// A scan in the chip model's own format (`CVMTWIN1`, then rows, cols, J1
+/// and J2 as u32 and the samples as u16, little-endian), as `dmap twin`
+/// writes it for `python3 -m h743twin --scan`.
+pub fn write_twin_scan(path: &Path, rows: usize, cols: usize, j: usize, data: &[u16]) {
+    let mut file = b"CVMTWIN1".to_vec();
+    for v in [rows, cols, j, j] {
+        file.extend_from_slice(&(v as u32).to_le_bytes());
+    }
+    for v in data {
+        file.extend_from_slice(&v.to_le_bytes());
+    }
+    std::fs::write(path, file).unwrap();
+}
