@@ -11,7 +11,7 @@
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum ResetCause {
-    /// Power-on or brown-out (`por`); also `dmap stream` and the emulated board.
+    /// Power-on (`por`); also `dmap stream` and the emulated board.
     PowerOn,
     /// A watchdog (`wdg`).
     Watchdog,
@@ -19,7 +19,7 @@ pub enum ResetCause {
     Software,
     /// The reset pin (`pin`).
     Pin,
-    /// Anything else (`other`).
+    /// Anything else (`other`): a brown-out among them.
     Other,
 }
 
