@@ -12,6 +12,9 @@ step "structure: no import circles, no oversized files or functions"
 (cd scripts && python3 -m unittest -q tests.test_check_structure)
 python3 scripts/check-structure.py
 
+step "docs: every relative link and anchor resolves"
+python3 scripts/check-links.py
+
 step "format"
 cargo fmt --all -- --check
 for crate in host-tests host-tests/fuzz nopanic; do
