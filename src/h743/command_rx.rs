@@ -143,20 +143,15 @@ fn USART3() {
     let push = |x: Rx| RX.lock(|r| r.borrow_mut().push_len(x));
     loop {
         if u.isr().read().ore() {
-            // (The marker wakes the command task, whatever the bytes.)
             // ORE: a byte came while the FIFO was full and was lost. The
             // FIFO's bytes arrived before it: they go first, then the
-            // marker, so the line they end is intact and the overrun
-            // damages the next one. Bytes that arrive during this drain
-            // come after the marker.
+            // marker (which wakes the command task), so the line they end
+            // is intact and the overrun damages the next one. Bytes that
+            // arrive during this drain come after the marker.
             u.icr().write(|w| w.set_ore(true));
             for _ in 0..RX_FIFO {
-                match receive(u) {
-                    Some((x, _)) => {
-                        push(x);
-                    }
-                    None => break,
-                }
+                let Some((x, _)) = receive(u) else { break };
+                push(x);
             }
             push(Rx::Overrun);
             wake = true;

@@ -10,10 +10,24 @@
 //! before the settings store is read, and from a fault handler that must
 //! not trust any RAM.
 
+use cvm_core::settings::Outputs;
+use cvm_fw_app::outputs::level;
 use embassy_stm32::pac;
 use embassy_stm32::pac::gpio::vals::Moder;
 
 use super::clocks::enable_clock;
+
+/// The asserted levels, the only ones the settings hold (`Key::range`
+/// refuses the others): READY high, REJECT low. The safe state ("not
+/// ready", "reject") is then both pins low, as `drive` writes them.
+pub const READY_ACTIVE_HIGH: bool = true;
+pub const REJECT_ACTIVE_HIGH: bool = false;
+const _: () = assert!(
+    Outputs::DEFAULT.ready_high == READY_ACTIVE_HIGH
+        && Outputs::DEFAULT.reject_high == REJECT_ACTIVE_HIGH
+        && !level(false, READY_ACTIVE_HIGH)
+        && !level(true, REJECT_ACTIVE_HIGH)
+);
 
 /// Port E: READY (PE14, D4) and REJECT (PE13, D3); port B: the LEDs that
 /// mirror them, LD1 green (PB0) and LD3 red (PB14).
@@ -66,9 +80,10 @@ pub fn stop() -> ! {
 /// A bus, memory or usage fault, or an undefined instruction.
 #[cortex_m_rt::exception]
 unsafe fn HardFault(frame: &cortex_m_rt::ExceptionFrame) -> ! {
+    // The pins first: the log may fault again.
     drive();
     defmt::error!("HardFault at pc {:#010x}", frame.pc());
-    stop()
+    cortex_m::peripheral::SCB::sys_reset()
 }
 
 /// An interrupt the firmware enabled without a handler.
@@ -76,5 +91,5 @@ unsafe fn HardFault(frame: &cortex_m_rt::ExceptionFrame) -> ! {
 unsafe fn DefaultHandler(irqn: i16) -> ! {
     drive();
     defmt::error!("unexpected interrupt {}", irqn);
-    stop()
+    cortex_m::peripheral::SCB::sys_reset()
 }

@@ -22,7 +22,9 @@ use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 
 use super::clocks::{APB1_TIMER_HZ, enable_clock};
-use super::failsafe::{READY_LED, READY_PIN, REJECT_LED, REJECT_PIN};
+use super::failsafe::{
+    READY_ACTIVE_HIGH, READY_LED, READY_PIN, REJECT_ACTIVE_HIGH, REJECT_LED, REJECT_PIN,
+};
 use super::pins::OutputPins;
 use crate::config::h743::OUTPUTS;
 
@@ -53,21 +55,13 @@ struct Pulses {
 static PULSES: Mutex<CriticalSectionRawMutex, Cell<Pulses>> =
     Mutex::new(Cell::new(Pulses { left: 0, on: false }));
 
-/// The outputs' settings the pins and TIM14 follow (they change between
-/// scans, by the command channel): bit 0 READY active high, bit 1 REJECT
-/// active high; the pulse width in µs.
-static LEVELS: AtomicU32 = AtomicU32::new(levels(&OUTPUTS));
+/// REJECT's pulse width in µs, which TIM14 follows (it changes between
+/// scans, by the command channel). The asserted levels never change
+/// (`failsafe`).
 static PULSE_US: AtomicU32 = AtomicU32::new(OUTPUTS.pulse_us);
 
-const fn levels(o: &Outputs) -> u32 {
-    o.ready_high as u32 | (o.reject_high as u32) << 1
-}
-
-fn active_high(bit: u32) -> bool {
-    LEVELS.load(Ordering::Relaxed) & bit != 0
-}
 fn write_ready(asserted: bool) {
-    let high = level(asserted, active_high(1));
+    let high = level(asserted, READY_ACTIVE_HIGH);
     pac::GPIOE.bsrr().write(|w| {
         w.set_bs(READY_PIN, high);
         w.set_br(READY_PIN, !high);
@@ -79,7 +73,7 @@ fn write_ready(asserted: bool) {
 }
 
 fn write_reject(asserted: bool) {
-    let high = level(asserted, active_high(2));
+    let high = level(asserted, REJECT_ACTIVE_HIGH);
     pac::GPIOE.bsrr().write(|w| {
         w.set_bs(REJECT_PIN, high);
         w.set_br(REJECT_PIN, !high);
@@ -140,7 +134,6 @@ impl PlcOutputs {
     /// Configures the pins at their start-up levels (READY dropped after
     /// any start but power-on) and TIM14.
     pub fn new(pins: OutputPins, cause: ResetCause, o: &Outputs) -> Self {
-        LEVELS.store(levels(o), Ordering::Relaxed);
         PULSE_US.store(o.pulse_us, Ordering::Relaxed);
         let logic = OutputLogic::start(*o, cause);
         let a = logic.asserted();
@@ -149,12 +142,12 @@ impl PlcOutputs {
         // return its pin to an input.
         core::mem::forget(Output::new(
             pins.ready,
-            lv(level(a.ready, o.ready_high)),
+            lv(level(a.ready, READY_ACTIVE_HIGH)),
             Speed::Low,
         ));
         core::mem::forget(Output::new(
             pins.reject,
-            lv(level(a.reject, o.reject_high)),
+            lv(level(a.reject, REJECT_ACTIVE_HIGH)),
             Speed::Low,
         ));
         core::mem::forget(Output::new(pins.ready_led, lv(a.ready), Speed::Low));
@@ -218,7 +211,6 @@ impl PlcOutputs {
     /// width, mode): the pins are written again at their new levels.
     pub fn configure(&mut self, o: &Outputs) {
         self.logic.configure(*o);
-        LEVELS.store(levels(o), Ordering::Relaxed);
         PULSE_US.store(o.pulse_us, Ordering::Relaxed);
         let now = self.logic.asserted();
         write_ready(now.ready);

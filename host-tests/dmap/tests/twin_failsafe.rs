@@ -409,36 +409,33 @@ fn brown_out_is_judged_safe() {
     reset_event("bor", "other");
 }
 
-#[test]
-fn hardfault_drives_the_safe_state_and_resets() {
+/// A fault injected at beam AT whose handler drives the safe state
+/// within `slack` µs and resets the chip within `reset_us` µs (`rst=sw`).
+fn fault_drives_the_safe_state_and_resets(fault: &str, slack: f64, reset_us: f64) {
     both_modes(|mode| {
         let period = 1000.0;
-        let r = run(mode, 10, period, &[format!("hardfault@{AT}")], &[], None);
-        let what = format!("HardFault ({mode:?} mode)");
+        let r = run(mode, 10, period, &[format!("{fault}@{AT}")], &[], None);
+        let what = format!("{fault} ({mode:?} mode)");
         assert_eq!(r.resets.len(), 1, "{what}: {}", r.counters);
         let t = beam_us(AT, period);
-        // The handler drives the pins at once, then resets.
         assert!(
-            r.resets[0] - t < 50.0,
+            r.resets[0] - t < reset_us,
             "{what}: reset at {} µs",
             r.resets[0]
         );
         assert!(r.stdout.contains(",rst=sw,"), "{what}: {}", r.stdout);
-        judged_safe(&r, &what, mode, t, 5.0);
+        judged_safe(&r, &what, mode, t, slack);
     });
 }
 
 #[test]
+fn hardfault_drives_the_safe_state_and_resets() {
+    fault_drives_the_safe_state_and_resets("hardfault", 5.0, 50.0);
+}
+
+#[test]
 fn panic_drives_the_safe_state_and_resets() {
-    both_modes(|mode| {
-        let period = 1000.0;
-        let r = run(mode, 10, period, &[format!("panic@{AT}")], &[], None);
-        let what = format!("panic ({mode:?} mode)");
-        assert_eq!(r.resets.len(), 1, "{what}: {}", r.counters);
-        let t = beam_us(AT, period);
-        assert!(r.stdout.contains(",rst=sw,"), "{what}: {}", r.stdout);
-        judged_safe(&r, &what, mode, t, 50.0);
-    });
+    fault_drives_the_safe_state_and_resets("panic", 50.0, 1000.0);
 }
 
 #[test]
@@ -608,16 +605,7 @@ fn save_during_a_scan(scan: &Path, opts: &[&str], beam_us: &str) {
 #[test]
 fn a_save_erases_while_the_demo_scans_at_the_spi_limit_and_reset_waits() {
     let dir = tempfile::tempdir().unwrap();
-    let scan = dir.path().join("demo.npy");
-    common::dmap_ok(&[
-        "simulate",
-        "--preset",
-        "prototype",
-        "--seed",
-        "1",
-        "-o",
-        scan.to_str().unwrap(),
-    ]);
+    let scan = common::demo_scan(dir.path());
     save_during_a_scan(&scan, &["--scores", "--threshold", "0.5"], "53");
 }
 

@@ -286,24 +286,6 @@ fn s(p: &Path) -> String {
     p.to_str().unwrap().to_string()
 }
 
-/// The demo scan: dmap simulate's prototype lens (39 x 39 beams of 9x9
-/// maps, two defects), as `scripts/demo.sh` makes it.
-fn demo(dir: &Path) -> std::path::PathBuf {
-    let scan = dir.join("demo.npy");
-    dmap(&[
-        "simulate",
-        "--preset",
-        "prototype",
-        "--seed",
-        "1",
-        "-o",
-        &s(&scan),
-        "--truth",
-        &s(&dir.join("truth.npy")),
-    ]);
-    scan
-}
-
 /// The demo at the 9x9 SPI-limit beam rate: `dmap twin --pins` writes the
 /// timeline; REJECT goes up once, after the scan's last beam, as the end
 /// line says `obj`; READY stays up. The output is `dmap stream`'s byte for
@@ -311,7 +293,7 @@ fn demo(dir: &Path) -> std::path::PathBuf {
 #[test]
 fn demo_part_is_rejected_at_the_scans_end() {
     let dir = tempfile::tempdir().unwrap();
-    let scan = demo(dir.path());
+    let scan = common::demo_scan(dir.path());
     let host = dmap(&["stream", &s(&scan), "--scores", "--threshold", "0.5"]);
     let pins = dir.path().join("pins.csv");
     let twin = dmap(&[
@@ -381,7 +363,7 @@ fn demo_part_is_rejected_at_the_scans_end() {
 #[test]
 fn demo_in_row_mode_pulses_once_per_object() {
     let dir = tempfile::tempdir().unwrap();
-    let scan = demo(dir.path());
+    let scan = common::demo_scan(dir.path());
     let pins = dir.path().join("pins.csv");
     let (period, delay, cols, rows) = (53.0, 2, 39, 39);
     let twin = dmap(&[

@@ -211,3 +211,22 @@ pub fn write_twin_scan(path: &Path, rows: usize, cols: usize, j: usize, data: &[
     }
     std::fs::write(path, file).unwrap();
 }
+
+/// The demo scan in `dir` (`demo.npy`, its truth in `truth.npy`): dmap
+/// simulate's prototype lens, 39 x 39 beams of 9x9 maps with two defects,
+/// as `scripts/demo.sh` makes it.
+pub fn demo_scan(dir: &Path) -> PathBuf {
+    let scan = dir.join("demo.npy");
+    dmap_ok(&[
+        "simulate",
+        "--preset",
+        "prototype",
+        "--seed",
+        "1",
+        "-o",
+        s(&scan),
+        "--truth",
+        s(&dir.join("truth.npy")),
+    ]);
+    scan
+}
