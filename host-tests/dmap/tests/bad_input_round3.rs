@@ -11,7 +11,7 @@
 //! tests/twin.rs needs (python3 with unicorn and pyelftools, the
 //! thumbv7em target).
 
-mod common;
+use crate::common;
 
 use common::{s, spot_scan};
 use std::io::Write;

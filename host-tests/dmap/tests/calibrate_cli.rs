@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use dmap::npy;
 
-mod common;
+use crate::common;
 use common::{dmap, ok, one_line_error, s};
 
 fn tmp(name: &str) -> PathBuf {

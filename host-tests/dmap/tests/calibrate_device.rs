@@ -13,7 +13,7 @@ use cvm_core::pipeline::{Pipeline, Settings};
 use cvm_core::protocol::{LineSink, Priority, ResetCause};
 use cvm_core::{Position, Scorer};
 
-mod common;
+use crate::common;
 use common::{calibration_of_file, dmap_ok, s};
 
 fn tmp(name: &str) -> PathBuf {

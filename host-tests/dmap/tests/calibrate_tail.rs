@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 
 use dmap::npy;
 
-mod common;
+use crate::common;
 use common::{dmap, ok, one_line_error, s, spot_scan};
 
 fn tmp(name: &str) -> PathBuf {

@@ -5,7 +5,7 @@ use std::io::Write;
 use std::path::PathBuf;
 use std::process::{Command, Output, Stdio};
 
-mod common;
+use crate::common;
 use common::{dmap, ok, s};
 
 fn tmp(name: &str) -> PathBuf {

@@ -6,7 +6,7 @@
 //! and exit status, and together they cover every line type, every flag
 //! and every kind of damage the document names.
 
-mod common;
+use crate::common;
 
 use common::{dmap, s};
 use serde_json::Value;

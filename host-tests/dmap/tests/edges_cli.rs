@@ -4,7 +4,7 @@
 //! messages that explain them. Every test runs the real binary on real
 //! files and checks the exit status, the files left behind and the words.
 
-mod common;
+use crate::common;
 
 use cvm_reference::Geometry;
 use std::io::Write;

@@ -4,7 +4,7 @@
 //! stream (`dmap stream`) and expects the problem to name that line and
 //! field; the stream as written has none.
 
-mod common;
+use crate::common;
 
 use common::{dmap, ok, s, tmp_in};
 use cvm_core::protocol;

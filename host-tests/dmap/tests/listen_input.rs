@@ -3,7 +3,7 @@
 //! stream cut mid-line and followed by a new scan (a board reset), a cut
 //! stream with `-o` over a file already there, and no input named.
 
-mod common;
+use crate::common;
 
 use common::{dmap, dmap_ok, s, spot_scan, tmp_in};
 use cvm_core::protocol;

@@ -8,7 +8,7 @@
 //! written (the pipe's or terminal's queue is empty), so what it decoded
 //! is known exactly.
 
-mod common;
+use crate::common;
 
 use common::{dmap_ok, s, spot_scan, tmp_in};
 use serde_json::Value;

@@ -4,7 +4,7 @@
 //! in mm, and the decoder's checks of damaged, missing and misplaced `O`
 //! lines.
 
-mod common;
+use crate::common;
 
 use common::{dmap, ok, s, tmp_in};
 use cvm_core::flags;

@@ -1,7 +1,7 @@
 //! `.npy` reading and writing against files built and parsed by hand from
 //! the format description.
 
-mod common;
+use crate::common;
 
 use common::raw_npy;
 use cvm_reference::Geometry;

@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use dmap::npy;
 
-mod common;
+use crate::common;
 use common::{dmap, ok, s};
 
 fn tmp(name: &str) -> PathBuf {

@@ -6,7 +6,7 @@
 use std::os::unix::fs::FileTypeExt;
 use std::path::{Path, PathBuf};
 
-mod common;
+use crate::common;
 use common::{dmap, ok, s};
 
 fn tmp(name: &str) -> PathBuf {

@@ -8,7 +8,7 @@ use cvm_reference::{
 };
 use std::path::{Path, PathBuf};
 
-mod common;
+use crate::common;
 use common::raw_npy;
 use std::process::Command;
 

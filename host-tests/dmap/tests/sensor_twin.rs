@@ -6,7 +6,7 @@
 //! has two scans. Needs what tests/twin.rs needs (python3 with unicorn and
 //! pyelftools, the `thumbv7em-none-eabihf` target).
 
-mod common;
+use crate::common;
 
 use common::dmap_ok as dmap;
 use cvm_core::command::{Key, Refusal, Reply, parse_reply};

@@ -6,7 +6,7 @@ use std::process::Output;
 
 use dmap::npy;
 
-mod common;
+use crate::common;
 use common::{dmap, ok, s};
 
 fn tmp(name: &str) -> PathBuf {

@@ -5,7 +5,7 @@
 //! (Before, positions of magnitude 0 were reported with strength 0, and
 //! `dmap listen` rejected the firmware's own lines.)
 
-mod common;
+use crate::common;
 
 use common::{ok, tmp_in};
 use cvm_reference::Geometry;

@@ -7,7 +7,7 @@
 //! nothing. The replies are decoded with the core's parser and checked
 //! against what each request asks, written out here.
 
-mod common;
+use crate::common;
 
 use common::dmap_ok as dmap;
 use common::{counters, crc16_bitwise, framed};

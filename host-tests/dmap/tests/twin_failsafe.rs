@@ -14,7 +14,7 @@
 //! next scan begins, since the part on the line at the event was never
 //! judged. Needs what tests/twin.rs needs.
 
-mod common;
+use crate::common;
 
 use common::counters;
 use cvm_core::command::{Key, Request, encode_request};

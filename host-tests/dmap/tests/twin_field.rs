@@ -8,7 +8,7 @@
 //! `dmap stream` of that part alone, with the settings the part was
 //! scanned with.
 
-mod common;
+use crate::common;
 
 use common::dmap_ok as dmap;
 use common::{calibration_of_file, counters, framed};

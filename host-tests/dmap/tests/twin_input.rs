@@ -7,7 +7,7 @@ use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 
-mod common;
+use crate::common;
 
 /// The run the tests build for: 6 x 12 beams of 9x9 maps, score lines.
 const OPTS: [&str; 3] = ["--scores", "--threshold", "0.05"];

@@ -4,7 +4,7 @@
 //! model are tested rule by rule in host-tests/twin/tests
 //! (test_usart_rx.py, test_flash.py).
 
-mod common;
+use crate::common;
 
 use std::process::Command;
 

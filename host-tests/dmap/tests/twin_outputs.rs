@@ -7,7 +7,7 @@
 //! part's verdict a fault and rejects it, and READY comes back only with
 //! the next clean scan. Needs what tests/twin.rs needs.
 
-mod common;
+use crate::common;
 
 use common::dmap_ok as dmap;
 use cvm_reference::Geometry;

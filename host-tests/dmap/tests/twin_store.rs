@@ -10,7 +10,7 @@
 //! while erasing) never stop it from starting. Needs what tests/twin.rs
 //! needs.
 
-mod common;
+use crate::common;
 
 use common::{counters, framed, s, tmp_in};
 use cvm_core::command::{Key, Store};

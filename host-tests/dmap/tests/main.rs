@@ -1,0 +1,45 @@
+//! dmap's integration tests, one binary: each file of this folder is a
+//! module, so the suite links once and its tests share the cores (one
+//! binary per file linked dmap and its dependencies 38 times, and ran the
+//! files one after another).
+
+mod common;
+
+mod bad_input_round3;
+mod bench_cli;
+mod calibrate_cli;
+mod calibrate_device;
+mod calibrate_refs;
+mod calibrate_tail;
+mod calibration_input;
+mod cli_usage;
+mod conformance;
+mod edges_cli;
+mod emulate;
+mod fixed_cli;
+mod halos_found;
+mod halos_parts;
+mod listen_crosscheck;
+mod listen_input;
+mod listen_interrupt;
+mod listen_objects;
+mod listen_verdict;
+mod npy_io;
+mod objects_cli;
+mod outputs_cli;
+mod score_cli;
+mod score_memory;
+mod sensor_cli;
+mod sensor_twin;
+mod sim_render_eval_cli;
+mod stream_listen;
+mod threshold_zero;
+mod twin;
+mod twin_commands;
+mod twin_failsafe;
+mod twin_field;
+mod twin_input;
+mod twin_link;
+mod twin_outputs;
+mod twin_reset;
+mod twin_store;
