@@ -24,6 +24,15 @@ pub enum Reply<'s> {
         value: u32,
         source: Source,
     },
+    /// `ok,<key>=<value>:<source>` with a key this decoder does not know
+    /// (a later board's setting): well formed, so a client passes over it
+    /// (docs/commands.md, "Settings (keys)"). The key is letters, digits
+    /// and `_`; the value is printable and has no `,`, `*` or `:`.
+    OtherKey {
+        key: &'s [u8],
+        value: &'s [u8],
+        source: Source,
+    },
     /// `ok,calibrate,<n>`: the next n scans calibrate.
     Calibrating(u16),
     /// `ok,calibrated,scans=..,positions=..,thr=..,pthr=..,sthr=..,med=..,mad=..,pmed=..,pmad=..,smed=..,smad=..`,
@@ -62,6 +71,13 @@ pub fn encode_reply(id: Option<u32>, r: &Reply, sink: &mut impl LineSink) {
             l.field(key.name().as_bytes());
             l.byte(b'=');
             key.encode(value, &mut l);
+            l.byte(b':');
+            l.byte(source.as_char());
+        }
+        Reply::OtherKey { key, value, source } => {
+            l.field(key);
+            l.byte(b'=');
+            l.bytes(value);
             l.byte(b':');
             l.byte(source.as_char());
         }
@@ -171,10 +187,10 @@ fn parse_ok<'s, I: Iterator<Item = &'s [u8]>>(f: &mut I) -> Result<Reply<'s>, Pa
             }
             Reply::Calibrated(c)
         }
-        kv_field => {
-            let (key, value, source) = key_value_source(kv_field).ok_or(ParseError::Format)?;
-            Reply::Value { key, value, source }
-        }
+        kv_field => match key_value_source(kv_field) {
+            Some((key, value, source)) => Reply::Value { key, value, source },
+            None => other_key(kv_field).ok_or(ParseError::Format)?,
+        },
     })
 }
 
@@ -192,6 +208,30 @@ fn parse_refusal<'s, I: Iterator<Item = &'s [u8]>>(f: &mut I) -> Result<Refusal,
 }
 
 /// `key=value:source`, the form of a setting in replies.
+/// A well-formed `key=value:source` whose key is not one of [`Key::ALL`].
+fn other_key(s: &[u8]) -> Option<Reply<'_>> {
+    let (key, rest) = split_once(s, b'=')?;
+    if key.is_empty()
+        || Key::from_name(key).is_some()
+        || !key
+            .iter()
+            .all(|b| b.is_ascii_lowercase() || b.is_ascii_digit() || *b == b'_')
+    {
+        return None;
+    }
+    let colon = rest.iter().rposition(|&b| b == b':')?;
+    let (value, src) = (rest.get(..colon)?, rest.get(colon + 1..)?);
+    let [c] = src else { return None };
+    if value.is_empty() || !value.iter().all(|b| b.is_ascii_graphic() && *b != b':') {
+        return None;
+    }
+    Some(Reply::OtherKey {
+        key,
+        value,
+        source: Source::from_char(*c)?,
+    })
+}
+
 fn key_value_source(s: &[u8]) -> Option<(Key, u32, Source)> {
     let (name, rest) = split_once(s, b'=')?;
     let key = Key::from_name(name)?;

@@ -63,14 +63,18 @@ pub(super) fn checked_body(line: &[u8]) -> Result<&[u8], FrameError> {
 
 /// A decimal number without sign: 1 to 10 digits that fit 32 bits.
 pub(super) fn parse_u32(s: &[u8]) -> Option<u32> {
-    if s.is_empty() || s.len() > 10 {
+    // Leading zeros are allowed, however many: the value counts, not the
+    // digits (docs/commands.md, "Framing").
+    if s.is_empty() || !s.iter().all(u8::is_ascii_digit) {
+        return None;
+    }
+    let first = s.iter().position(|&c| c != b'0').unwrap_or(s.len());
+    let significant = s.get(first..)?;
+    if significant.len() > 10 {
         return None;
     }
     let mut v: u64 = 0;
-    for &c in s {
-        if !c.is_ascii_digit() {
-            return None;
-        }
+    for &c in significant {
         v = v * 10 + (c - b'0') as u64;
     }
     u32::try_from(v).ok()

@@ -30,14 +30,17 @@ impl core::fmt::Display for ParseError {
 }
 
 pub(super) fn parse_u64(s: &[u8]) -> Option<u64> {
-    if s.is_empty() || s.len() > 20 {
+    // Leading zeros are allowed, however many (docs/protocol.md, "Values").
+    if s.is_empty() || !s.iter().all(u8::is_ascii_digit) {
+        return None;
+    }
+    let first = s.iter().position(|&c| c != b'0').unwrap_or(s.len());
+    let significant = s.get(first..)?;
+    if significant.len() > 20 {
         return None;
     }
     let mut v: u64 = 0;
-    for &c in s {
-        if !c.is_ascii_digit() {
-            return None;
-        }
+    for &c in significant {
         v = v.checked_mul(10)?.checked_add((c - b'0') as u64)?;
     }
     Some(v)

@@ -652,13 +652,17 @@ fn object_fields_are_checked_one_by_one() {
         panic!("a 20-digit centroid must parse");
     };
     assert_eq!(o.centroid_row_q8, u64::MAX);
-    let bad: [(usize, &str); 11] = [
+    // Leading zeros, however many: 21 digits whose value is 1.
+    let Ok(Line::Object(o)) = protocol::parse(&with(13, "000000000000000000001")) else {
+        panic!("a zero-padded number must parse");
+    };
+    assert_eq!(o.centroid_col_q8, 1);
+    let bad: [(usize, &str); 10] = [
         (1, "3"),                      // row0 > row1
         (3, "4"),                      // col0 > col1
         (14, "17"),                    // a channel bit that is not a decision
         (14, "144"),                   // bit 7, no channel
         (12, ""),                      // an empty number
-        (13, "000000000000000000001"), // 21 digits, though the value is 1
         (12, "18446744073709551616"),  // u64::MAX + 1
         (1, "4294967296"),             // u32::MAX + 1
         (10, "65536"),                 // peak power above u16

@@ -46,6 +46,7 @@ impl Decoder {
             max_defect_lines: h.max_defect_lines,
             reset_cause: Some(h.reset_cause),
             boots: h.boots,
+            origin: h.origin,
             kernels: h.kernels as char,
             kernel_size: h.kernel_size,
             weights: h.weights.to_string(),

@@ -204,6 +204,8 @@ pub struct ScanResult {
     /// Why the board last started (`rst`), and its starts since power-on (`boots`).
     pub reset_cause: Option<ResetCause>,
     pub boots: u32,
+    /// The header's `rows`, `src` and `store` (version 6 on).
+    pub origin: Option<cvm_core::protocol::Origin>,
     /// Magnitudes, power magnitudes and flags received, by row then
     /// column (integers as the lines carry them). Sparse, so that memory
     /// follows the lines received, never the geometry a (possibly

@@ -154,6 +154,8 @@ impl<P: Read + Write> Link<P> {
                 (_, Reply::Refused(why)) => {
                     return Err(Failure::refused(format!("{words} refused: {why}")));
                 }
+                // A setting of a later board: passed over.
+                (_, Reply::OtherKey { .. }) => {}
                 (_, r) => return Ok(answer(r)),
             }
         }
@@ -256,6 +258,6 @@ fn answer(r: Reply<'_>) -> Option<Answer> {
         Reply::Saved => Answer::Saved,
         Reply::Defaults => Answer::Defaults,
         Reply::Resetting => Answer::Resetting,
-        Reply::Refused(_) => return None,
+        Reply::Refused(_) | Reply::OtherKey { .. } => return None,
     })
 }

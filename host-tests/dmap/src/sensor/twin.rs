@@ -167,6 +167,11 @@ fn said(r: &Reply<'_>, compact: bool) -> String {
         Reply::Saved => "saved".into(),
         Reply::Defaults => "compiled values from the next scan".into(),
         Reply::Resetting => "restarting".into(),
+        Reply::OtherKey { key, value, .. } => format!(
+            "{}={} (a setting this dmap does not know)",
+            String::from_utf8_lossy(key),
+            String::from_utf8_lossy(value)
+        ),
         Reply::Refused(why) => format!("refused: {why}"),
     }
 }

@@ -101,6 +101,14 @@ fn requests() -> Vec<Value> {
             "leading zeros in the id and value: accepted",
             &sealed("C,0010,set,thr=0042"),
         ),
+        request(
+            "more than 10 digits, the value in range: accepted (leading zeros count for nothing)",
+            &sealed("C,11,set,thr=00000000001"),
+        ),
+        request(
+            "more than 10 digits and a value beyond 32 bits: range",
+            &sealed("C,11,set,thr=04294967296"),
+        ),
         request("the largest id", &sealed("C,4294967295,status")),
         request(
             "\\r\\n line end: accepted",
@@ -252,6 +260,15 @@ fn replies() -> Vec<Value> {
         reply("ok with no id", &sealed("A,-,ok,save")),
         reply("an unknown reason", &sealed("A,1,err,sorry")),
         reply("range without its limits", &sealed("A,1,err,range,1")),
+        reply(
+            "a value of a key this decoder does not know (a later board's setting): well formed, a client passes over it",
+            &sealed("A,5,ok,foo=1:d"),
+        ),
+        reply(
+            "an unknown key in capitals: malformed",
+            &sealed("A,5,ok,Foo=1:d"),
+        ),
+        reply("an unknown key without a value", &sealed("A,5,ok,foo=:d")),
         reply("a value without its source", &sealed("A,1,ok,thr=5")),
         reply("a source that is no source", &sealed("A,1,ok,thr=5:x")),
         reply("neither ok nor err", &sealed("A,1,maybe")),

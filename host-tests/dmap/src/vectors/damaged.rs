@@ -157,6 +157,19 @@ fn framing(g: &Lines, default: &[u8]) -> Vec<Vector> {
         },
     ));
     out.push(damaged(
+        "padded-row",
+        "A row line of exactly 256 bytes (its max written with leading zeros): not damage; it decodes as the line without them",
+        g,
+        |l| {
+            let i = l.nth(b'R', 1);
+            let mut f: Vec<String> = l.body(i).split(',').map(String::from).collect();
+            while f.join(",").len() + 6 < 256 {
+                f[2].insert(0, '0');
+            }
+            l.seal(i, &f.join(","));
+        },
+    ));
+    out.push(damaged(
         "too-long-garbage",
         "400 bytes without a newline among them: longer than any line",
         g,
