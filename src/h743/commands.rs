@@ -14,14 +14,14 @@
 use core::cell::RefCell;
 use core::sync::atomic::{AtomicBool, Ordering};
 
-use cvm_core::command::{Event, LineReader, LinkError, Refusal};
+use cvm_core::command::{Event, IDLE_GAP_MS, LineReader, LinkError, Refusal};
 use cvm_core::settings::KEYS;
 use cvm_fw_app::control::{Control, Effect};
 use cvm_fw_app::queue::LineQueue;
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::ThreadModeRawMutex;
 use embassy_sync::signal::Signal;
-use embassy_time::{Duration, Timer};
+use embassy_time::{Duration, Timer, with_timeout};
 
 use super::command_rx::{self, RX_READY, Rx};
 use super::settings_store;
@@ -43,6 +43,13 @@ pub static REPLIES: SharedQueue<REPLY_BYTES> =
 /// calibration for the scan driver.
 pub static CHANGED: AtomicBool = AtomicBool::new(true);
 
+/// Command task -> UART task: a restart is coming; send replies only, so
+/// that no result line is cut by it.
+pub static RESTARTING: AtomicBool = AtomicBool::new(false);
+
+/// UART task -> command task: a line is being written.
+pub static SENDING: AtomicBool = AtomicBool::new(false);
+
 /// Command task -> store task: a `save` (its id and the values).
 static SAVE: Signal<ThreadModeRawMutex, (u32, [u32; KEYS])> = Signal::new();
 
@@ -59,7 +66,22 @@ pub async fn command_task(control: &'static RefCell<Control>) {
     let mut reader = LineReader::new();
     let mut sink = QueueSink(&REPLIES);
     loop {
-        RX_READY.wait().await;
+        // A damaged line ends at an idle gap too: its `\n` may have been
+        // lost with the overrun, and the next request must not be joined
+        // to it (docs/commands.md, "Framing").
+        if reader.damaged_pending() {
+            let gap = Duration::from_millis(IDLE_GAP_MS as u64);
+            if with_timeout(gap, RX_READY.wait()).await.is_err() {
+                if let Some(Event::Damaged(e)) = reader.idle() {
+                    wait_for_reply_room().await;
+                    control.borrow_mut().damaged(e.refusal(), &mut sink);
+                    KICK.signal(());
+                }
+                continue;
+            }
+        } else {
+            RX_READY.wait().await;
+        }
         while let Some(rx) = command_rx::take() {
             let effect = match rx {
                 Rx::Overrun => {
@@ -115,11 +137,14 @@ pub async fn store_task(control: &'static RefCell<Control>) {
     }
 }
 
-/// Restarts once the `reset` reply has left: the reply queue drained,
-/// then the longest line's time on the wire (280 bytes at 921 600 baud
-/// take 3.04 ms) for the UART to finish sending it.
+/// Restarts once the `reset` reply has left and the line on the wire is
+/// whole: no result line starts after the request ([`RESTARTING`]), the
+/// reply queue is drained and the UART task is between lines, then the
+/// UART's FIFO has its time (a longest line's, 280 bytes at 921 600 baud
+/// take 3.04 ms, with room to spare).
 async fn restart() -> ! {
-    while !REPLIES.lock(|q| q.borrow().is_empty()) {
+    RESTARTING.store(true, Ordering::Release);
+    while !REPLIES.lock(|q| q.borrow().is_empty()) || SENDING.load(Ordering::Acquire) {
         KICK.signal(());
         Timer::after(Duration::from_micros(500)).await;
     }

@@ -17,7 +17,7 @@ use embassy_stm32::usart::UartTx;
 use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_time::{Duration, Instant, with_timeout};
 
-use super::commands::{CHANGED, REPLIES};
+use super::commands::{CHANGED, REPLIES, RESTARTING, SENDING};
 use super::memory::Noload;
 use super::outputs::PlcOutputs;
 use super::shared::{ACQ, BEAMS, CELLS, FRAMES, KICK, QUEUE, ROOM};
@@ -38,15 +38,26 @@ pub async fn uart_task(mut uart: UartTx<'static, Async>) {
     let line = unsafe { TX_LINE.take_zeroed() };
     loop {
         // Replies first: they are few and short, and a host waits for them.
-        let n = REPLIES
-            .lock(|q| q.borrow_mut().pop_into(line))
-            .or_else(|| QUEUE.lock(|q| q.borrow_mut().pop_into(line)));
+        // Before a commanded restart, replies only: a result line begun
+        // now would be cut.
+        let n = REPLIES.lock(|q| q.borrow_mut().pop_into(line)).or_else(|| {
+            if RESTARTING.load(Ordering::Acquire) {
+                None
+            } else {
+                QUEUE.lock(|q| q.borrow_mut().pop_into(line))
+            }
+        });
         let Some(n) = n else {
             KICK.wait().await;
             continue;
         };
         ROOM.signal(());
-        if uart.write(&line[..n]).await.is_err() {
+        // Set and cleared with no await between pop and write: the
+        // command task sees a line in flight exactly while it is.
+        SENDING.store(true, Ordering::Release);
+        let written = uart.write(&line[..n]).await;
+        SENDING.store(false, Ordering::Release);
+        if written.is_err() {
             errors = errors.wrapping_add(1);
             warn!(
                 "USART3 TX error ({} so far): a result line was lost",

@@ -26,7 +26,7 @@ mod wire;
 pub use crate::calibration::Calibration;
 pub use crate::settings::{Source, Store};
 pub use key::{Capacity, Key, Kind, conflict};
-pub use reader::{Event, LineReader, LinkError};
+pub use reader::{Event, IDLE_GAP_MS, LineReader, LinkError};
 pub use refusal::Refusal;
 pub use reply::{Reply, encode_reply, parse_reply};
 pub use request::{Request, encode_request, parse_request};

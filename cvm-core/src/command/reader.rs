@@ -97,8 +97,30 @@ impl LineReader {
             return Some(Event::TooLong);
         }
         match self.buf.get(..len) {
-            Some(line) if !line.is_empty() => Some(Event::Line(line)),
+            // `\r\n` alone is an empty line too.
+            Some(line) if !line.is_empty() && line != b"\r" => Some(Event::Line(line)),
             _ => None,
         }
     }
+
+    /// A line damaged by the receiver is partly here (its `\n` not yet).
+    pub fn damaged_pending(&self) -> bool {
+        self.damage.is_some()
+    }
+
+    /// The link has been idle for [`IDLE_GAP_MS`]: a damaged line ends
+    /// here, as if its `\n` had come (the `\n` may have been among the
+    /// bytes lost), so the next request is read on its own. An undamaged
+    /// partial line waits on: a host may type slowly.
+    pub fn idle(&mut self) -> Option<Event<'static>> {
+        let e = self.damage.take()?;
+        self.len = 0;
+        self.overflow = false;
+        Some(Event::Damaged(e))
+    }
 }
+
+/// The idle gap that ends a damaged line, in milliseconds: 20 ms is
+/// about 1 800 characters' time at 921 600 baud, far more than any gap
+/// inside a line a program sends.
+pub const IDLE_GAP_MS: u32 = 20;

@@ -658,16 +658,16 @@ fn object_fields_are_checked_one_by_one() {
     };
     assert_eq!(o.centroid_col_q8, 1);
     let bad: [(usize, &str); 10] = [
-        (1, "3"),                      // row0 > row1
-        (3, "4"),                      // col0 > col1
-        (14, "17"),                    // a channel bit that is not a decision
-        (14, "144"),                   // bit 7, no channel
-        (12, ""),                      // an empty number
-        (12, "18446744073709551616"),  // u64::MAX + 1
-        (1, "4294967296"),             // u32::MAX + 1
-        (10, "65536"),                 // peak power above u16
-        (11, "4294967296"),            // peak spread above u32
-        (12, "+1"),                    // not a digit
+        (1, "3"),                     // row0 > row1
+        (3, "4"),                     // col0 > col1
+        (14, "17"),                   // a channel bit that is not a decision
+        (14, "144"),                  // bit 7, no channel
+        (12, ""),                     // an empty number
+        (12, "18446744073709551616"), // u64::MAX + 1
+        (1, "4294967296"),            // u32::MAX + 1
+        (10, "65536"),                // peak power above u16
+        (11, "4294967296"),           // peak spread above u32
+        (12, "+1"),                   // not a digit
     ];
     for (i, v) in bad {
         assert_eq!(

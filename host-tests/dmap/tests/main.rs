@@ -36,6 +36,7 @@ mod stream_listen;
 mod threshold_zero;
 mod twin;
 mod twin_commands;
+mod twin_contract;
 mod twin_failsafe;
 mod twin_field;
 mod twin_input;
