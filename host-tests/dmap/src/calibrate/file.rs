@@ -123,6 +123,16 @@ impl Calibration {
         Self::from_json(path, read_json(path)?)
     }
 
+    /// A calibration file's text already in memory, read and checked as
+    /// [`Calibration::load`] reads a file; `name` stands for the file in
+    /// messages.
+    pub fn from_text(name: &Path, text: &str) -> Result<Self> {
+        let body = text.strip_prefix('\u{feff}').unwrap_or(text);
+        let v = serde_json::from_str(body)
+            .with_context(|| format!("{}: not a JSON calibration", name.display()))?;
+        Self::from_json(name, v)
+    }
+
     /// Checks the calibration `v` read from `path` (named in messages).
     fn from_json(path: &Path, v: Value) -> Result<Self> {
         let p = path.display();

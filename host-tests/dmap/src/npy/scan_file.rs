@@ -8,7 +8,7 @@ use npyz::{DType, TypeChar};
 use std::path::{Path, PathBuf};
 
 use crate::npy::format::{FileBytes, map_file, open_npy, plain};
-use crate::npy::scan::{ScanDtype, scan_shape};
+use crate::npy::scan::{ScanDtype, check_shape, scan_shape};
 
 /// A scan file whose samples are read and decoded a few maps at a time,
 /// when asked, so that `score` and `stream` hold a few rows of a scan and a
@@ -19,9 +19,9 @@ use crate::npy::scan::{ScanDtype, scan_shape};
 /// mapping), so a file that shrinks during the run is an error naming the
 /// position whose samples are gone, not a fault of the process. A pipe is
 /// read whole.
-pub struct ScanFile {
+pub struct ScanFile<'a> {
     path: PathBuf,
-    samples: Samples,
+    samples: Samples<'a>,
     /// Where the samples start in the file.
     offset: usize,
     /// Positions along the slow axis.
@@ -36,14 +36,16 @@ pub struct ScanFile {
 }
 
 /// Where a scan's samples come from.
-enum Samples {
+enum Samples<'a> {
     /// A regular file, read when maps are asked for.
     File(std::fs::File),
     /// What could not be mapped (a pipe, `/dev/stdin`), read at open.
     Memory(Vec<u8>),
+    /// Memory the caller holds (a NumPy array's buffer), never copied.
+    Borrowed(&'a [u8]),
 }
 
-impl ScanFile {
+impl ScanFile<'static> {
     /// Opens `path` and checks its header and its length. What cannot be
     /// mapped (a pipe, `/dev/stdin`) is read into memory instead.
     pub fn open(path: &Path) -> Result<Self> {
@@ -84,14 +86,46 @@ impl ScanFile {
             big_endian,
         })
     }
+}
+
+impl<'a> ScanFile<'a> {
+    /// A scan whose samples are `bytes` in memory (C order, native byte
+    /// order, `dtype`), of shape `(rows, cols, j1, j2)`, with the header
+    /// checks of [`ScanFile::open`] on that shape and the size; `name`
+    /// stands for the file in messages. The samples are read in place.
+    pub fn from_bytes(
+        name: &str,
+        bytes: &'a [u8],
+        shape: &[usize],
+        dtype: ScanDtype,
+    ) -> Result<Self> {
+        let path = PathBuf::from(name);
+        let shape64: Vec<u64> = shape.iter().map(|&d| d as u64).collect();
+        let (rows, cols, geometry) = check_shape(&path, &shape64)?;
+        let expected = [cols, geometry.cells(), dtype.item()]
+            .iter()
+            .try_fold(rows, |n, &d| n.checked_mul(d));
+        if expected != Some(bytes.len()) {
+            bail!(
+                "{name}: {} bytes of {} samples do not fill its shape {shape:?}",
+                bytes.len(),
+                dtype.name()
+            );
+        }
+        Ok(ScanFile {
+            path,
+            samples: Samples::Borrowed(bytes),
+            offset: 0,
+            rows,
+            cols,
+            geometry,
+            dtype,
+            big_endian: cfg!(target_endian = "big"),
+        })
+    }
 
     fn item(&self) -> usize {
-        match self.dtype {
-            ScanDtype::U8 => 1,
-            ScanDtype::U16 => 2,
-            ScanDtype::U32 | ScanDtype::F32 => 4,
-            ScanDtype::F64 => 8,
-        }
+        self.dtype.item()
     }
 
     /// Positions of the scan.
@@ -115,6 +149,7 @@ impl ScanFile {
         let read;
         let bytes: &[u8] = match &self.samples {
             Samples::Memory(v) => &v[start..start + len],
+            Samples::Borrowed(v) => &v[start..start + len],
             Samples::File(file) => {
                 use std::os::unix::fs::FileExt;
                 let mut buf = vec![0u8; len];
