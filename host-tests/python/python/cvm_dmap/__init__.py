@@ -193,7 +193,7 @@ def simulate(preset: str = "paper-sim", seed: int = 1,
     for kind, values in defects or []:
         if kind not in flags:
             raise ValueError(f"unknown defect kind {kind!r} (bubble, scratch or scatter)")
-        extra += ["--" + flags[kind], ",".join(repr(float(v)) for v in values)]
+        extra.append(f"--{flags[kind]}=" + ",".join(repr(float(v)) for v in values))
     scan, truth, _summary = _native.simulate(argv({**opts, **options}) + extra)
     return scan, truth
 

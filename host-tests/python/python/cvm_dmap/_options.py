@@ -37,10 +37,10 @@ def argv(options: Dict[str, Any]) -> List[str]:
         if value is True:
             out.append(flag)
         elif isinstance(value, list) and value and isinstance(value[0], (tuple, list)):
-            for v in value:
-                out += [flag, word(v)]
+            out += [f"{flag}={word(v)}" for v in value]
         else:
-            out += [flag, word(value)]
+            # One word, so that a negative number stays a value.
+            out.append(f"{flag}={word(value)}")
     return out
 
 

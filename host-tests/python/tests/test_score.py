@@ -1,0 +1,92 @@
+"""score and score_many against dmap score on the same files."""
+
+import numpy as np
+import pytest
+
+import cvm_dmap
+
+DISTANCES = ["cvm", "cvm-fixed", "emd", "mean-dir"]
+
+
+def cli_score(dmap, tmp_path, scan_file, *args):
+    out = tmp_path / "grad.npy"
+    dmap.run("score", scan_file, "-o", out, *args)
+    return np.load(out)
+
+
+@pytest.mark.parametrize("distance", DISTANCES)
+def test_each_distance_equals_dmap_bit_for_bit(dmap, files, tmp_path, distance):
+    scan = np.load(files / "part.npy")
+    got = cvm_dmap.score(scan, distance)
+    want = cli_score(dmap, tmp_path, files / "part.npy", "--distance", distance)
+    assert got.dtype == np.float64 and got.shape == (14, 16, 3)
+    assert got.tobytes() == want.tobytes()
+
+
+@pytest.mark.parametrize("kw,args", [
+    ({"kernels": "square"}, ["--kernels", "square"]),
+    ({"kernels": "square", "bmax": 3}, ["--kernels", "square", "--bmax", "3"]),
+    ({"weights": "unit"}, ["--weights", "unit"]),
+    ({"bmax": 2}, ["--bmax", "2"]),
+    ({"raw": True}, ["--raw"]),
+])
+@pytest.mark.parametrize("distance", ["cvm", "cvm-fixed"])
+def test_scoring_options_equal_dmap(dmap, files, tmp_path, distance, kw, args):
+    scan = np.load(files / "part.npy")
+    got = cvm_dmap.score(scan, distance, **kw)
+    want = cli_score(dmap, tmp_path, files / "part.npy", "--distance", distance, *args)
+    assert got.tobytes() == want.tobytes()
+
+
+def test_emd_ground_l1_equals_dmap(dmap, files, tmp_path):
+    got = cvm_dmap.score(np.load(files / "part.npy"), "emd", ground="l1")
+    want = cli_score(dmap, tmp_path, files / "part.npy", "--distance", "emd", "--ground", "l1")
+    assert got.tobytes() == want.tobytes()
+
+
+@pytest.mark.parametrize("dtype", ["uint8", "uint32", "float32", "float64"])
+@pytest.mark.parametrize("distance", ["cvm", "cvm-fixed"])
+def test_every_dtype_a_scan_file_may_have(dmap, files, tmp_path, dtype, distance):
+    f = files / f"part_{dtype}.npy"
+    got = cvm_dmap.score(np.load(f), distance)
+    want = cli_score(dmap, tmp_path, f, "--distance", distance)
+    assert got.tobytes() == want.tobytes()
+
+
+def test_a_memory_mapped_scan_is_read_in_place(dmap, files, tmp_path):
+    scan = np.load(files / "part.npy", mmap_mode="r")
+    got = cvm_dmap.score(scan, "cvm-fixed")
+    want = cli_score(dmap, tmp_path, files / "part.npy", "--distance", "cvm-fixed")
+    assert got.tobytes() == want.tobytes()
+
+
+def test_score_many_equals_score_of_each(files):
+    scans = [np.load(files / n) for n in ("part.npy", "ref1.npy", "ref2.npy", "part_float32.npy")]
+    scans.append(scans[0][:5, :7].copy())
+    many = cvm_dmap.score_many(scans, "cvm-fixed")
+    assert len(many) == len(scans)
+    for s, g in zip(scans, many):
+        assert g.tobytes() == cvm_dmap.score(s, "cvm-fixed").tobytes()
+
+
+def test_score_many_names_the_scan_that_fails(files):
+    good = np.load(files / "part.npy")
+    bad = good.astype(np.float64) + 0.5
+    with pytest.raises(ValueError, match=r"^scans\[1\]: float64 scan value 0?\.?\d*\.5 at"):
+        cvm_dmap.score_many([good, bad], "cvm-fixed")
+
+
+def test_fixed_point_refuses_what_is_not_a_count_as_dmap_does(dmap, files, tmp_path):
+    scan = np.load(files / "part_halves.npy")
+    with pytest.raises(ValueError) as e:
+        cvm_dmap.score(scan, "cvm-fixed")
+    p = dmap.run("score", files / "part_halves.npy", "-o", tmp_path / "x.npy", "--distance", "cvm-fixed", check=False)
+    cli = p.stderr.decode().strip().removeprefix("dmap: error: ")
+    assert p.returncode == 1
+    assert str(e.value) == cli.replace(str(files / "part_halves.npy"), "scan")
+
+
+def test_dmap_warnings_become_python_warnings():
+    scan = np.ones((3, 4, 1, 2), np.uint16)
+    with pytest.warns(cvm_dmap.DmapWarning, match="^1x2 maps: this configuration scores every pair of maps 0"):
+        cvm_dmap.score(scan)
