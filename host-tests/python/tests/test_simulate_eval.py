@@ -32,7 +32,7 @@ def test_simulate_refuses_bad_options_with_dmaps_message():
 
 @pytest.mark.parametrize("kw,args", [
     ({}, []),
-    ({"threshold": 0.9, "dilate": 1}, ["--threshold", "0.9", "--dilate", "1"]),
+    ({"threshold": 0.9, "dilate": 0}, ["--threshold", "0.9", "--dilate", "0"]),
     ({"k": 3.0, "pitch_um": 100.0, "channel": 0}, ["--k", "3.0", "--pitch-um", "100.0", "--channel", "0"]),
 ])
 @pytest.mark.parametrize("distance", ["cvm", "emd"])
