@@ -34,7 +34,10 @@ fn bytes_of<'a, T: Element>(a: &'a PyReadonlyArrayDyn<'_, T>) -> &'a [u8] {
     unsafe { std::slice::from_raw_parts(s.as_ptr().cast::<u8>(), std::mem::size_of_val(s)) }
 }
 
-fn borrow<'py, T: Element>(obj: &Bound<'py, PyAny>, name: &str) -> PyResult<PyReadonlyArrayDyn<'py, T>> {
+fn borrow<'py, T: Element>(
+    obj: &Bound<'py, PyAny>,
+    name: &str,
+) -> PyResult<PyReadonlyArrayDyn<'py, T>> {
     let a = obj
         .cast::<PyArrayDyn<T>>()
         .map_err(|_| PyValueError::new_err(format!("{name}: the array's dtype changed")))?;

@@ -11,15 +11,17 @@ type Image<'py> = Bound<'py, PyArray3<f64>>;
 /// would not write them.
 type Images<'py> = (Option<(Image<'py>, Image<'py>, Image<'py>)>, Option<String>);
 
-fn image<'py>(py: Python<'py>, s: &ScanResult, data: Vec<f64>) -> PyResult<Bound<'py, PyArray3<f64>>> {
+fn image<'py>(
+    py: Python<'py>,
+    s: &ScanResult,
+    data: Vec<f64>,
+) -> PyResult<Bound<'py, PyArray3<f64>>> {
     PyArray1::from_vec(py, data).reshape([s.n_rows(), s.cols, 3])
 }
 
 fn images<'py>(py: Python<'py>, s: &ScanResult) -> PyResult<Images<'py>> {
     let refusal = match s.end {
-        None => Some(
-            "has no end line (cut): its image would be partial".to_string(),
-        ),
+        None => Some("has no end line (cut): its image would be partial".to_string()),
         Some(_) => image_refusal(s),
     };
     if let Some(why) = refusal {

@@ -76,6 +76,9 @@ pub fn score<'py>(
     Ok((out, warnings))
 }
 
+/// Images and each one's warnings.
+type Many<'py> = (Vec<Bound<'py, PyArray3<f64>>>, Vec<Vec<String>>);
+
 /// The gradient images of many scans, scored in parallel (`dmap score`
 /// on each); the warnings of each.
 #[pyfunction]
@@ -83,7 +86,7 @@ pub fn score_many<'py>(
     py: Python<'py>,
     scans: Vec<Bound<'py, PyAny>>,
     argv: Vec<String>,
-) -> PyResult<(Vec<Bound<'py, PyArray3<f64>>>, Vec<Vec<String>>)> {
+) -> PyResult<Many<'py>> {
     let args = score_args(&argv)?;
     let held = scans
         .iter()
@@ -136,10 +139,11 @@ pub fn stream<'py>(
         .detach(|| {
             let scan = view.open()?;
             let mut lines = Vec::new();
-            let w = dmap::stream::stream_with(&scan, &args.scoring, &args.output, &load, &mut |b| {
-                lines.extend_from_slice(b);
-                Ok(())
-            })?;
+            let w =
+                dmap::stream::stream_with(&scan, &args.scoring, &args.output, &load, &mut |b| {
+                    lines.extend_from_slice(b);
+                    Ok(())
+                })?;
             anyhow::Ok((lines, w))
         })
         .map_err(value_error)?;

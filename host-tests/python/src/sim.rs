@@ -4,18 +4,24 @@
 use crate::{parse, value_error};
 use dmap::eval::EvalArgs;
 use dmap::simulate::SimulateArgs;
-use numpy::{PyArray1, PyArray2, PyArray4, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMethods};
+use numpy::{
+    PyArray1, PyArray2, PyArray4, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMethods,
+};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
+
+/// A scan, its truth mask, and the beam power summary.
+type Simulated<'py> = (
+    Bound<'py, PyArray4<u16>>,
+    Bound<'py, PyArray2<bool>>,
+    String,
+);
 
 /// `dmap simulate` with its options in its words: the scan (`uint16`,
 /// `(rows, cols, J1, J2)`), the truth mask (`bool`, `(rows, cols)`) and
 /// the summary lines it prints.
 #[pyfunction]
-pub fn simulate<'py>(
-    py: Python<'py>,
-    argv: Vec<String>,
-) -> PyResult<(Bound<'py, PyArray4<u16>>, Bound<'py, PyArray2<bool>>, String)> {
+pub fn simulate<'py>(py: Python<'py>, argv: Vec<String>) -> PyResult<Simulated<'py>> {
     let mut all: Vec<String> = vec!["-o".into(), "scan.npy".into()];
     all.extend(argv);
     let a = parse::<SimulateArgs>("simulate", &all)?;
@@ -71,7 +77,11 @@ fn channel(grad: &Bound<'_, PyAny>, ch: usize) -> PyResult<(usize, usize, Vec<f6
         (r, c, pick(a.as_array().iter().copied().collect())?)
     } else if let Ok(a) = grad.extract::<PyReadonlyArrayDyn<'_, f32>>() {
         let (r, c) = shape_of(a.shape())?;
-        (r, c, pick(a.as_array().iter().map(|&x| f64::from(x)).collect())?)
+        (
+            r,
+            c,
+            pick(a.as_array().iter().map(|&x| f64::from(x)).collect())?,
+        )
     } else {
         return Err(bad(
             "a gradient image must be a float64 (or float32) array (rows, cols, 3)".into(),
@@ -91,14 +101,19 @@ pub fn eval(
     truth: &Bound<'_, PyAny>,
     argv: Vec<String>,
 ) -> PyResult<(String, String)> {
-    let mut all: Vec<String> = vec!["grad".into(), "--truth".into(), "truth".into(), "--json".into()];
+    let mut all: Vec<String> = vec![
+        "grad".into(),
+        "--truth".into(),
+        "truth".into(),
+        "--json".into(),
+    ];
     all.extend(argv);
     let a = parse::<EvalArgs>("eval", &all)?;
     dmap::eval::check_args(&a).map_err(value_error)?;
     let (rows, cols, values) = channel(grad, a.channel)?;
-    let mask = truth.extract::<PyReadonlyArrayDyn<'_, bool>>().map_err(|_| {
-        PyValueError::new_err("truth: a mask must be a bool array (rows, cols)")
-    })?;
+    let mask = truth
+        .extract::<PyReadonlyArrayDyn<'_, bool>>()
+        .map_err(|_| PyValueError::new_err("truth: a mask must be a bool array (rows, cols)"))?;
     if mask.ndim() != 2 {
         return Err(PyValueError::new_err(format!(
             "truth: a mask must have shape (rows, cols), got {:?}",
