@@ -3,7 +3,8 @@
 # with maturin (`pip install ./host-tests/python`) into a virtual
 # environment under host-tests/target/py-venv, builds the `dmap` binary the
 # tests compare it with, and runs its pytest suite. Arguments go to pytest
-# (`scripts/python.sh -k stream`). Installs what it needs (maturin, NumPy,
+# (`scripts/python.sh -k stream`); with PY_INSTALL_ONLY=1 it stops before
+# them (scripts/bench-python.sh). Installs what it needs (maturin, NumPy,
 # pytest, hypothesis) into the environment only; `python3 -m venv` itself
 # comes from scripts/setup.sh.
 set -euo pipefail
@@ -23,6 +24,7 @@ fi
 # build environment), in the host workspace's target folder.
 PATH="$PWD/$venv/bin:$PATH" "$py" -m pip install --quiet --disable-pip-version-check \
     --no-build-isolation --no-deps --force-reinstall ./host-tests/python
+[ "${PY_INSTALL_ONLY:-}" = 1 ] && exit 0
 host=$(rustc -vV | sed -n 's/^host: //p')
 DMAP="$PWD/host-tests/target/$host/release/dmap" \
     "$py" -m pytest -q -p no:cacheprovider host-tests/python/tests "$@"
