@@ -90,3 +90,39 @@ def test_dmap_warnings_become_python_warnings():
     scan = np.ones((3, 4, 1, 2), np.uint16)
     with pytest.warns(cvm_dmap.DmapWarning, match="^1x2 maps: this configuration scores every pair of maps 0"):
         cvm_dmap.score(scan)
+
+
+def test_a_scan_of_many_bands_equals_dmap(dmap, tmp_path):
+    # 16x16 maps, 300 columns: dmap scores 13 rows a band, so 40 rows are 4 bands.
+    scan = np.random.default_rng(7).integers(0, 4096, size=(40, 300, 16, 16), dtype=np.uint16)
+    np.save(tmp_path / "wide.npy", scan)
+    for distance in ("cvm", "cvm-fixed"):
+        got = cvm_dmap.score(scan, distance)
+        want = cli_score(dmap, tmp_path, tmp_path / "wide.npy", "--distance", distance)
+        assert got.tobytes() == want.tobytes()
+
+
+def test_the_gil_is_released_while_scoring():
+    import threading
+    import time
+
+    scan = np.random.default_rng(1).integers(0, 4096, size=(150, 150, 15, 15), dtype=np.uint16)
+    started, took = threading.Event(), []
+
+    def work():
+        started.set()
+        t0 = time.perf_counter()
+        cvm_dmap.score(scan, "cvm")
+        took.append(time.perf_counter() - t0)
+
+    t = threading.Thread(target=work)
+    t.start()
+    started.wait()
+    last, gap = time.perf_counter(), 0.0
+    while t.is_alive():
+        now = time.perf_counter()
+        gap, last = max(gap, now - last), now
+    t.join()
+    # With the GIL held through the call, this loop would stop for all of it.
+    assert took[0] > 0.05
+    assert gap < 0.5 * took[0], (gap, took[0])

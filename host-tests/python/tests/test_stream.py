@@ -63,6 +63,13 @@ def test_decode_equals_dmap_listen(dmap, files, tmp_path, scores):
     assert got.objects == got.scans[-1].objects and got.totals == got.scans[-1].totals
 
 
+def test_a_cut_scan_has_no_image_as_dmap_listen_writes_none(files):
+    lines = cvm_dmap.stream(np.load(files / "part.npy"), scores=True)
+    cut = cvm_dmap.decode(lines[: len(lines) // 2], strict=False)
+    assert cut.damaged and cut.image is None and cut.verdict is None
+    assert cut.scans[0].image_refusal.startswith("has no end line (cut)")
+
+
 def test_decode_takes_text_and_lists_of_lines(files):
     lines = cvm_dmap.stream(np.load(files / "part.npy"))
     want = cvm_dmap.decode(lines).json
