@@ -181,11 +181,9 @@ pub fn calibrate<'py>(
     let held = refs
         .iter()
         .zip(&names)
-        .map(|(r, name)| match r.extract::<PathBuf>() {
-            Ok(path) if !r.hasattr("__array_interface__").unwrap_or(false) => {
-                Ok(Reference::File(path))
-            }
-            _ => ScanArray::new(r, name).map(Reference::Array),
+        .map(|(r, name)| match r.cast::<pyo3::types::PyString>() {
+            Ok(path) => Ok(Reference::File(path.extract::<PathBuf>()?)),
+            Err(_) => ScanArray::new(r, name).map(Reference::Array),
         })
         .collect::<PyResult<Vec<_>>>()?;
     enum Ref<'a> {

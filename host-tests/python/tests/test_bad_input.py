@@ -79,6 +79,14 @@ def test_a_damaged_stream_raises_with_the_decode(files):
     assert cvm_dmap.decode(b"", strict=False).scans == []
 
 
+def test_options_take_numpy_scalars_and_refuse_nothing_to_calibrate(files):
+    scan = np.load(files / "part.npy")
+    assert cvm_dmap.stream(scan, threshold=np.float64(0.3), max_defect_lines=np.int64(2)) == cvm_dmap.stream(
+        scan, threshold=0.3, max_defect_lines=2)
+    with pytest.raises(ValueError, match="^no reference scan given$"):
+        cvm_dmap.calibrate([])
+
+
 def test_bad_eval_input():
     g = np.zeros((3, 4, 3))
     t = np.zeros((3, 4), bool)

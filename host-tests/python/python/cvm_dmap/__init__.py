@@ -156,6 +156,8 @@ def calibrate(scans: Sequence[Union[np.ndarray, Path]], rate: Optional[float] = 
     file ``dmap calibrate -o`` writes, byte for byte.
     """
     scans = list(scans)
+    if not scans:
+        raise ValueError("no reference scan given")
     if names is None:
         names = [os.fspath(s) if isinstance(s, (str, os.PathLike)) else f"scans[{i}]" for i, s in enumerate(scans)]
     refs = [os.fspath(s) if isinstance(s, os.PathLike) else s for s in scans]

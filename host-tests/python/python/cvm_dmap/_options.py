@@ -1,6 +1,7 @@
 """Keyword arguments to dmap's command-line words, and the warnings."""
 
 import math
+import numbers
 import os
 import warnings
 from typing import Any, Dict, List, Optional
@@ -14,10 +15,11 @@ def word(value: Any) -> str:
     """One option value as dmap reads it on its command line."""
     if isinstance(value, bool):
         raise ValueError(f"{value!r} is not a value (a flag is given as True)")
-    if isinstance(value, float):
-        if math.isnan(value):
-            return "NaN"
-        return repr(value)
+    if isinstance(value, numbers.Integral):
+        return str(int(value))
+    if isinstance(value, numbers.Real):  # float, and NumPy's float scalars
+        f = float(value)
+        return "NaN" if math.isnan(f) else repr(f)
     if isinstance(value, (tuple, list)):
         return ",".join(word(v) for v in value)
     if isinstance(value, os.PathLike):
