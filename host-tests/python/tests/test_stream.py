@@ -29,6 +29,7 @@ def test_stream_equals_dmap_byte_for_byte(dmap, files, kw, args):
 def test_settings_dict_is_the_keywords(files):
     scan = np.load(files / "part.npy")
     assert cvm_dmap.stream(scan, {"threshold": 0.3, "scores": True}) == cvm_dmap.stream(scan, threshold=0.3, scores=True)
+    assert cvm_dmap.stream(scan, {"threshold": 0.3}, threshold=0.0) == cvm_dmap.stream(scan, threshold=0.0)
     with pytest.raises(ValueError, match="unknown setting 'treshold'"):
         cvm_dmap.stream(scan, {"treshold": 0.3})
 

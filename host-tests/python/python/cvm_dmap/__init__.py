@@ -104,7 +104,7 @@ def stream(scan: np.ndarray, settings: Optional[Dict[str, Any]] = None,
     for k, v in (settings or {}).items():
         if k not in opts:
             raise ValueError(f"unknown setting {k!r} (one of {', '.join(sorted(opts))})")
-        if opts[k] in (None, False):
+        if opts[k] is None or opts[k] is False:
             opts[k] = v
     cal, text = _calibration_arg(calibration)
     lines, warnings = _native.stream(scan, argv({**opts, **cal}), text)
