@@ -9,8 +9,11 @@ use numpy::{
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
-/// An array's samples, borrowed read-only for as long as this lives.
+/// An array's samples, borrowed read-only for as long as this lives
+/// (`Other`: an array in the other byte order, held, its buffer read in
+/// place).
 pub enum Held<'py> {
+    Other(Bound<'py, PyUntypedArray>),
     U8(PyReadonlyArrayDyn<'py, u8>),
     U16(PyReadonlyArrayDyn<'py, u16>),
     U32(PyReadonlyArrayDyn<'py, u32>),
@@ -24,6 +27,7 @@ pub struct ScanArray<'py> {
     pub name: String,
     pub shape: Vec<usize>,
     pub dtype: ScanDtype,
+    pub big_endian: bool,
     held: Held<'py>,
 }
 
@@ -76,19 +80,14 @@ impl<'py> ScanArray<'py> {
                 )));
             }
         };
-        if dt.is_native_byteorder() == Some(false) {
-            return Err(PyValueError::new_err(format!(
-                "{name}: dtype {} is not in this machine's byte order: convert with .astype(\"{}\")",
-                dt.str().map_or("?".into(), |s| s.to_string()),
-                dtype.name()
-            )));
-        }
+        let native = dt.is_native_byteorder() != Some(false);
         if !arr.is_c_contiguous() {
             return Err(PyValueError::new_err(format!(
                 "{name}: the array is not C-contiguous (a view with strides): pass numpy.ascontiguousarray({name}), which copies it once"
             )));
         }
         let held = match dtype {
+            _ if !native => Held::Other(arr.clone()),
             ScanDtype::U8 => Held::U8(borrow(obj, name)?),
             ScanDtype::U16 => Held::U16(borrow(obj, name)?),
             ScanDtype::U32 => Held::U32(borrow(obj, name)?),
@@ -99,6 +98,7 @@ impl<'py> ScanArray<'py> {
             name: name.to_string(),
             shape,
             dtype,
+            big_endian: cfg!(target_endian = "big") == native,
             held,
         })
     }
@@ -106,6 +106,17 @@ impl<'py> ScanArray<'py> {
     /// The samples' bytes, in place.
     pub fn bytes(&self) -> &[u8] {
         match &self.held {
+            Held::Other(a) => {
+                let len = a.len() * self.dtype.item();
+                if len == 0 {
+                    return &[];
+                }
+                // SAFETY: a C-contiguous array (checked) of `len` bytes
+                // from its data pointer, alive while `a` is held.
+                unsafe {
+                    std::slice::from_raw_parts((*a.as_array_ptr()).fields.data.cast::<u8>(), len)
+                }
+            }
             Held::U8(a) => bytes_of(a),
             Held::U16(a) => bytes_of(a),
             Held::U32(a) => bytes_of(a),
@@ -121,6 +132,7 @@ impl<'py> ScanArray<'py> {
             bytes: self.bytes(),
             shape: &self.shape,
             dtype: self.dtype,
+            big_endian: self.big_endian,
         }
     }
 }
@@ -133,12 +145,18 @@ pub struct View<'a> {
     pub bytes: &'a [u8],
     pub shape: &'a [usize],
     pub dtype: ScanDtype,
+    pub big_endian: bool,
 }
 
 impl<'a> View<'a> {
     /// The scan as `dmap` reads a file: shape checks first.
     pub fn open(&self) -> anyhow::Result<ScanFile<'a>> {
-        ScanFile::from_bytes(self.name, self.bytes, self.shape, self.dtype)
+        ScanFile::from_bytes(
+            self.name,
+            self.bytes,
+            self.shape,
+            (self.dtype, self.big_endian),
+        )
     }
 
     /// Rows and columns (the shape is rank 4, checked).

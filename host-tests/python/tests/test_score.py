@@ -53,6 +53,17 @@ def test_every_dtype_a_scan_file_may_have(dmap, files, tmp_path, dtype, distance
     assert got.tobytes() == want.tobytes()
 
 
+@pytest.mark.parametrize("dtype", [">u2", ">u4", ">f4", ">f8"])
+@pytest.mark.parametrize("distance", ["cvm", "cvm-fixed"])
+def test_the_other_byte_order_as_dmap_reads_it(dmap, files, tmp_path, dtype, distance):
+    scan = np.load(files / "part.npy").astype(dtype)
+    np.save(tmp_path / "big.npy", scan)
+    got = cvm_dmap.score(scan, distance)
+    want = cli_score(dmap, tmp_path, tmp_path / "big.npy", "--distance", distance)
+    assert got.tobytes() == want.tobytes()
+    assert cvm_dmap.stream(scan) == dmap.run("stream", tmp_path / "big.npy").stdout
+
+
 def test_a_memory_mapped_scan_is_read_in_place(dmap, files, tmp_path):
     scan = np.load(files / "part.npy", mmap_mode="r")
     got = cvm_dmap.score(scan, "cvm-fixed")

@@ -89,15 +89,15 @@ impl ScanFile<'static> {
 }
 
 impl<'a> ScanFile<'a> {
-    /// A scan whose samples are `bytes` in memory (C order, native byte
-    /// order, `dtype`), of shape `(rows, cols, j1, j2)`, with the header
+    /// A scan whose samples are `bytes` in memory (C order, `dtype`, big
+    /// endian or not), of shape `(rows, cols, j1, j2)`, with the header
     /// checks of [`ScanFile::open`] on that shape and the size; `name`
     /// stands for the file in messages. The samples are read in place.
     pub fn from_bytes(
         name: &str,
         bytes: &'a [u8],
         shape: &[usize],
-        dtype: ScanDtype,
+        (dtype, big_endian): (ScanDtype, bool),
     ) -> Result<Self> {
         let path = PathBuf::from(name);
         let shape64: Vec<u64> = shape.iter().map(|&d| d as u64).collect();
@@ -120,7 +120,7 @@ impl<'a> ScanFile<'a> {
             cols,
             geometry,
             dtype,
-            big_endian: cfg!(target_endian = "big"),
+            big_endian,
         })
     }
 

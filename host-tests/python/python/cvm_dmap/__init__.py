@@ -38,7 +38,8 @@ def score(scan: np.ndarray, distance: str = "cvm", *, kernels: Optional[str] = N
     """The gradient image (Eq. 1) of a scan, as ``dmap score``.
 
     ``scan`` is a C-contiguous array ``(rows, cols, J1, J2)`` of uint8,
-    uint16, uint32, float32 or float64 (read in place, not copied);
+    uint16, uint32, float32 or float64, either byte order (read in place,
+    not copied);
     ``distance`` one of ``"cvm"`` (exact, f64), ``"cvm-fixed"`` (the
     firmware's fixed point, which needs integer counts 0..65535), ``"emd"``
     or ``"mean-dir"``. ``kernels`` (``"paper"``, ``"square"``),
