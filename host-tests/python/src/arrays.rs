@@ -10,8 +10,8 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
 /// An array's samples, borrowed read-only for as long as this lives
-/// (`Other`: an array in the other byte order, held, its buffer read in
-/// place).
+/// (`Other`: an array in the other byte order, or unaligned, held, its
+/// buffer read in place as bytes).
 pub enum Held<'py> {
     Other(Bound<'py, PyUntypedArray>),
     U8(PyReadonlyArrayDyn<'py, u8>),
@@ -86,8 +86,12 @@ impl<'py> ScanArray<'py> {
                 "{name}: the array is not C-contiguous (a view with strides): pass numpy.ascontiguousarray({name}), which copies it once"
             )));
         }
+        // SAFETY: the array object's own flags, read while it is held.
+        let flags = unsafe { (*arr.as_array_ptr()).fields.flags };
+        let aligned = flags & numpy::npyffi::NPY_ARRAY_ALIGNED != 0;
         let held = match dtype {
-            _ if !native => Held::Other(arr.clone()),
+            // Read as bytes: no typed slice over unaligned samples.
+            _ if !native || !aligned => Held::Other(arr.clone()),
             ScanDtype::U8 => Held::U8(borrow(obj, name)?),
             ScanDtype::U16 => Held::U16(borrow(obj, name)?),
             ScanDtype::U32 => Held::U32(borrow(obj, name)?),

@@ -64,6 +64,15 @@ def test_the_other_byte_order_as_dmap_reads_it(dmap, files, tmp_path, dtype, dis
     assert cvm_dmap.stream(scan) == dmap.run("stream", tmp_path / "big.npy").stdout
 
 
+def test_an_unaligned_scan_is_read_in_place(files):
+    scan = np.load(files / "part.npy")
+    buf = bytearray(scan.nbytes + 1)
+    odd = np.frombuffer(buf, dtype=np.uint16, offset=1, count=scan.size).reshape(scan.shape)
+    odd[...] = scan
+    assert not odd.flags.aligned
+    assert cvm_dmap.score(odd, "cvm-fixed").tobytes() == cvm_dmap.score(scan, "cvm-fixed").tobytes()
+
+
 def test_a_memory_mapped_scan_is_read_in_place(dmap, files, tmp_path):
     scan = np.load(files / "part.npy", mmap_mode="r")
     got = cvm_dmap.score(scan, "cvm-fixed")
