@@ -26,6 +26,13 @@ __all__ = [
     "Calibration", "Decoded", "Scan", "Metrics", "StreamDamaged", "DmapWarning", "MAX_COLS",
 ]
 
+try:
+    from importlib.metadata import version as _version
+
+    __version__: str = _version("cvm-dmap")
+except Exception:  # not installed as a distribution (a source tree on sys.path)
+    __version__ = "unknown"
+
 #: Most columns a scan may have on the board (``dmap stream`` refuses more).
 MAX_COLS: int = _native.MAX_COLS
 

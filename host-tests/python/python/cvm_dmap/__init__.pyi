@@ -10,6 +10,7 @@ import numpy.typing as npt
 _Path = Union[str, "os.PathLike[str]"]
 _Scan = npt.NDArray[Any]
 
+__version__: str
 MAX_COLS: int
 
 class DmapWarning(UserWarning):
