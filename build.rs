@@ -73,75 +73,7 @@ fn main() {
 /// (geometry, kernels, weights, normalisation, full scale); `threshold`,
 /// `pthr` and `sthr` may then not be given.
 fn h743_scan(spec: &str, calibration: Option<&std::path::Path>) -> Result<String, String> {
-    let mut j1 = 15u8;
-    let mut j2 = 15u8;
-    let mut cols = 300usize;
-    let mut rows = 200u32;
-    let mut kernels = "paper".to_string();
-    let mut b = None::<u8>;
-    let mut weights = "uniform".to_string();
-    let mut normalise = true;
-    let mut threshold = 0.5f64;
-    let mut pthr = 0.1f64;
-    let mut sthr = f64::INFINITY;
-    let mut scores = true;
-    let mut max_defect_lines = 0u16;
-    let mut full_scale = u16::MAX;
-    let mut fw = None::<String>;
-    let mut reject_row = false;
-    let mut pulse_us = 0u32;
-    let mut row_delay = 0u32;
-    fn num<T: std::str::FromStr>(k: &str, v: &str) -> Result<T, String> {
-        v.parse()
-            .map_err(|_| format!("{k}={v}: not a valid number"))
-    }
-    fn flag(k: &str, v: &str) -> Result<bool, String> {
-        match v {
-            "true" => Ok(true),
-            "false" => Ok(false),
-            _ => Err(format!("{k}={v}: expected true or false")),
-        }
-    }
-    for pair in spec.split_whitespace() {
-        let (k, v) = pair
-            .split_once('=')
-            .ok_or_else(|| format!("{pair:?} is not key=value"))?;
-        match k {
-            "j1" => j1 = num(k, v)?,
-            "j2" => j2 = num(k, v)?,
-            "cols" => cols = num(k, v)?,
-            "rows" => rows = num(k, v)?,
-            "kernels" if v == "paper" || v == "square" => kernels = v.into(),
-            "b" => b = Some(num(k, v)?),
-            "weights" if v == "uniform" || v == "unit" => weights = v.into(),
-            "normalise" => normalise = flag(k, v)?,
-            "threshold" => threshold = num(k, v)?,
-            "pthr" => pthr = num(k, v)?,
-            "sthr" => sthr = num(k, v)?,
-            "scores" => scores = flag(k, v)?,
-            "max_defect_lines" => max_defect_lines = num(k, v)?,
-            "fs" => full_scale = num(k, v)?,
-            "reject" if v == "part" || v == "row" => reject_row = v == "row",
-            "pulse_us" => pulse_us = num(k, v)?,
-            "row_delay" => row_delay = num(k, v)?,
-            // The version the header announces (`dmap twin` passes the
-            // host's, so that its output compares byte for byte).
-            "fw" if !v.is_empty()
-                && v.len() <= 32
-                && v.bytes()
-                    .all(|b| b.is_ascii_graphic() && b != b',' && b != b'*') =>
-            {
-                fw = Some(v.into())
-            }
-            _ => return Err(format!("unknown key or value in {pair:?}")),
-        }
-    }
-    if !(1..=16).contains(&j1) || !(1..=16).contains(&j2) {
-        return Err(format!("j1={j1} j2={j2}: each must be 1..=16"));
-    }
-    if cols == 0 || rows == 0 {
-        return Err("cols and rows must be at least 1".into());
-    }
+    let mut scan = Scan::parse(spec)?;
     if let Some(path) = calibration {
         if spec.split_whitespace().any(|p| {
             ["threshold=", "pthr=", "sthr="]
@@ -153,88 +85,207 @@ fn h743_scan(spec: &str, calibration: Option<&std::path::Path>) -> Result<String
                     .into(),
             );
         }
-        let resolved_b = match (kernels.as_str(), b) {
+        let config = serde_json::json!({
+            "j1": scan.j1,
+            "j2": scan.j2,
+            "kernels": scan.kernels,
+            "b": scan.resolved_b(),
+            "weights": scan.weights,
+            "normalise": scan.normalise,
+            "full_scale": scan.full_scale,
+        });
+        (scan.threshold, scan.pthr, scan.sthr) = calibration_thresholds(path, &config)?;
+    }
+    scan.check_thresholds()?;
+    Ok(scan.rust(spec))
+}
+
+/// The values of `CVM_H743_SCAN`, each at its default until given.
+struct Scan {
+    j1: u8,
+    j2: u8,
+    cols: usize,
+    rows: u32,
+    kernels: String,
+    b: Option<u8>,
+    weights: String,
+    normalise: bool,
+    threshold: f64,
+    pthr: f64,
+    sthr: f64,
+    scores: bool,
+    max_defect_lines: u16,
+    full_scale: u16,
+    fw: Option<String>,
+    reject_row: bool,
+    pulse_us: u32,
+    row_delay: u32,
+}
+
+fn num<T: std::str::FromStr>(k: &str, v: &str) -> Result<T, String> {
+    v.parse()
+        .map_err(|_| format!("{k}={v}: not a valid number"))
+}
+
+fn flag(k: &str, v: &str) -> Result<bool, String> {
+    match v {
+        "true" => Ok(true),
+        "false" => Ok(false),
+        _ => Err(format!("{k}={v}: expected true or false")),
+    }
+}
+
+impl Scan {
+    fn parse(spec: &str) -> Result<Scan, String> {
+        let mut s = Scan {
+            j1: 15,
+            j2: 15,
+            cols: 300,
+            rows: 200,
+            kernels: "paper".into(),
+            b: None,
+            weights: "uniform".into(),
+            normalise: true,
+            threshold: 0.5,
+            pthr: 0.1,
+            sthr: f64::INFINITY,
+            scores: true,
+            max_defect_lines: 0,
+            full_scale: u16::MAX,
+            fw: None,
+            reject_row: false,
+            pulse_us: 0,
+            row_delay: 0,
+        };
+        for pair in spec.split_whitespace() {
+            let (k, v) = pair
+                .split_once('=')
+                .ok_or_else(|| format!("{pair:?} is not key=value"))?;
+            match k {
+                "j1" => s.j1 = num(k, v)?,
+                "j2" => s.j2 = num(k, v)?,
+                "cols" => s.cols = num(k, v)?,
+                "rows" => s.rows = num(k, v)?,
+                "kernels" if v == "paper" || v == "square" => s.kernels = v.into(),
+                "b" => s.b = Some(num(k, v)?),
+                "weights" if v == "uniform" || v == "unit" => s.weights = v.into(),
+                "normalise" => s.normalise = flag(k, v)?,
+                "threshold" => s.threshold = num(k, v)?,
+                "pthr" => s.pthr = num(k, v)?,
+                "sthr" => s.sthr = num(k, v)?,
+                "scores" => s.scores = flag(k, v)?,
+                "max_defect_lines" => s.max_defect_lines = num(k, v)?,
+                "fs" => s.full_scale = num(k, v)?,
+                "reject" if v == "part" || v == "row" => s.reject_row = v == "row",
+                "pulse_us" => s.pulse_us = num(k, v)?,
+                "row_delay" => s.row_delay = num(k, v)?,
+                // The version the header announces (`dmap twin` passes the
+                // host's, so that its output compares byte for byte).
+                "fw" if !v.is_empty()
+                    && v.len() <= 32
+                    && v.bytes()
+                        .all(|b| b.is_ascii_graphic() && b != b',' && b != b'*') =>
+                {
+                    s.fw = Some(v.into())
+                }
+                _ => return Err(format!("unknown key or value in {pair:?}")),
+            }
+        }
+        if !(1..=16).contains(&s.j1) || !(1..=16).contains(&s.j2) {
+            return Err(format!("j1={} j2={}: each must be 1..=16", s.j1, s.j2));
+        }
+        if s.cols == 0 || s.rows == 0 {
+            return Err("cols and rows must be at least 1".into());
+        }
+        Ok(s)
+    }
+
+    /// `b` as the kernels take it: the paper kernels' bound (0: the
+    /// default), or the square kernels' size (default: the map's).
+    fn resolved_b(&self) -> u8 {
+        match (self.kernels.as_str(), self.b) {
             ("paper", b) => b.unwrap_or(0),
             (_, Some(k)) => k,
-            (_, None) => j1.max(j2) - 1,
+            (_, None) => self.j1.max(self.j2) - 1,
+        }
+    }
+
+    fn check_thresholds(&self) -> Result<(), String> {
+        let (t, p, s) = (self.threshold, self.pthr, self.sthr);
+        if !t.is_finite() || t < 0.0 {
+            return Err(format!("threshold={t}: must be finite and >= 0"));
+        }
+        if p.is_nan() || p < 0.0 {
+            return Err(format!("pthr={p}: must be >= 0 (inf: off)"));
+        }
+        if s.is_nan() || s < 0.0 {
+            return Err(format!("sthr={s}: must be >= 0 (inf: off)"));
+        }
+        Ok(())
+    }
+
+    /// The constants `src/config.rs` includes, and the `.cvm_config`
+    /// section: what the ELF was built for, in a section that is not loaded
+    /// (no flash), which `dmap twin --elf` reads to refuse a run it does
+    /// not fit.
+    fn rust(&self, spec: &str) -> String {
+        let Scan {
+            j1, j2, cols, rows, ..
+        } = *self;
+        let (threshold, pthr, sthr) = (self.threshold, self.pthr, self.sthr);
+        let (scores, max_defect_lines, full_scale) =
+            (self.scores, self.max_defect_lines, self.full_scale);
+        let (kernels, weights, normalise) = (&self.kernels, &self.weights, self.normalise);
+        let section_b = self.resolved_b();
+        let built_for = format!(
+            "j1={j1} j2={j2} cols={cols} rows={rows} kernels={kernels} b={section_b} weights={weights} normalise={normalise} threshold={threshold:?} pthr={pthr:?} sthr={sthr:?} scores={scores} max_defect_lines={max_defect_lines} fs={full_scale}"
+        );
+        let kernels = match (kernels.as_str(), self.b) {
+            ("paper", b) => format!("Kernels::Paper {{ bmax: {} }}", b.unwrap_or(0)),
+            (_, Some(k)) => format!("Kernels::Square {{ kmax: {k} }}"),
+            (_, None) => "Kernels::square_default(GEOMETRY)".into(),
         };
-        let config = serde_json::json!({
-            "j1": j1,
-            "j2": j2,
-            "kernels": kernels,
-            "b": resolved_b,
-            "weights": weights,
-            "normalise": normalise,
-            "full_scale": full_scale,
-        });
-        (threshold, pthr, sthr) = calibration_thresholds(path, &config)?;
+        let weights = if weights == "unit" { "Unit" } else { "Uniform" };
+        let f = |x: f64| {
+            if x.is_infinite() {
+                "f64::INFINITY".to_string()
+            } else {
+                format!("{x:?}")
+            }
+        };
+        let mut s = String::new();
+        let _ = writeln!(s, "// Generated by build.rs from CVM_H743_SCAN={spec:?}.");
+        let _ = writeln!(s, "pub const J1: u8 = {j1};\npub const J2: u8 = {j2};");
+        let _ = writeln!(
+            s,
+            "pub const COLS: usize = {cols};\npub const ROWS: u32 = {rows};"
+        );
+        let _ = writeln!(s, "pub const KERNELS: Kernels = {kernels};");
+        let _ = writeln!(s, "pub const WEIGHTS: Weights = Weights::{weights};");
+        let _ = writeln!(s, "pub const NORMALISE: bool = {normalise};");
+        let _ = writeln!(s, "pub const THRESHOLD_UNITS: f64 = {threshold:?};");
+        let _ = writeln!(s, "pub const POWER_THRESHOLD_UNITS: f64 = {};", f(pthr));
+        let _ = writeln!(s, "pub const SPREAD_THRESHOLD_UNITS: f64 = {};", f(sthr));
+        let _ = writeln!(s, "pub const SCORES: bool = {scores};");
+        let _ = writeln!(
+            s,
+            "pub const MAX_DEFECT_LINES_PER_ROW: u16 = {max_defect_lines};"
+        );
+        let _ = writeln!(s, "pub const FULL_SCALE: u16 = {full_scale};");
+        let _ = writeln!(s, "pub const REJECT_ROW: bool = {};", self.reject_row);
+        let _ = writeln!(s, "pub const PULSE_US: u32 = {};", self.pulse_us);
+        let _ = writeln!(s, "pub const ROW_DELAY: u32 = {};", self.row_delay);
+        let _ = writeln!(
+            s,
+            "pub const FIRMWARE_VERSION_OVERRIDE: Option<&str> = {:?};",
+            self.fw
+        );
+        let _ = writeln!(
+            s,
+            r##"core::arch::global_asm!(r#".pushsection .cvm_config,"",%progbits"#, r#".ascii "{built_for}""#, ".popsection");"##
+        );
+        s
     }
-    if !threshold.is_finite() || threshold < 0.0 {
-        return Err(format!("threshold={threshold}: must be finite and >= 0"));
-    }
-    if pthr.is_nan() || pthr < 0.0 {
-        return Err(format!("pthr={pthr}: must be >= 0 (inf: off)"));
-    }
-    if sthr.is_nan() || sthr < 0.0 {
-        return Err(format!("sthr={sthr}: must be >= 0 (inf: off)"));
-    }
-    // What the ELF was built for, in a section that is not loaded (no
-    // flash): `dmap twin --elf` reads it and refuses a run it does not fit.
-    let section_b = match (kernels.as_str(), b) {
-        ("paper", b) => b.unwrap_or(0),
-        (_, Some(k)) => k,
-        (_, None) => j1.max(j2) - 1,
-    };
-    let built_for = format!(
-        "j1={j1} j2={j2} cols={cols} rows={rows} kernels={kernels} b={section_b} weights={weights} normalise={normalise} threshold={threshold:?} pthr={pthr:?} sthr={sthr:?} scores={scores} max_defect_lines={max_defect_lines} fs={full_scale}"
-    );
-    let kernels = match (kernels.as_str(), b) {
-        ("paper", b) => format!("Kernels::Paper {{ bmax: {} }}", b.unwrap_or(0)),
-        (_, Some(k)) => format!("Kernels::Square {{ kmax: {k} }}"),
-        (_, None) => "Kernels::square_default(GEOMETRY)".into(),
-    };
-    let weights = if weights == "unit" { "Unit" } else { "Uniform" };
-    let mut s = String::new();
-    let _ = writeln!(s, "// Generated by build.rs from CVM_H743_SCAN={spec:?}.");
-    let _ = writeln!(s, "pub const J1: u8 = {j1};\npub const J2: u8 = {j2};");
-    let _ = writeln!(
-        s,
-        "pub const COLS: usize = {cols};\npub const ROWS: u32 = {rows};"
-    );
-    let _ = writeln!(s, "pub const KERNELS: Kernels = {kernels};");
-    let _ = writeln!(s, "pub const WEIGHTS: Weights = Weights::{weights};");
-    let _ = writeln!(s, "pub const NORMALISE: bool = {normalise};");
-    let _ = writeln!(s, "pub const THRESHOLD_UNITS: f64 = {threshold:?};");
-    let pthr = if pthr.is_infinite() {
-        "f64::INFINITY".to_string()
-    } else {
-        format!("{pthr:?}")
-    };
-    let _ = writeln!(s, "pub const POWER_THRESHOLD_UNITS: f64 = {pthr};");
-    let sthr = if sthr.is_infinite() {
-        "f64::INFINITY".to_string()
-    } else {
-        format!("{sthr:?}")
-    };
-    let _ = writeln!(s, "pub const SPREAD_THRESHOLD_UNITS: f64 = {sthr};");
-    let _ = writeln!(s, "pub const SCORES: bool = {scores};");
-    let _ = writeln!(
-        s,
-        "pub const MAX_DEFECT_LINES_PER_ROW: u16 = {max_defect_lines};"
-    );
-    let _ = writeln!(s, "pub const FULL_SCALE: u16 = {full_scale};");
-    let _ = writeln!(s, "pub const REJECT_ROW: bool = {reject_row};");
-    let _ = writeln!(s, "pub const PULSE_US: u32 = {pulse_us};");
-    let _ = writeln!(s, "pub const ROW_DELAY: u32 = {row_delay};");
-    let _ = writeln!(
-        s,
-        "pub const FIRMWARE_VERSION_OVERRIDE: Option<&str> = {fw:?};"
-    );
-    let _ = writeln!(
-        s,
-        r##"core::arch::global_asm!(r#".pushsection .cvm_config,"",%progbits"#, r#".ascii "{built_for}""#, ".popsection");"##
-    );
-    Ok(s)
 }
 
 /// The CVM, power and spread thresholds (distance units, contrast, share

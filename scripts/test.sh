@@ -6,7 +6,14 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
 
-step() { printf '\n== %s\n' "$*" >&2; }
+# Each step's wall time, printed as it ends and summed up at the end, so a
+# slow step shows in CI's log (docs/performance.md, "Test command").
+t0=$SECONDS
+last=$SECONDS
+times=()
+name=""
+mark() { [ -n "$name" ] && times+=("$(printf '%5d s  %s' $((SECONDS - last)) "$name")"); last=$SECONDS; }
+step() { mark; name="$*"; printf '\n== %s\n' "$*" >&2; }
 
 step "structure: no import circles, no oversized files or functions"
 (cd scripts && python3 -m unittest -q tests.test_check_structure)
@@ -63,6 +70,10 @@ fi
 # The last line: one count over every host test binary (cargo prints one
 # line per binary, the last of which is often an empty doc-test run) and
 # the Python package's pytest run (its last line, "N passed in T s").
+mark
+printf '\nstep times:\n' >&2
+printf '  %s\n' "${times[@]}" >&2
+printf '  %5d s  total\n' $((SECONDS - t0)) >&2
 awk '/^test result:/ || FILENAME == ARGV[2] && /^[0-9]+ (passed|failed)/ {
          for (i = 1; i <= NF; i++) { if ($(i+1) ~ /^passed/) p += $i; if ($(i+1) ~ /^failed/) f += $i } }
      END { printf "\ntests: %d passed, %d failed\n", p, f }' "$log" "$pylog"

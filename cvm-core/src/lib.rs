@@ -5,22 +5,21 @@
 pub const VERSION: &str = env!("CARGO_PKG_VERSION");
 
 pub mod calibration;
+pub mod channels;
 pub mod command;
 pub mod config;
-pub mod flags;
 pub mod objects;
 pub mod pipeline;
-pub mod power;
 pub mod protocol;
 pub mod record;
 pub mod scorer;
 pub mod settings;
-pub mod spread;
 pub mod stream;
 pub mod tables;
 pub mod verdict;
 
 pub use calibration::Calibrator;
+pub use channels::{flags, power, spread};
 pub use config::{Config, ConfigError, Geometry, Kernels, MAX_CELLS, MAX_J, Weights};
 pub use objects::{Object, Objects};
 pub use pipeline::Pipeline;

@@ -25,7 +25,7 @@
 //! of them (area) stays below `2^88`: `u128` accumulators cannot
 //! overflow. The centroid is reported in `Q8` positions (1/256).
 
-use crate::flags;
+use crate::channels::flags;
 use crate::stream::{PositionScore, RowView, Totals};
 
 /// Objects open at once, and runs kept per row.
@@ -54,7 +54,7 @@ pub struct Object {
     pub peak_mag: u32,
     /// Power magnitude at the peak (`Q15`).
     pub peak_power: u16,
-    /// Spread magnitude at the peak (`Q16`, [`crate::spread`]; 0 while
+    /// Spread magnitude at the peak (`Q16`, [`crate::channels::spread`]; 0 while
     /// the spread channel is off).
     pub peak_spread: u32,
     /// Channels that fired anywhere in the object: [`flags::CVM_DEFECT`],

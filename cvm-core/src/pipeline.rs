@@ -4,11 +4,11 @@
 //! what makes their output byte-identical.
 
 use crate::calibration::{Calibrator, Progress};
+use crate::channels::spread::{SPREAD_MAX, SPREAD_OFF};
 use crate::objects::{MAX_OBJECTS, Object, Objects};
 use crate::protocol::{HeaderInfo, LineSink, encode_end, encode_header, encode_object, encode_row};
 use crate::scorer::Scorer;
 pub use crate::settings::{Outputs, Settings};
-use crate::spread::{SPREAD_MAX, SPREAD_OFF};
 use crate::stream::{Engine, EngineError, Position, PushOutcome, RowView, Totals};
 use crate::verdict::{self, Ahead, Verdict};
 

@@ -43,7 +43,6 @@
 mod embed;
 mod error;
 mod formats;
-mod magnitude;
 mod normalise;
 mod prepare;
 mod score;
@@ -52,9 +51,9 @@ mod square;
 mod sum;
 mod words;
 
+pub use crate::channels::magnitude::magnitude;
 pub use error::FrameError;
 pub use formats::{Bounds, Formats};
-pub use magnitude::magnitude;
 /// The reciprocal of the normalisation, exposed for its exhaustive test.
 #[doc(hidden)]
 pub use normalise::reciprocal_q60;

@@ -63,10 +63,10 @@ pub struct Settings {
     /// Integer magnitude at or above which a position is a defect.
     pub threshold: u32,
     /// Power magnitude (`Q15`) at or above which a position is a defect
-    /// ([`crate::power::POWER_OFF`]: never).
+    /// ([`crate::channels::power::POWER_OFF`]: never).
     pub power_threshold: u32,
     /// Spread magnitude (`Q16`) at or above which a position is a defect
-    /// ([`crate::spread::SPREAD_OFF`], the default: the channel is off and
+    /// ([`crate::channels::spread::SPREAD_OFF`], the default: the channel is off and
     /// measures nothing).
     pub spread_threshold: u32,
     /// Emit per-position score (`S`) lines.
@@ -111,7 +111,7 @@ impl Settings {
             cols,
             threshold,
             power_threshold,
-            spread_threshold: crate::spread::SPREAD_OFF,
+            spread_threshold: crate::channels::spread::SPREAD_OFF,
             scores: false,
             max_defect_lines_per_row: 0,
             firmware_version,

@@ -51,6 +51,56 @@ class Checker(unittest.TestCase):
                               "cvm-core/src/b.rs": "pub struct B;\n"})
         self.assertEqual(run(tree)[0], 0)
 
+    def test_three_file_circle(self):
+        tree = dict(CRATE, **{"cvm-core/src/lib.rs": "pub mod a;\npub mod b;\npub mod c;\n",
+                              "cvm-core/src/a.rs": "use crate::b::B;\npub struct A;\n",
+                              "cvm-core/src/b.rs": "use crate::c::C;\npub struct B;\n",
+                              "cvm-core/src/c.rs": "pub struct C;\nfn f() { crate::a::A; }\n"})
+        rc, out = run(tree)
+        self.assertEqual(rc, 1)
+        self.assertIn("import circle: cvm-core/src/a.rs -> cvm-core/src/b.rs -> cvm-core/src/c.rs -> cvm-core/src/a.rs", out)
+        tree["cvm-core/src/c.rs"] = "pub struct C;\n"
+        self.assertEqual(run(tree), (0, "structure: ok\n"))
+
+    def test_folder_circle_without_file_circle(self):
+        tree = dict(CRATE, **{"cvm-core/src/lib.rs": "pub mod a;\npub mod b;\n",
+                              "cvm-core/src/a/mod.rs": "pub mod x;\npub mod y;\n",
+                              "cvm-core/src/a/x.rs": "use crate::b::p::P;\npub struct X;\n",
+                              "cvm-core/src/a/y.rs": "pub struct Y;\n",
+                              "cvm-core/src/b/mod.rs": "pub mod p;\npub mod q;\n",
+                              "cvm-core/src/b/p.rs": "pub struct P;\n",
+                              "cvm-core/src/b/q.rs": "use crate::a::y::Y;\npub struct Q;\n"})
+        rc, out = run(tree)
+        self.assertEqual(rc, 1)
+        self.assertIn("folder circle: cvm-core/src/a/ -> cvm-core/src/b/ -> cvm-core/src/a/", out)
+        self.assertNotIn("import circle", out)
+        # A file beside a folder counts as its own module.
+        tree["cvm-core/src/b/q.rs"] = "pub struct Q;\n"
+        tree["cvm-core/src/lib.rs"] = "pub mod a;\npub mod b;\npub mod s;\n"
+        tree["cvm-core/src/s.rs"] = "use crate::a::y::Y;\n"
+        tree["cvm-core/src/b/p.rs"] = "use crate::s;\npub struct P;\n"
+        self.assertIn("folder circle: cvm-core/src/a/ -> cvm-core/src/b/ -> cvm-core/src/s.rs -> cvm-core/src/a/",
+                      run(tree)[1])
+        # A child using its parent is not a circle.
+        del tree["cvm-core/src/s.rs"]
+        tree["cvm-core/src/lib.rs"] = "pub mod a;\npub mod b;\n"
+        tree["cvm-core/src/b/p.rs"] = "use super::q::Q;\npub struct P;\n"
+        tree["cvm-core/src/b/q.rs"] = "use super::Z;\npub struct Q;\n"
+        tree["cvm-core/src/b/mod.rs"] = "pub mod p;\npub mod q;\npub struct Z;\n"
+        self.assertEqual(run(tree), (0, "structure: ok\n"))
+
+    def test_build_script_function_rule_and_warnings(self):
+        long = "fn main() {\n" + "    let x = 1;\n" * 119 + "}\n"  # 121 lines
+        tree = dict(CRATE, **{"cvm-core/src/a.rs": "", "cvm-core/src/b.rs": "", "build.rs": long})
+        rc, out = run(tree)
+        self.assertIn("build.rs:1: fn main is 121 lines", out)
+        tree["build.rs"] = "fn main() {\n" + "    let x = 1;\n" * 110 + "}\n"  # 112 lines
+        tree["tool/a.py"] = "x = 1\n" * 640
+        rc, out = run(tree)
+        self.assertEqual(rc, 0)
+        self.assertIn("warning: build.rs:1: fn main is 112 lines (90 % of 120)", out)
+        self.assertIn("warning: tool/a.py: 640 lines (90 % of 700)", out)
+
     def test_python_circle(self):
         tree = {"pkg/__init__.py": "", "pkg/x.py": "from .y import f\n", "pkg/y.py": "from . import x\n"}
         rc, out = run(tree)

@@ -16,8 +16,8 @@
 //! The spread rule: per channel, over the magnitudes of every position with data of every
 //! reference scan (the CVM gradient magnitudes `mag` in the scorer's
 //! `Q(q)` format, the power magnitudes `pmag` in `Q15`,
-//! [`crate::power`], and the spread magnitudes `smag` in `Q16`,
-//! [`crate::spread`]; dark, saturated, clipped and border positions
+//! [`crate::channels::power`], and the spread magnitudes `smag` in `Q16`,
+//! [`crate::channels::spread`]; dark, saturated, clipped and border positions
 //! included, positions without a frame left out):
 //!
 //! ```text
@@ -62,15 +62,16 @@
 //! [`Calibrator::finish`] one pass over the bins.
 
 pub mod histogram;
+mod result;
 pub mod rule;
 pub mod tail;
 
-use crate::command::Calibration;
-use crate::flags;
-use crate::power;
-use crate::spread;
+use crate::channels::flags;
+use crate::channels::power;
+use crate::channels::spread;
 use crate::stream::PositionScore;
 use histogram::{Histogram, bins};
+pub use result::Calibration;
 pub use rule::{Channel, Rule};
 
 /// Bins of the CVM channel: 32-bit magnitudes.

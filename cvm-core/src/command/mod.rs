@@ -23,11 +23,12 @@ mod request;
 mod status;
 mod wire;
 
+pub use crate::calibration::Calibration;
 pub use crate::settings::{Source, Store};
 pub use key::{Capacity, Key, Kind, conflict};
 pub use reader::{Event, LineReader, LinkError};
 pub use refusal::Refusal;
-pub use reply::{Calibration, Reply, encode_reply, parse_reply};
+pub use reply::{Reply, encode_reply, parse_reply};
 pub use request::{Request, encode_request, parse_request};
 pub use status::{LastScan, Status};
 pub use wire::{

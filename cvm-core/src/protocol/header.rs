@@ -29,10 +29,10 @@ pub struct HeaderInfo<'s> {
     pub normalise: bool,
     pub full_scale: u16,
     pub threshold: u32,
-    /// Power channel threshold, `Q15` (`pthr`; [`crate::power::POWER_OFF`]: off).
+    /// Power channel threshold, `Q15` (`pthr`; [`crate::channels::power::POWER_OFF`]: off).
     pub power_threshold: u32,
     /// Spread channel threshold, `Q16` (`sthr`, version 7 on;
-    /// [`crate::spread::SPREAD_OFF`]: off, as in an older header).
+    /// [`crate::channels::spread::SPREAD_OFF`]: off, as in an older header).
     pub spread_threshold: u32,
     /// Score format: a score `s` is `s / 2^q` distance units.
     pub q: i32,
@@ -177,7 +177,7 @@ pub(super) fn parse_header<'s>(
     let spread_threshold = if version >= 7 {
         f.key_u32("sthr")?
     } else {
-        crate::spread::SPREAD_OFF
+        crate::channels::spread::SPREAD_OFF
     };
     let q = parse_i32(f.key("q")?).ok_or(e)?;
     let scores = f.key_flag("scores", "scores: 0 or 1")?;

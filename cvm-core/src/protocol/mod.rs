@@ -20,6 +20,7 @@ mod end;
 mod fields;
 mod frame;
 mod header;
+pub mod layout;
 mod line;
 mod object;
 mod ranges;

@@ -56,7 +56,7 @@ pub(super) fn parse_object<'s>(
     let centroid_row_q8 = parse_u64(f.next()?).ok_or(e)?;
     let centroid_col_q8 = parse_u64(f.next()?).ok_or(e)?;
     let channels = u8::try_from(f.u32()?).map_err(|_| e)?;
-    if row0 > row1 || col0 > col1 || channels & !crate::flags::DEFECT != 0 {
+    if row0 > row1 || col0 > col1 || channels & !crate::channels::flags::DEFECT != 0 {
         return Err(e);
     }
     Ok(Object {

@@ -8,9 +8,9 @@ use super::fields::ParseError;
 use super::header::{HeaderInfo, MAX_FW};
 use super::line::Line;
 use super::score::{SCORE_CHARS, ScoreValue, decode_score};
-use crate::flags;
-use crate::power::POWER_MAX;
-use crate::spread::SPREAD_MAX;
+use crate::channels::flags;
+use crate::channels::power::POWER_MAX;
+use crate::channels::spread::SPREAD_MAX;
 
 /// Smallest and largest score format `q` a scorer can have.
 pub const Q_MIN: i32 = -120;

@@ -80,7 +80,7 @@ pub fn encode_row(view: &RowView, max_defect_lines: u16, scores: bool, sink: &mu
 fn next_defect(view: &RowView, last: Option<(u32, usize)>) -> Option<(usize, PositionScore)> {
     let mut best: Option<(usize, PositionScore)> = None;
     for (c, p) in view.scores.iter().enumerate() {
-        let defect = p.flags & crate::flags::NO_DATA == 0 && p.is_defect();
+        let defect = p.flags & crate::channels::flags::NO_DATA == 0 && p.is_defect();
         let after = match last {
             None => true,
             Some((m, lc)) => p.strength < m || (p.strength == m && c > lc),

@@ -2,7 +2,7 @@
 //! normalised and raw maps, and the exact reciprocal it needs without a
 //! 64-bit division.
 
-use crate::flags;
+use crate::channels::flags;
 use crate::scorer::error::FrameError;
 use crate::scorer::setup::Scorer;
 use crate::tables::pow2;

@@ -2,14 +2,14 @@
 //! [`Scorer::prepare_map`], for both kernel sets, with the two shorter
 //! forms the host tools use.
 
-use crate::flags;
+use crate::channels::flags;
+use crate::channels::spread;
 use crate::scorer::embed::embed;
 use crate::scorer::error::FrameError;
 use crate::scorer::setup::{Kind, Scorer};
 use crate::scorer::square;
 use crate::scorer::sum::{FrameCopy, sum_and_peak};
 use crate::scorer::words::{copy_words, squared_difference};
-use crate::spread;
 
 /// What [`Scorer::prepare_map`] learnt about one map.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -22,7 +22,7 @@ pub struct Prepared {
     /// state held and the new one; 0 otherwise.
     pub score: u32,
     /// The share of the power outside the core around the brightest cell,
-    /// `Q16` ([`crate::spread`]); 0 for a dark map, and when not measured
+    /// `Q16` ([`crate::channels::spread`]); 0 for a dark map, and when not measured
     /// ([`Scorer::prepare_beam`]).
     pub spread: u16,
 }

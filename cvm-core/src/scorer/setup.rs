@@ -38,7 +38,7 @@ pub struct Scorer {
     /// ([`Scorer::with_factors`]); empty otherwise.
     pub(super) factors: &'static [i32],
     /// Half-width `h` of the spread channel's core box
-    /// ([`crate::spread`]).
+    /// ([`crate::channels::spread`]).
     pub(super) spread_half: u8,
 }
 
@@ -146,7 +146,7 @@ impl Scorer {
             passes,
             square_p,
             factors: &[],
-            spread_half: crate::spread::CORE_HALF,
+            spread_half: crate::channels::spread::CORE_HALF,
         })
     }
 
@@ -218,7 +218,7 @@ impl Scorer {
     }
 
     /// This scorer with the spread channel's core half-width `h` (the box
-    /// of `2h + 1` cells a side; [`crate::spread::CORE_HALF`] by default).
+    /// of `2h + 1` cells a side; [`crate::channels::spread::CORE_HALF`] by default).
     pub const fn with_spread_half(mut self, half: u8) -> Scorer {
         self.spread_half = half;
         self

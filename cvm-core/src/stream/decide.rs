@@ -3,10 +3,10 @@
 //! and a final row put out.
 
 use super::{Engine, PositionScore, RowView, strength};
-use crate::flags;
-use crate::power::{self, contrast};
-use crate::scorer::magnitude;
-use crate::spread::{self, SPREAD_OFF};
+use crate::channels::flags;
+use crate::channels::magnitude::magnitude;
+use crate::channels::power::{self, contrast};
+use crate::channels::spread::{self, SPREAD_OFF};
 
 impl<const MAX_COLS: usize> Engine<'_, MAX_COLS> {
     /// The last row pending: its undecided positions get their vertical

@@ -39,10 +39,10 @@ mod results;
 
 pub use results::{Position, PositionScore, RowSummary, RowView, Totals, strength};
 
-use crate::flags;
-use crate::power::{POWER_OFF, contrast};
+use crate::channels::flags;
+use crate::channels::power::{POWER_OFF, contrast};
+use crate::channels::spread::SPREAD_OFF;
 use crate::scorer::{FrameError, Prepared, Scorer, Scratch};
-use crate::spread::SPREAD_OFF;
 
 /// Why an engine could not be set up.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -129,7 +129,7 @@ pub struct Engine<'a, const MAX_COLS: usize> {
     meta: [[u8; MAX_COLS]; 2],
     /// Power (sample sum) of the map in each slot of each buffer.
     powers: [[u32; MAX_COLS]; 2],
-    /// Spread `q` ([`crate::spread`]) of the map in each slot of each buffer.
+    /// Spread `q` ([`crate::channels::spread`]) of the map in each slot of each buffer.
     spreads: [[u16; MAX_COLS]; 2],
     /// Results of two rows: `results[cur]` is the row being received (`g0`
     /// filled as beams arrive), the other one the previous row (`g0` final,
@@ -265,7 +265,7 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
     /// Sets the spread channel's threshold (`Q16`). [`SPREAD_OFF`], the
     /// default, turns the channel off: no map's spread is measured, and
     /// every position's `s0`, `s1` and `smag` are 0. Any other value
-    /// measures it (a threshold above [`crate::spread::SPREAD_MAX`]
+    /// measures it (a threshold above [`crate::channels::spread::SPREAD_MAX`]
     /// measures without ever firing). Meant for between scans, as
     /// [`Engine::reconfigure`]: the maps already held keep the spread they
     /// were measured with.

@@ -2,7 +2,7 @@
 //! row, the scan's totals. Plain data, shared by the engine, the object
 //! labeller, the line encoder and the host's decoder.
 
-use crate::flags;
+use crate::channels::flags;
 
 /// Scan position of a beam: `row = m2 - 1`, `col = m1 - 1`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -26,19 +26,19 @@ pub struct PositionScore {
     /// fired (threshold 0 taken as 1), the larger one, saturating; at least
     /// `2^16` for a defect, 0 for any other position.
     pub strength: u32,
-    /// Horizontal power contrast of the neighbours, `Q15` ([`crate::power`]).
+    /// Horizontal power contrast of the neighbours, `Q15` ([`crate::channels::power`]).
     pub p0: u16,
     /// Vertical power contrast, `Q15`.
     pub p1: u16,
     /// `floor(sqrt(p0² + p1²))`, `Q15`.
     pub pmag: u16,
     /// Horizontal spread difference of the neighbours, `|q(+) - q(-)|`,
-    /// `Q16` ([`crate::spread`]).
+    /// `Q16` ([`crate::channels::spread`]).
     pub s0: u16,
     /// Vertical spread difference, `Q16`.
     pub s1: u16,
     /// `floor(sqrt(s0² + s1²))`, `Q16`, at most
-    /// [`crate::spread::SPREAD_MAX`].
+    /// [`crate::channels::spread::SPREAD_MAX`].
     pub smag: u32,
     /// [`flags`] bits, the decisions ([`flags::CVM_DEFECT`],
     /// [`flags::POWER_DEFECT`], [`flags::SPREAD_DEFECT`]) included.

@@ -3,6 +3,7 @@
 
 pub mod bench;
 pub mod calibrate;
+pub mod calibration_file;
 pub mod child;
 pub mod cli_values;
 pub mod elf;

@@ -17,7 +17,7 @@
 use anyhow::{Result, anyhow, bail};
 use cvm_core::{Config, Scorer, Settings};
 
-use crate::calibrate::file::Calibration;
+use crate::calibration_file::Calibration;
 use crate::fmt::fmt_num;
 use crate::options::{KernelArg, OutputArgs, ScoringArgs, WeightArg};
 

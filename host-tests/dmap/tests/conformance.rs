@@ -221,3 +221,86 @@ fn the_spread_vector_carries_the_hand_computed_values() {
     assert_eq!(f[6], u64::from(cvm_core::flags::SPREAD_DEFECT), "{d}");
     assert!(text.lines().next().unwrap().contains(",sthr=3277,"));
 }
+
+/// Field `name` of a line (`key=` for `H` and `E`, else by its place in
+/// the layout), the trailer left out.
+fn field_of(line: &str, name: &str) -> Option<String> {
+    let body = line.trim_end().rsplit_once('*').map_or(line, |(b, _)| b);
+    let kind = *body.as_bytes().first()?;
+    let fields: Vec<&str> = body.split(',').collect();
+    match kind {
+        b'H' | b'E' => fields
+            .iter()
+            .find_map(|f| f.split_once('=').filter(|(k, _)| *k == name))
+            .map(|(_, v)| v.to_string()),
+        _ => fields
+            .get(cvm_core::protocol::layout::place(kind, name)?)
+            .map(|s| s.to_string()),
+    }
+}
+
+/// Every vector that says it changes one field (`range-`, `field-`,
+/// `cross-`, ...) changes that field, in lines of that type, and nothing
+/// else of its base stream; and `dmap listen` names that field in what it
+/// reports (a line refused for the field's range, a field or cross-check
+/// problem). A vector made with another field's place, as happens when the
+/// layout changes and the generator does not follow, fails here.
+#[test]
+fn each_one_field_vector_changes_its_field_only_and_the_decoder_names_it() {
+    let index: Value =
+        serde_json::from_slice(&std::fs::read(dir().join("index.json")).unwrap()).unwrap();
+    let mut checked = 0;
+    for e in index.as_array().unwrap() {
+        let Some(change) = e["changes"].as_str() else {
+            continue;
+        };
+        let name = e["name"].as_str().unwrap();
+        let base = e["base"].as_str().unwrap();
+        let (kind, field) = change.split_once('.').unwrap();
+        let read = |n: &str| std::fs::read_to_string(dir().join(format!("{n}.txt"))).unwrap();
+        let (good, bad) = (read(base), read(name));
+        let (good, bad): (Vec<&str>, Vec<&str>) = (good.lines().collect(), bad.lines().collect());
+        assert_eq!(good.len(), bad.len(), "{name}: lines added or removed");
+        let differ: Vec<usize> = (0..good.len()).filter(|&i| good[i] != bad[i]).collect();
+        assert!(!differ.is_empty(), "{name}: no line changed");
+        for &i in &differ {
+            assert!(
+                bad[i].starts_with(&format!("{kind},")),
+                "{name}: line {i} is not {kind}"
+            );
+            let fields = cvm_core::protocol::layout::fields(kind.as_bytes()[0]).unwrap();
+            for f in fields {
+                let (a, b) = (field_of(good[i], f), field_of(bad[i], f));
+                if *f == field {
+                    assert_ne!(a, b, "{name}: {change} unchanged in line {i}");
+                } else {
+                    assert_eq!(a, b, "{name}: {kind}.{f} changed too, in line {i}");
+                }
+            }
+        }
+        let doc: Value =
+            serde_json::from_slice(&std::fs::read(dir().join(format!("{name}.json"))).unwrap())
+                .unwrap();
+        let said: Vec<String> = ["line_errors", "problems"]
+            .iter()
+            .flat_map(|k| doc["listen"][k].as_array().cloned().unwrap_or_default())
+            .filter_map(|p| p["what"].as_str().map(String::from))
+            .collect();
+        // An S line's field is its positions: the decoder names the position.
+        let names = |w: &str| {
+            if field == "chars" {
+                w.contains("S line") && w.contains("position")
+            } else {
+                [" ", ":", "=", ","].iter().any(|end| {
+                    w.contains(&format!(" {field}{end}")) || w.starts_with(&format!("{field}{end}"))
+                })
+            }
+        };
+        assert!(
+            said.iter().any(|w| names(w)),
+            "{name}: the decoder does not name {change}: {said:?}"
+        );
+        checked += 1;
+    }
+    assert!(checked >= 30, "{checked}");
+}

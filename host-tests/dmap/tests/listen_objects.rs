@@ -538,18 +538,23 @@ fn misplaced_and_impossible_object_lines_are_reported() {
     // line is kept and the contradiction reported; no channel, a field
     // out of its range, makes the line malformed.
     for (tag, field, value, needle) in [
-        ("peak-outside", 8, "0", "object 0: peak at row 0 column"),
+        (
+            "peak-outside",
+            "peak_row",
+            "0",
+            "object 0: peak_row 0 peak_col",
+        ),
         (
             "no-channel",
-            15,
+            "channels",
             "0",
             "field outside its range: channels: a sum of 16, 32 and 64",
         ),
-        ("past-cols", 5, "30", "object 0: columns"),
+        ("past-cols", "col1", "30", "object 0: columns"),
     ] {
         let mut v = ls.clone();
         let mut f = f0.clone();
-        f[field] = value.into();
+        f[cvm_core::protocol::layout::place(b'O', field).unwrap()] = value.into();
         v[obj[0]] = with_crc(&f.join(","));
         let p = run(tag, v);
         assert!(p.iter().any(|w| w.starts_with(needle)), "{tag}: {p:?}");

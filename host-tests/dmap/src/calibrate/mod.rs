@@ -60,7 +60,6 @@
 //! channel at a default the references never checked.
 
 pub mod checks;
-pub mod file;
 pub mod report;
 pub mod rule;
 
@@ -73,15 +72,15 @@ use cvm_core::calibration::{Calibrator, Rule as CoreRule, Statistics};
 use cvm_core::{Config, PositionScore, Scorer, flags, power, spread};
 use serde_json::json;
 
+use crate::calibration_file::{FORMAT, VERSION};
 use crate::fmt::fmt_num;
 use crate::npy::ScanFile;
 use crate::options::ScoringArgs;
 use crate::settings;
-use file::{FORMAT, VERSION};
 use rule::{Options, Rule, RuleName, threshold_f64};
 
 // `dmap eval --calibration` reads calibration files too.
-pub use file::{Calibration, eval_threshold};
+pub use crate::calibration_file::{Calibration, eval_threshold};
 
 #[derive(Args, Clone, Debug)]
 pub struct CalibrateArgs {

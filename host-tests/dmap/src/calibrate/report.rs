@@ -10,8 +10,8 @@ use cvm_core::calibration::{Channel, Rule as CoreRule, Statistics};
 use cvm_core::{Config, Scorer, power, spread};
 use serde_json::{Value, json};
 
-use super::file::{FORMAT, VERSION, config_json};
 use super::rule::Rule;
+use crate::calibration_file::{FORMAT, VERSION, config_json};
 use crate::fmt::fmt_num;
 
 /// The spread rule as the file states it.

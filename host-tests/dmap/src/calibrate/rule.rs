@@ -8,7 +8,6 @@ use clap::ValueEnum;
 use cvm_core::calibration::Rule as CoreRule;
 use cvm_core::calibration::rule::{DEFAULT_RATE_PPM, DEFAULT_TAIL_PPM, K_DEN, P_DEN};
 use cvm_core::calibration::tail::RATE_DEN;
-use cvm_core::{power, spread};
 
 use crate::fmt::fmt_num;
 
@@ -197,27 +196,6 @@ fn median_sorted(v: &[f64]) -> f64 {
     }
 }
 
-/// The power channel's threshold from the rule's: itself when a magnitude
-/// can reach it, else [`power::POWER_OFF`] (both convert to a contrast and
-/// back exactly).
-pub fn power_thr(thr: u32) -> u32 {
-    if thr <= power::POWER_MAX {
-        thr
-    } else {
-        power::POWER_OFF
-    }
-}
-
-/// The spread channel's threshold from the rule's: itself when a
-/// magnitude can reach it, else [`spread::SPREAD_OFF`].
-pub fn spread_thr(thr: u32) -> u32 {
-    if thr <= spread::SPREAD_MAX {
-        thr
-    } else {
-        spread::SPREAD_OFF
-    }
-}
-
 /// `--scores`: a rule in f64 on precomputed magnitudes `m` (not empty),
 /// for `dmap eval` only and not the board's: the nearest-rank quantile plus
 /// `k * 1.4826 * MAD` with exact medians (mean of the middle two), and at
@@ -246,6 +224,8 @@ pub fn threshold_f64(m: &[f64], rule: &Rule) -> (f64, f64, f64, f64) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::calibration_file::{power_thr, spread_thr};
+    use cvm_core::{power, spread};
 
     #[test]
     fn options_become_exact_rationals_or_are_refused() {

@@ -75,7 +75,7 @@ pub(super) fn check_complete(s: &mut ScanResult, line_no: usize) {
             line: line_no,
             kind: Kind::Misplaced,
             what: format!(
-                "{misplaced} map(s) were scored at a wrong position (a short row: beams without DRDY); \
+                "end line: misplaced {misplaced}: map(s) scored at a wrong position (a short row: beams without DRDY); \
                  scores next to the short row are unreliable"
             ),
         });
@@ -123,14 +123,16 @@ pub(super) fn object_fault(o: &Object, cols: usize) -> Option<String> {
         Some(format!("area {} does not fit its {h}x{w} box", o.area))
     } else if !inside(o.peak_row, o.peak_col) {
         Some(format!(
-            "peak at row {} column {} outside its box",
-            o.peak_row, o.peak_col
+            "peak_row {} peak_col {} outside its box (rows {}-{}, columns {}-{})",
+            o.peak_row, o.peak_col, o.row0, o.row1, o.col0, o.col1
         ))
     } else if !box_q8(o.centroid_row_q8, o.row0, o.row1)
         || !box_q8(o.centroid_col_q8, o.col0, o.col1)
     {
         Some(format!(
-            "centroid ({:.2}, {:.2}) outside its box",
+            "centroid_row_q8 {} centroid_col_q8 {} ({:.2}, {:.2}) outside its box",
+            o.centroid_row_q8,
+            o.centroid_col_q8,
             q8(o.centroid_row_q8),
             q8(o.centroid_col_q8)
         ))

@@ -74,7 +74,7 @@ impl Decoder {
                 line: self.line_no,
                 kind: Kind::Version,
                 what: format!(
-                    "protocol version {} (this decoder reads {} to {})",
+                    "header v={}: a protocol version this decoder does not read (it reads {} to {})",
                     h.version,
                     OLDEST_VERSION,
                     protocol::VERSION

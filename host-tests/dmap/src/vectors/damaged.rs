@@ -9,6 +9,8 @@ use super::edit::{Lines, sealed};
 use super::good::scores_scene;
 use super::scenes::{Scene, stream};
 use anyhow::Result;
+use cvm_core::flags;
+use cvm_core::protocol::{SCORE_CHARS, encode_score};
 
 /// One damaged vector: `base` changed by `edit`.
 fn damaged(name: &str, about: &str, base: &Lines, edit: impl FnOnce(&mut Lines)) -> Vector {
@@ -18,7 +20,31 @@ fn damaged(name: &str, about: &str, base: &Lines, edit: impl FnOnce(&mut Lines))
         name: name.to_string(),
         about: about.to_string(),
         bytes: l.bytes(),
+        changes: None,
     }
+}
+
+/// The whole streams the damaged vectors start from, by their vector's name.
+const SCORES: &str = "good-scores";
+const DEFECT_LINES: &str = "good-defect-lines";
+
+/// A vector that changes field `field` (`TYPE.name`) of `base` (named
+/// `base_name`) and nothing else: `edit` gets the field's name and sets
+/// it, in one or more lines of that type.
+fn one_field(
+    name: &str,
+    about: &str,
+    (base_name, base): (&'static str, &Lines),
+    field: &str,
+    edit: impl FnOnce(&mut Lines, &str),
+) -> Vector {
+    let (_, key) = field.split_once('.').expect("TYPE.name");
+    let mut v = damaged(name, about, base, |l| edit(l, key));
+    v.changes = Some(super::Change {
+        base: base_name,
+        field: field.to_string(),
+    });
+    v
 }
 
 /// The damaged vectors.
@@ -190,18 +216,21 @@ fn framing(g: &Lines, default: &[u8]) -> Vec<Vector> {
         name: "empty".into(),
         about: "Nothing at all: no scan".into(),
         bytes: Vec::new(),
+        changes: None,
     });
     out.push(Vector {
         name: "no-scan".into(),
         about: "Lines that are no protocol: each reported, and no scan".into(),
         bytes: b"hello\nOK\n\n".to_vec(),
+        changes: None,
     });
-    out.push(damaged(
+    out.push(one_field(
         "version-8",
         "A header of version 8: a problem of the scan, which is decoded as far as it goes",
-        g,
-        |l| {
-            l.set_key(0, "v", "8");
+        (SCORES, g),
+        "H.v",
+        |l, f| {
+            l.set_field(0, f, "8");
         },
     ));
     out
@@ -218,160 +247,174 @@ fn ranges(g: &Lines) -> Vec<Vector> {
         ("range-fs-0", "fs", "0"),
         ("range-norm-2", "norm", "2"),
     ] {
-        out.push(damaged(
+        out.push(one_field(
             name,
             &format!(
                 "Header {key}={value}, a valid CRC: outside the field's range, the header refused"
             ),
-            g,
-            |l| {
-                l.set_key(0, key, value);
+            (SCORES, g),
+            &format!("H.{key}"),
+            |l, k| {
+                l.set_field(0, k, value);
             },
         ));
     }
-    out.push(damaged(
+    let g = (SCORES, g);
+    out.push(one_field(
         "range-pmax",
         "A row line's pmax 46341, above the largest power magnitude",
         g,
-        |l| {
+        "R.pmax",
+        |l, f| {
             let i = l.nth(b'R', 2);
-            l.set(i, 4, "46341");
+            l.set_field(i, f, "46341");
         },
     ));
-    out.push(damaged(
+    out.push(one_field(
         "range-strength",
         "A defect line's strength 65535, below a defect's least",
         g,
-        |l| {
+        "D.strength",
+        |l, f| {
             let i = l.nth(b'D', 0);
-            l.set(i, 5, "65535");
+            l.set_field(i, f, "65535");
         },
     ));
-    out.push(damaged(
+    out.push(one_field(
         "range-defect-flags",
         "A defect line's flags 1 (NO_DATA, no channel)",
         g,
-        |l| {
+        "D.flags",
+        |l, f| {
             let i = l.nth(b'D', 0);
-            l.set(i, 6, "1");
+            l.set_field(i, f, "1");
         },
     ));
-    out.push(damaged(
+    out.push(one_field(
         "range-position",
         "A score line's first position NO_DATA with a magnitude of 1",
         g,
-        |l| {
+        "S.chars",
+        |l, f| {
             let i = l.nth(b'S', 0);
-            let chars = l.field(i, 3);
-            l.set(i, 3, &format!("BAAAAAAAB{}", &chars[9..]));
+            let first = position(flags::NO_DATA, 1);
+            let chars = l.get(i, f);
+            l.set_field(i, f, &format!("{first}{}", &chars[SCORE_CHARS..]));
         },
     ));
-    out.push(damaged(
+    out.push(one_field(
         "range-clipped",
-        "A score line's first position CLIPPED below the top magnitude",
+        "A score line's first position CLIPPED (and a distance defect) below the top magnitude",
         g,
-        |l| {
+        "S.chars",
+        |l, f| {
             let i = l.nth(b'S', 0);
-            let chars = l.field(i, 3);
-            // Flags 24 (CLIPPED and CVM_DEFECT), magnitude 5.
-            l.set(i, 3, &format!("YAAAAAAAF{}", &chars[9..]));
+            let first = position(flags::CLIPPED | flags::CVM_DEFECT, 5);
+            let chars = l.get(i, f);
+            l.set_field(i, f, &format!("{first}{}", &chars[SCORE_CHARS..]));
         },
     ));
-    out.push(damaged(
+    out.push(one_field(
         "range-object-channels",
         "An object line's channels 0",
         g,
-        |l| {
+        "O.channels",
+        |l, f| {
             let i = l.nth(b'O', 0);
-            l.set(i, 14, "0");
+            l.set_field(i, f, "0");
         },
     ));
-    out.push(damaged(
+    out.push(one_field(
         "field-header-q",
         "Header q one below what a scorer of its configuration (5x5, paper kernels, uniform weights, normalised) has",
         g,
-        |l| {
-            let q: i64 = l.key(0, "q").parse().unwrap_or(0);
-            l.set_key(0, "q", &(q - 1).to_string());
+        "H.q",
+        |l, f| {
+            let q: i64 = l.get(0, f).parse().unwrap_or(0);
+            l.set_field(0, f, &(q - 1).to_string());
         },
     ));
-    out.push(damaged(
+    out.push(one_field(
         "field-row-argmax",
         "A row line's argmax at column 30 of a 30-column scan",
         g,
-        |l| {
+        "R.argmax",
+        |l, f| {
             let i = l.nth(b'R', 1);
-            l.set(i, 3, "30");
+            l.set_field(i, f, "30");
         },
     ));
     out.push(damaged(
         "field-row-listed",
         "A row line listing one defect line fewer than min(defects, dcap)",
-        g,
+        g.1,
         |l| {
             let i = (0..l.0.len())
-                .find(|&i| l.0[i].starts_with(b"R,") && l.num(i, 7) > 0)
+                .find(|&i| l.0[i].starts_with(b"R,") && l.num_of(i, "listed") > 0)
                 .unwrap_or(0);
-            let listed = l.num(i, 7);
-            l.set(i, 7, &(listed - 1).to_string());
+            let listed = l.num_of(i, "listed");
+            l.set_field(i, "listed", &(listed - 1).to_string());
             l.remove(i + 1);
         },
     ));
-    out.push(damaged(
+    out.push(one_field(
         "field-defect-strength",
         "A defect line's strength one above what its magnitudes and the thresholds make",
         g,
-        |l| {
+        "D.strength",
+        |l, f| {
             let i = l.nth(b'D', 0);
-            let s = l.num(i, 5);
-            l.set(i, 5, &(s + 1).to_string());
+            let s = l.num_of(i, f);
+            l.set_field(i, f, &(s + 1).to_string());
         },
     ));
-    out.push(damaged(
-        "field-end-frames",
-        "An end line's frames one short of rows x columns - missing",
-        g,
-        |l| {
+    for (name, about, field, delta) in [
+        (
+            "field-end-frames",
+            "An end line's frames one short of rows x columns - missing",
+            "E.frames",
+            -1i64,
+        ),
+        (
+            "field-end-rows",
+            "An end line's rows one above the header's rows",
+            "E.rows",
+            1,
+        ),
+    ] {
+        out.push(one_field(name, about, g, field, |l, f| {
             let i = l.nth(b'E', 0);
-            let f: u64 = l.key(i, "frames").parse().unwrap_or(0);
-            l.set_key(i, "frames", &(f - 1).to_string());
-        },
-    ));
-    out.push(damaged(
-        "field-end-rows",
-        "An end line's rows one above the header's rows",
-        g,
-        |l| {
-            let i = l.nth(b'E', 0);
-            let r: u64 = l.key(i, "rows").parse().unwrap_or(0);
-            l.set_key(i, "rows", &(r + 1).to_string());
-        },
-    ));
-    out.push(damaged(
+            let v: i64 = l.get(i, f).parse().unwrap_or(0);
+            l.set_field(i, f, &(v + delta).to_string());
+        }));
+    }
+    out.push(one_field(
         "field-object-box",
-        "An object line whose peak lies outside its box",
+        "An object line whose peak row lies outside its box",
         g,
-        |l| {
+        "O.peak_row",
+        |l, f| {
             let i = l.nth(b'O', 0);
-            l.set(i, 8, "0");
+            l.set_field(i, f, "0");
         },
     ));
     out.push(damaged(
         "verdict-good-with-objects-left-out",
         "An end line with unobj 1 and verdict good",
-        g,
+        g.1,
         |l| {
             let i = l.nth(b'E', 0);
             l.set_key(i, "unobj", "1").set_key(i, "verdict", "good");
         },
     ));
-    out.push(damaged(
+    out.push(one_field(
         "misplaced",
         "An end line counting one misplaced map",
         g,
-        |l| {
+        "E.misplaced",
+        |l, f| {
             let i = l.nth(b'E', 0);
-            l.set_key(i, "misplaced", "1");
+            l.set_field(i, f, "1");
         },
     ));
     out
@@ -381,7 +424,7 @@ fn ranges(g: &Lines) -> Vec<Vector> {
 fn order(g: &Lines) -> Vec<Vector> {
     let row_with = |l: &Lines, n: u64| {
         (0..l.0.len())
-            .find(|&i| l.0[i].starts_with(b"R,") && l.num(i, 7) >= n)
+            .find(|&i| l.0[i].starts_with(b"R,") && l.num_of(i, "listed") >= n)
             .unwrap_or(0)
     };
     vec![
@@ -400,7 +443,7 @@ fn order(g: &Lines) -> Vec<Vector> {
             g,
             |l| {
                 let r = row_with(l, 1);
-                l.mv(r + 1, r + 1 + l.num(r, 7) as usize + 1);
+                l.mv(r + 1, r + 1 + l.num_of(r, "listed") as usize + 1);
             },
         ),
         damaged(
@@ -488,89 +531,108 @@ fn lost_and_repeated(g: &Lines) -> Vec<Vector> {
 /// Lines with a valid CRC whose content other lines contradict.
 fn contradictions(g: &Lines, d: &Lines) -> Vec<Vector> {
     let mut out = Vec::new();
-    // O,id,row0,row1,col0,col1,area,peak,peak_row,peak_col,peak_mag,peak_power,centroid_row_q8,centroid_col_q8,channels
     for (base, lines, with) in [
-        (g, "S", "its S lines"),
-        (d, "D", "its D lines (no S lines)"),
+        ((SCORES, g), "S", "its S lines"),
+        ((DEFECT_LINES, d), "D", "its D lines (no S lines)"),
     ] {
-        for (field, name, delta) in [
-            (7, "peak", 1i64),
-            (6, "area", 1),
-            (5, "box", 1),
-            (12, "centroid", 1),
-            (11, "peak-power", 1),
+        for (field, name) in [
+            ("peak", "peak"),
+            ("area", "area"),
+            ("col1", "box"),
+            ("centroid_col_q8", "centroid"),
+            ("peak_power", "peak-power"),
         ] {
-            out.push(damaged(
+            out.push(one_field(
                 &format!("cross-object-{name}-{}", lines.to_lowercase()),
-                &format!("The first object line's {name} changed by {delta}, sealed again: {with} contradict it"),
+                &format!(
+                    "The first object line's {field} one higher, sealed again: {with} contradict it"
+                ),
                 base,
-                |l| {
+                &format!("O.{field}"),
+                |l, f| {
                     let i = l.nth(b'O', 0);
-                    let v = l.num(i, field) as i64 + delta;
-                    l.set(i, field, &v.to_string());
+                    let v = l.num_of(i, f) + 1;
+                    l.set_field(i, f, &v.to_string());
                 },
             ));
         }
     }
-    out.push(damaged(
+    let g = (SCORES, g);
+    out.push(one_field(
         "cross-object-channels",
         "The distance object's channels claiming the power channel too",
         g,
-        |l| {
+        "O.channels",
+        |l, f| {
             let i = l.nth(b'O', 0);
-            l.set(i, 14, "48");
+            l.set_field(i, f, "48");
         },
     ));
-    out.push(damaged(
+    out.push(one_field(
         "cross-object-ids",
         "The two objects' ids swapped: each line in its place, but the ids against the order the objects open",
         g,
-        |l| {
+        "O.id",
+        |l, f| {
             let (a, b) = (l.nth(b'O', 0), l.nth(b'O', 1));
-            let (ia, ib) = (l.field(a, 1), l.field(b, 1));
-            l.set(a, 1, &ib).set(b, 1, &ia);
+            let (ia, ib) = (l.get(a, f), l.get(b, f));
+            l.set_field(a, f, &ib).set_field(b, f, &ia);
         },
     ));
-    out.push(damaged(
+    out.push(one_field(
         "cross-defect-magnitude",
         "A defect line's magnitude one step up: its position's score says otherwise",
         g,
-        |l| {
+        "D.mag",
+        |l, f| {
             let i = l.nth(b'D', 0);
-            let m = l.num(i, 3);
-            l.set(i, 3, &(m + 1).to_string());
+            let m = l.num_of(i, f);
+            l.set_field(i, f, &(m + 1).to_string());
         },
     ));
-    out.push(damaged(
+    out.push(one_field(
         "cross-row-max",
         "A row line's max one below the largest magnitude of its score lines",
         g,
-        |l| {
+        "R.max",
+        |l, f| {
             let i = (0..l.0.len())
-                .find(|&i| l.0[i].starts_with(b"R,") && l.num(i, 2) > 0)
+                .find(|&i| l.0[i].starts_with(b"R,") && l.num_of(i, f) > 0)
                 .unwrap_or(0);
-            let m = l.num(i, 2);
-            l.set(i, 2, &(m - 1).to_string());
+            let m = l.num_of(i, f);
+            l.set_field(i, f, &(m - 1).to_string());
         },
     ));
-    out.push(damaged(
-        "cross-end-defects",
-        "An end line's defects one above the row lines' sum (and the objects' areas)",
-        g,
-        |l| {
+    for (name, about, field, value) in [
+        (
+            "cross-end-defects",
+            "An end line's defects one above the row lines' sum (and the objects' areas)",
+            "E.defects",
+            None,
+        ),
+        (
+            "cross-end-clipped",
+            "An end line counting one clipped score that no score line flags",
+            "E.clipped",
+            Some("1"),
+        ),
+    ] {
+        out.push(one_field(name, about, g, field, |l, f| {
             let i = l.nth(b'E', 0);
-            let v: u64 = l.key(i, "defects").parse().unwrap_or(0);
-            l.set_key(i, "defects", &(v + 1).to_string());
-        },
-    ));
-    out.push(damaged(
-        "cross-end-clipped",
-        "An end line counting one clipped score that no score line flags",
-        g,
-        |l| {
-            let i = l.nth(b'E', 0);
-            l.set_key(i, "clipped", "1");
-        },
-    ));
+            let v: u64 = l.get(i, f).parse().unwrap_or(0);
+            l.set_field(i, f, value.unwrap_or(&(v + 1).to_string()));
+        }));
+    }
     out
+}
+
+/// One position of a score line with these flags and magnitude (the power
+/// and spread magnitudes 0), as the encoder writes it.
+fn position(flags: u8, mag: u32) -> String {
+    let p = cvm_core::PositionScore {
+        mag,
+        flags,
+        ..Default::default()
+    };
+    String::from_utf8_lossy(&encode_score(&p)).into_owned()
 }

@@ -2,7 +2,7 @@
 //! CRC fails), a field or key changed and the line sealed again with a
 //! valid CRC (the content is wrong), lines removed, repeated, moved or cut.
 
-use cvm_core::protocol;
+use cvm_core::protocol::{self, layout};
 
 /// A stream as lines, each with its own line end.
 #[derive(Clone, Debug)]
@@ -54,6 +54,45 @@ impl Lines {
             .nth(k)
             .unwrap_or_default()
             .to_string()
+    }
+
+    /// The type letter of line `i`.
+    pub fn kind(&self, i: usize) -> u8 {
+        self.0[i].first().copied().unwrap_or(0)
+    }
+
+    /// Where field `name` stands in line `i`, by the protocol's layout.
+    fn place(&self, i: usize, name: &str) -> usize {
+        layout::place(self.kind(i), name)
+            .unwrap_or_else(|| panic!("the {} line has no field {name}", char::from(self.kind(i))))
+    }
+
+    /// Field `name` of line `i` as a number.
+    pub fn num_of(&self, i: usize, name: &str) -> u64 {
+        self.num(i, self.place(i, name))
+    }
+
+    /// Field `name` of line `i` (the layout's name; `key=` for `H` and `E`).
+    pub fn get(&self, i: usize, name: &str) -> String {
+        match self.kind(i) {
+            b'H' | b'E' => self.key(i, name),
+            _ => self.field(i, self.place(i, name)),
+        }
+    }
+
+    /// Field `name` of line `i` set to `v`, the line sealed again.
+    pub fn set_field(&mut self, i: usize, name: &str, v: &str) -> &mut Self {
+        match self.kind(i) {
+            b'H' | b'E' => {
+                // The key must be there: a vector never adds one.
+                self.place(i, name);
+                self.set_key(i, name, v)
+            }
+            _ => {
+                let k = self.place(i, name);
+                self.set(i, k, v)
+            }
+        }
     }
 
     /// Field `k` of line `i` as a number.

@@ -77,6 +77,7 @@ fn v(name: &str, about: &str, bytes: Vec<u8>) -> Vector {
         name: name.to_string(),
         about: about.to_string(),
         bytes,
+        changes: None,
     }
 }
 
@@ -155,7 +156,7 @@ pub fn all() -> Result<Vec<Vector>> {
         ),
         v(
             "good-spread",
-            "sthr=3277 (0.05 of the power), thr at 0.2: a haloed patch (rows 2-3, columns 10-12; a quarter of the spot's light on the map's rim) found by the spread channel alone (flags 64); above it, at (1, 10), smag = 21638 - 7084 = 14554, the share outside the 3x3 core of a haloed map (2440 of 7390) less a clear one's (800 of 7400), in Q16",
+            "sthr=3277 (0.05 of the power), thr at 0.2: a haloed patch (rows 2-3, columns 10-12; a quarter of the spot's light on the map's rim) found by the spread channel alone (flags 64); above it, at (1, 10), smag = 21638 - 7084 = 14554, the share outside the 3x3 core of a haloed map (2440 of 7390) less a clear one's (800 of 7400), in Q16 (the vectors' scorer takes a core of half-width 1: the boards' 5x5 core would cover these 5x5 maps whole)",
             stream(&Scene {
                 map: haloed,
                 threshold: 0.2,
@@ -230,7 +231,7 @@ pub fn all() -> Result<Vec<Vector>> {
     ];
     out.push(v(
         "good-fault-frames",
-        "A frame of the wrong length (bad; its position without data), one for a position already passed (rejected), one past the last column (extra): verdict fault-frames",
+        "A frame of the wrong length (bad; its position without data, missing=1), one for a position already passed (rejected), one past the last column (extra): verdict fault-frames, which comes before fault-missing",
         stream(&Scene {
             map: |r, c| if (r, c) == (3, 12) { Map::Bad } else { two_defects(r, c) },
             stray_frames: true,

@@ -38,6 +38,19 @@ pub struct Vector {
     pub name: String,
     pub about: String,
     pub bytes: Vec<u8>,
+    /// For a vector that changes one field of a whole stream (every
+    /// `range-`, `field-` and `cross-` vector): the stream it changes and
+    /// the field, `TYPE.name` by the protocol's layout (`D.strength`).
+    pub changes: Option<Change>,
+}
+
+/// What a one-field vector changed.
+#[derive(Clone, Debug)]
+pub struct Change {
+    /// The whole vector it starts from.
+    pub base: &'static str,
+    /// `TYPE.name`: the line type and the field's name in its layout.
+    pub field: String,
 }
 
 /// Every vector, the whole streams first.
@@ -66,7 +79,12 @@ pub fn files() -> Result<Vec<(String, Vec<u8>)>> {
             "exit": status,
             "listen": doc,
         });
-        index.push(serde_json::json!({"name": v.name, "about": v.about, "exit": status}));
+        let mut entry = serde_json::json!({"name": v.name, "about": v.about, "exit": status});
+        if let Some(c) = &v.changes {
+            entry["base"] = c.base.into();
+            entry["changes"] = c.field.clone().into();
+        }
+        index.push(entry);
         out.push((format!("{}.txt", v.name), v.bytes));
         out.push((format!("{}.json", v.name), pretty(&expected)?));
     }

@@ -15,7 +15,7 @@
 //! (the first in raster order on ties), clipped at the map's edges:
 //!
 //! `q = floor(2^16 (P - C) / P)`, 0 for a dark map (`P = 0`, flagged
-//! [`crate::flags::DARK`] by the scorer as for the other channels).
+//! [`crate::channels::flags::DARK`] by the scorer as for the other channels).
 //!
 //! Per position, as the power channel does, the two differences of Eq. 1,
 //! `s0 = |q(right) - q(left)|` and `s1 = |q(below) - q(above)|`, a missing
@@ -50,9 +50,9 @@
 //! default [`CORE_HALF`]); the engine measures `q` only while its spread
 //! channel is on ([`crate::Engine::set_spread_threshold`]).
 
+use super::magnitude::magnitude as magnitude64;
+use super::power::{fixed_threshold, isqrt};
 use crate::config::MAX_CELLS;
-use crate::power::{fixed_threshold, isqrt};
-use crate::scorer::magnitude as magnitude64;
 
 /// Fraction bits of the spread channel's values.
 pub const SPREAD_FRAC: u32 = 16;

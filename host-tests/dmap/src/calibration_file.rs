@@ -9,7 +9,6 @@ use anyhow::{Context, Result, anyhow, bail};
 use cvm_core::{Config, Kernels, Scorer, Weights, power, spread};
 use serde_json::{Value, json};
 
-use crate::calibrate::rule::{power_thr, spread_thr};
 use crate::fmt::fmt_num;
 
 /// Identifies a calibration file.
@@ -383,5 +382,26 @@ mod tests {
             vec!["normalise: calibrated true, this run false".to_string()]
         );
         assert!(config_differences(&a, &a).is_empty());
+    }
+}
+
+/// The power channel's threshold from the rule's: itself when a magnitude
+/// can reach it, else [`power::POWER_OFF`] (both convert to a contrast and
+/// back exactly).
+pub fn power_thr(thr: u32) -> u32 {
+    if thr <= power::POWER_MAX {
+        thr
+    } else {
+        power::POWER_OFF
+    }
+}
+
+/// The spread channel's threshold from the rule's: itself when a
+/// magnitude can reach it, else [`spread::SPREAD_OFF`].
+pub fn spread_thr(thr: u32) -> u32 {
+    if thr <= spread::SPREAD_MAX {
+        thr
+    } else {
+        spread::SPREAD_OFF
     }
 }
