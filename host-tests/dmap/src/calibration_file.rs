@@ -311,6 +311,27 @@ pub fn eval_threshold(path: &Path) -> Result<f64> {
     Ok(Calibration::from_json(path, v)?.threshold)
 }
 
+/// The power channel's threshold from the rule's: itself when a magnitude
+/// can reach it, else [`power::POWER_OFF`] (both convert to a contrast and
+/// back exactly).
+pub fn power_thr(thr: u32) -> u32 {
+    if thr <= power::POWER_MAX {
+        thr
+    } else {
+        power::POWER_OFF
+    }
+}
+
+/// The spread channel's threshold from the rule's: itself when a
+/// magnitude can reach it, else [`spread::SPREAD_OFF`].
+pub fn spread_thr(thr: u32) -> u32 {
+    if thr <= spread::SPREAD_MAX {
+        thr
+    } else {
+        spread::SPREAD_OFF
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -382,26 +403,5 @@ mod tests {
             vec!["normalise: calibrated true, this run false".to_string()]
         );
         assert!(config_differences(&a, &a).is_empty());
-    }
-}
-
-/// The power channel's threshold from the rule's: itself when a magnitude
-/// can reach it, else [`power::POWER_OFF`] (both convert to a contrast and
-/// back exactly).
-pub fn power_thr(thr: u32) -> u32 {
-    if thr <= power::POWER_MAX {
-        thr
-    } else {
-        power::POWER_OFF
-    }
-}
-
-/// The spread channel's threshold from the rule's: itself when a
-/// magnitude can reach it, else [`spread::SPREAD_OFF`].
-pub fn spread_thr(thr: u32) -> u32 {
-    if thr <= spread::SPREAD_MAX {
-        thr
-    } else {
-        spread::SPREAD_OFF
     }
 }
