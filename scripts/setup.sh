@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Installs what the project needs on a fresh Debian machine with rustup:
 # the Cortex-M target, rustfmt/clippy, QEMU for the emulated board, and the
-# Python packages of the H743 chip model (Unicorn, pyelftools).
+# Python packages of the H743 chip model (Unicorn, pyelftools), and Python's
+# venv and libpython for the Python package (scripts/python.sh).
 # Idempotent: does nothing that is already done.
 set -euo pipefail
 
@@ -20,6 +21,18 @@ if ! command -v qemu-system-arm >/dev/null 2>&1; then
     echo "setup: installing qemu-system-arm" >&2
     need_sudo apt-get update -qq
     DEBIAN_FRONTEND=noninteractive need_sudo apt-get install -y -qq qemu-system-arm >/dev/null
+fi
+if ! python3 -c "import venv, ensurepip" >/dev/null 2>&1; then
+    echo "setup: installing python3-venv (the Python package's environment, scripts/python.sh)" >&2
+    need_sudo apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive need_sudo apt-get install -y -qq python3-venv >/dev/null
+fi
+# The Python package's crate (host-tests/python, PyO3) links its Rust test
+# binary against libpython in `cargo test --workspace`: python3-dev has it.
+if ! command -v python3-config >/dev/null 2>&1; then
+    echo "setup: installing python3-dev (libpython, for the Python package's crate tests)" >&2
+    need_sudo apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive need_sudo apt-get install -y -qq python3-dev >/dev/null
 fi
 if ! python3 -c "import unicorn, elftools" >/dev/null 2>&1; then
     echo "setup: installing the chip model's Python packages (unicorn, pyelftools)" >&2

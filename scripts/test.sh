@@ -49,6 +49,11 @@ log=$(mktemp)
 trap 'rm -f "$log"' EXIT
 (cd host-tests && cargo test --workspace 2>&1) | tee "$log"
 
+step "Python package: wheel built and installed in a venv, pytest against dmap"
+pylog=$(mktemp)
+trap 'rm -f "$log" "$pylog"' EXIT
+bash scripts/python.sh 2>&1 | tee "$pylog"
+
 step "panic-free per-beam path (link-time check)"
 bash scripts/nopanic.sh
 
@@ -63,10 +68,12 @@ fi
 (cd host-tests/fuzz && cargo +nightly clippy --all-targets -- -D warnings)
 
 # The last line: one count over every host test binary (cargo prints one
-# line per binary, the last of which is often an empty doc-test run).
+# line per binary, the last of which is often an empty doc-test run) and
+# the Python package's pytest run (its last line, "N passed in T s").
 mark
 printf '\nstep times:\n' >&2
 printf '  %s\n' "${times[@]}" >&2
 printf '  %5d s  total\n' $((SECONDS - t0)) >&2
-awk '/^test result:/ { for (i = 1; i <= NF; i++) { if ($(i+1) ~ /^passed/) p += $i; if ($(i+1) ~ /^failed/) f += $i } }
-     END { printf "\ntests: %d passed, %d failed\n", p, f }' "$log"
+awk '/^test result:/ || FILENAME == ARGV[2] && /^[0-9]+ (passed|failed)/ {
+         for (i = 1; i <= NF; i++) { if ($(i+1) ~ /^passed/) p += $i; if ($(i+1) ~ /^failed/) f += $i } }
+     END { printf "\ntests: %d passed, %d failed\n", p, f }' "$log" "$pylog"

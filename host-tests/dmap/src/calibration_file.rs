@@ -122,6 +122,16 @@ impl Calibration {
         Self::from_json(path, read_json(path)?)
     }
 
+    /// A calibration file's text already in memory, read and checked as
+    /// [`Calibration::load`] reads a file; `name` stands for the file in
+    /// messages.
+    pub fn from_text(name: &Path, text: &str) -> Result<Self> {
+        let body = text.strip_prefix('\u{feff}').unwrap_or(text);
+        let v = serde_json::from_str(body)
+            .with_context(|| format!("{}: not a JSON calibration", name.display()))?;
+        Self::from_json(name, v)
+    }
+
     /// Checks the calibration `v` read from `path` (named in messages).
     fn from_json(path: &Path, v: Value) -> Result<Self> {
         let p = path.display();
@@ -301,6 +311,27 @@ pub fn eval_threshold(path: &Path) -> Result<f64> {
     Ok(Calibration::from_json(path, v)?.threshold)
 }
 
+/// The power channel's threshold from the rule's: itself when a magnitude
+/// can reach it, else [`power::POWER_OFF`] (both convert to a contrast and
+/// back exactly).
+pub fn power_thr(thr: u32) -> u32 {
+    if thr <= power::POWER_MAX {
+        thr
+    } else {
+        power::POWER_OFF
+    }
+}
+
+/// The spread channel's threshold from the rule's: itself when a
+/// magnitude can reach it, else [`spread::SPREAD_OFF`].
+pub fn spread_thr(thr: u32) -> u32 {
+    if thr <= spread::SPREAD_MAX {
+        thr
+    } else {
+        spread::SPREAD_OFF
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -372,26 +403,5 @@ mod tests {
             vec!["normalise: calibrated true, this run false".to_string()]
         );
         assert!(config_differences(&a, &a).is_empty());
-    }
-}
-
-/// The power channel's threshold from the rule's: itself when a magnitude
-/// can reach it, else [`power::POWER_OFF`] (both convert to a contrast and
-/// back exactly).
-pub fn power_thr(thr: u32) -> u32 {
-    if thr <= power::POWER_MAX {
-        thr
-    } else {
-        power::POWER_OFF
-    }
-}
-
-/// The spread channel's threshold from the rule's: itself when a
-/// magnitude can reach it, else [`spread::SPREAD_OFF`].
-pub fn spread_thr(thr: u32) -> u32 {
-    if thr <= spread::SPREAD_MAX {
-        thr
-    } else {
-        spread::SPREAD_OFF
     }
 }

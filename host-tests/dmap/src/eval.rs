@@ -235,7 +235,8 @@ fn fmt(v: f64) -> String {
     }
 }
 
-pub fn run(a: &EvalArgs) -> Result<()> {
+/// Checks the options that need no file.
+pub fn check_args(a: &EvalArgs) -> Result<()> {
     if !(a.pitch_um.is_finite() && a.pitch_um > 0.0) {
         bail!("--pitch-um must be positive, got {}", fmt_num(a.pitch_um));
     }
@@ -245,18 +246,29 @@ pub fn run(a: &EvalArgs) -> Result<()> {
     if a.threshold.is_some_and(|t| !t.is_finite()) {
         bail!("--threshold must be finite");
     }
-    let (rows, cols, values) = load_scores(&a.input, a.channel)?;
-    let mask = crate::npy::read_mask(&a.truth)?;
-    if (mask.rows, mask.cols) != (rows, cols) {
-        bail!(
-            "truth mask {} is {}x{} but the scores are {rows}x{cols}",
-            a.truth.display(),
-            mask.rows,
-            mask.cols
-        );
-    }
-    let truth = mask.data;
-    let m = metrics(&values, &truth);
+    Ok(())
+}
+
+/// What `dmap eval` finds: the metrics, the threshold and how it was
+/// chosen, the defects' sizes and the objects.
+pub struct Evaluation {
+    pub metrics: Metrics,
+    pub threshold: f64,
+    pub rule: String,
+    pub sizes: Vec<DefectSize>,
+    pub objects: crate::objects::ObjectReport,
+}
+
+/// `dmap eval` on scores already loaded (`values`, one channel, and the
+/// mask `truth`, both `rows x cols`), the threshold from `a` (a
+/// calibration file named there is read).
+pub fn evaluate(
+    a: &EvalArgs,
+    (rows, cols): (usize, usize),
+    values: &[f64],
+    truth: &[bool],
+) -> Result<Evaluation> {
+    let m = metrics(values, truth);
     let calibrated = match &a.calibration {
         Some(p) => Some(crate::calibrate::eval_threshold(p)?),
         None => None,
@@ -274,11 +286,21 @@ pub fn run(a: &EvalArgs) -> Result<()> {
             )
         }
     };
-    let sizes = defect_sizes(&values, &truth, rows, cols, threshold, a.dilate);
-    let mm = |n: usize| n as f64 * a.pitch_um / 1000.0;
-    let objects = crate::objects::evaluate(&values, &truth, rows, cols, threshold);
-    if a.json {
-        let defects: Vec<serde_json::Value> = sizes
+    Ok(Evaluation {
+        metrics: m,
+        threshold,
+        rule,
+        sizes: defect_sizes(values, truth, rows, cols, threshold, a.dilate),
+        objects: crate::objects::evaluate(values, truth, rows, cols, threshold),
+    })
+}
+
+impl Evaluation {
+    /// `dmap eval --json`'s document, sizes in mm at `pitch_um`.
+    pub fn json(&self, pitch_um: f64) -> serde_json::Value {
+        let mm = |n: usize| n as f64 * pitch_um / 1000.0;
+        let defects: Vec<serde_json::Value> = self
+            .sizes
             .iter()
             .map(|d| {
                 serde_json::json!({
@@ -287,16 +309,38 @@ pub fn run(a: &EvalArgs) -> Result<()> {
                 })
             })
             .collect();
-        let obj = serde_json::json!({
+        let m = &self.metrics;
+        serde_json::json!({
             "snr": json_num(m.snr),
             "psnr": json_num(m.psnr),
             "cnr": json_num(m.cnr),
-            "threshold": json_num(threshold),
+            "threshold": json_num(self.threshold),
             "defects": defects,
-            "objects": crate::objects::to_json(&objects, a.pitch_um / 1000.0),
-        });
-        return crate::out::stdout(format!("{obj}\n").as_bytes());
+            "objects": crate::objects::to_json(&self.objects, pitch_um / 1000.0),
+        })
     }
+}
+
+pub fn run(a: &EvalArgs) -> Result<()> {
+    check_args(a)?;
+    let (rows, cols, values) = load_scores(&a.input, a.channel)?;
+    let mask = crate::npy::read_mask(&a.truth)?;
+    if (mask.rows, mask.cols) != (rows, cols) {
+        bail!(
+            "truth mask {} is {}x{} but the scores are {rows}x{cols}",
+            a.truth.display(),
+            mask.rows,
+            mask.cols
+        );
+    }
+    let truth = mask.data;
+    let e = evaluate(a, (rows, cols), &values, &truth)?;
+    if a.json {
+        return crate::out::stdout(format!("{}\n", e.json(a.pitch_um)).as_bytes());
+    }
+    let (m, threshold, rule, sizes, objects) =
+        (&e.metrics, e.threshold, &e.rule, &e.sizes, &e.objects);
+    let mm = |n: usize| n as f64 * a.pitch_um / 1000.0;
     let mut o = String::new();
     // Writing to a String cannot fail.
     macro_rules! println {

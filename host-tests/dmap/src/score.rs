@@ -60,49 +60,100 @@ pub struct ScoreArgs {
 /// (about 2^20 samples' worth, [`crate::npy::band_rows`]), whatever the
 /// size of the scan.
 pub fn run(args: &ScoreArgs) -> Result<()> {
-    check_flags(args)?;
+    check_flags(args.distance, &args.scoring, args.ground)?;
     let target = Target::new(&args.output);
     if let Target::File(out) = &target {
         crate::out::refuse_inputs(out, &[&args.scan])?;
     }
     let scan = ScanFile::open(&args.scan)?;
-    let g = scan.geometry;
-    let (j1, j2) = (g.j1(), g.j2());
-    // The configuration is checked before the samples are.
-    let method = match args.distance {
-        DistanceArg::Cvm => Method::Cvm(CvmEmbedding::new(&args.scoring.reference_config(j1, j2)?)),
-        DistanceArg::CvmFixed => Method::Fixed(args.scoring.scorer(j1, j2)?),
-        DistanceArg::Emd => {
-            let ground = match args.ground.unwrap_or(GroundArg::Euclid) {
-                GroundArg::Euclid => Ground::Euclid,
-                GroundArg::L1 => Ground::L1,
-            };
-            Method::Emd(Emd::new(cvm_reference::Geometry::new(j1, j2)?, ground))
-        }
-        DistanceArg::MeanDir => Method::MeanDir(MeanDir(cvm_reference::Geometry::new(j1, j2)?)),
-    };
-    let mut warnings = match &method {
-        Method::Cvm(_) | Method::Fixed(_) => args.scoring.warnings(j1, j2)?,
-        Method::Emd(d) => blind_axes(j1, j2, |a, b| d.distance(&d.prepare(a), &d.prepare(b))),
-        Method::MeanDir(d) => blind_axes(j1, j2, |a, b| d.distance(&d.prepare(a), &d.prepare(b))),
-    };
-    warnings.extend(flat_scan_warnings(scan.rows, scan.cols));
-    scan.validate(args.distance == DistanceArg::CvmFixed)?;
+    let scoring = Scoring::new(args.distance, &args.scoring, args.ground, &scan)?;
+    scan.validate(scoring.counts())?;
     crate::out::write_target(&target, |out| {
         let mut w = GradientWriter::new(out, target.name(), scan.rows, scan.cols)?;
-        match &method {
-            Method::Cvm(d) => banded(&scan, &Prepare(d), &mut w)?,
-            Method::Fixed(s) => banded(&scan, &FixedPrepare(s), &mut w)?,
-            Method::Emd(d) => banded(&scan, &Prepare(d), &mut w)?,
-            Method::MeanDir(d) => banded(&scan, &Prepare(d), &mut w)?,
-        }
+        scoring.score(&scan, &mut |band| w.push(band))?;
         w.finish()
     })?;
     // After the result, so that a failed run says one thing only.
-    for w in &warnings {
+    for w in &scoring.warnings {
         crate::out::warn(w);
     }
     Ok(())
+}
+
+/// `dmap score` on a scan already opened (a file or memory), without a
+/// file to write: the flags checked, every sample checked, then the
+/// gradient image handed to `push` a band of rows at a time (`(rows, cols,
+/// 3)` in C order, bands in order). Returns the warnings `dmap score`
+/// prints after its output.
+pub fn score_scan(
+    scan: &ScanFile,
+    distance: DistanceArg,
+    scoring: &ScoringArgs,
+    ground: Option<GroundArg>,
+    push: &mut dyn FnMut(&[f64]) -> Result<()>,
+) -> Result<Vec<String>> {
+    check_flags(distance, scoring, ground)?;
+    let s = Scoring::new(distance, scoring, ground, scan)?;
+    scan.validate(s.counts())?;
+    s.score(scan, push)?;
+    Ok(s.warnings)
+}
+
+/// A distance ready to score a scan, and what the user should know.
+pub struct Scoring {
+    method: Method,
+    /// The configuration's and the scan's shape's warnings.
+    pub warnings: Vec<String>,
+}
+
+impl Scoring {
+    /// The distance for `scan`'s geometry (the configuration is checked
+    /// before the samples are).
+    pub fn new(
+        distance: DistanceArg,
+        scoring: &ScoringArgs,
+        ground: Option<GroundArg>,
+        scan: &ScanFile,
+    ) -> Result<Self> {
+        let (j1, j2) = (scan.geometry.j1(), scan.geometry.j2());
+        let method = match distance {
+            DistanceArg::Cvm => Method::Cvm(CvmEmbedding::new(&scoring.reference_config(j1, j2)?)),
+            DistanceArg::CvmFixed => Method::Fixed(scoring.scorer(j1, j2)?),
+            DistanceArg::Emd => {
+                let ground = match ground.unwrap_or(GroundArg::Euclid) {
+                    GroundArg::Euclid => Ground::Euclid,
+                    GroundArg::L1 => Ground::L1,
+                };
+                Method::Emd(Emd::new(cvm_reference::Geometry::new(j1, j2)?, ground))
+            }
+            DistanceArg::MeanDir => Method::MeanDir(MeanDir(cvm_reference::Geometry::new(j1, j2)?)),
+        };
+        let mut warnings = match &method {
+            Method::Cvm(_) | Method::Fixed(_) => scoring.warnings(j1, j2)?,
+            Method::Emd(d) => blind_axes(j1, j2, |a, b| d.distance(&d.prepare(a), &d.prepare(b))),
+            Method::MeanDir(d) => {
+                blind_axes(j1, j2, |a, b| d.distance(&d.prepare(a), &d.prepare(b)))
+            }
+        };
+        warnings.extend(flat_scan_warnings(scan.rows, scan.cols));
+        Ok(Scoring { method, warnings })
+    }
+
+    /// Whether the samples must be counts (`cvm-fixed`, the firmware's input).
+    pub fn counts(&self) -> bool {
+        matches!(self.method, Method::Fixed(_))
+    }
+
+    /// Scores `scan` (samples already checked), handing the gradient image
+    /// to `push` a band of rows at a time.
+    pub fn score(&self, scan: &ScanFile, push: &mut dyn FnMut(&[f64]) -> Result<()>) -> Result<()> {
+        match &self.method {
+            Method::Cvm(d) => banded(scan, &Prepare(d), push),
+            Method::Fixed(s) => banded(scan, &FixedPrepare(s), push),
+            Method::Emd(d) => banded(scan, &Prepare(d), push),
+            Method::MeanDir(d) => banded(scan, &Prepare(d), push),
+        }
+    }
 }
 
 /// The distance a run scores with (one per run: the size of the largest
@@ -119,7 +170,7 @@ enum Method {
 /// gradient of a position from its four neighbours' prepared maps.
 trait Banded: Sync {
     type Prepared: Send + Sync;
-    fn prepare_row(&self, scan: &ScanFile, row: usize) -> Result<Vec<Self::Prepared>>;
+    fn prepare_row(&self, scan: &ScanFile<'_>, row: usize) -> Result<Vec<Self::Prepared>>;
     fn gradient(
         &self,
         left: &Self::Prepared,
@@ -138,7 +189,7 @@ where
     D::Prepared: Send + Sync,
 {
     type Prepared = D::Prepared;
-    fn prepare_row(&self, scan: &ScanFile, row: usize) -> Result<Vec<D::Prepared>> {
+    fn prepare_row(&self, scan: &ScanFile<'_>, row: usize) -> Result<Vec<D::Prepared>> {
         let n = scan.geometry.cells();
         let mut samples = vec![0.0; scan.cols * n];
         scan.maps_f64(row * scan.cols, &mut samples)?;
@@ -163,7 +214,7 @@ struct FixedPrepare<'a>(&'a cvm_core::Scorer);
 
 impl Banded for FixedPrepare<'_> {
     type Prepared = Vec<i32>;
-    fn prepare_row(&self, scan: &ScanFile, row: usize) -> Result<Vec<Vec<i32>>> {
+    fn prepare_row(&self, scan: &ScanFile<'_>, row: usize) -> Result<Vec<Vec<i32>>> {
         let n = scan.geometry.cells();
         let mut counts = vec![0u16; scan.cols * n];
         scan.maps_u16(row * scan.cols, &mut counts, &mut Vec::new())?;
@@ -197,7 +248,11 @@ impl Banded for FixedPrepare<'_> {
 /// Eq. 1 with the border rule (a missing neighbour is the map itself), a
 /// band of rows at a time: each map prepared once, held while a row next to
 /// it is scored, then dropped.
-fn banded<B: Banded>(scan: &ScanFile, b: &B, w: &mut GradientWriter) -> Result<()> {
+fn banded<B: Banded>(
+    scan: &ScanFile<'_>,
+    b: &B,
+    push: &mut dyn FnMut(&[f64]) -> Result<()>,
+) -> Result<()> {
     let (rows, cols) = (scan.rows, scan.cols);
     let band = band_rows(cols, scan.geometry.cells());
     let mut window: VecDeque<Vec<B::Prepared>> = VecDeque::new();
@@ -232,20 +287,23 @@ fn banded<B: Banded>(scan: &ScanFile, b: &B, w: &mut GradientWriter) -> Result<(
                 i / 3 % cols
             );
         }
-        w.push(&out)?;
+        push(&out)?;
     }
     Ok(())
 }
 /// Flags that only mean something for some distances are refused elsewhere,
 /// so that nobody believes they changed a result.
-fn check_flags(args: &ScoreArgs) -> Result<()> {
-    let cvm = matches!(args.distance, DistanceArg::Cvm | DistanceArg::CvmFixed);
-    if args.ground.is_some() && args.distance != DistanceArg::Emd {
+pub fn check_flags(
+    distance: DistanceArg,
+    s: &ScoringArgs,
+    ground: Option<GroundArg>,
+) -> Result<()> {
+    let cvm = matches!(distance, DistanceArg::Cvm | DistanceArg::CvmFixed);
+    if ground.is_some() && distance != DistanceArg::Emd {
         bail!("--ground applies only to --distance emd");
     }
     if !cvm {
-        let s = &args.scoring;
-        let name = match args.distance {
+        let name = match distance {
             DistanceArg::Emd => "emd",
             _ => "mean-dir",
         };

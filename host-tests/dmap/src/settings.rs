@@ -60,6 +60,24 @@ pub struct RunSettings {
 pub fn resolve(
     scoring: &ScoringArgs,
     output: &OutputArgs,
+    geometry: (usize, usize),
+    shape: (usize, usize),
+) -> Result<RunSettings> {
+    resolve_with(
+        scoring,
+        output,
+        &|path| Calibration::load(path),
+        geometry,
+        shape,
+    )
+}
+
+/// [`resolve`] with the calibration `output.calibration` names read by
+/// `load` (a file, or a calibration already in memory).
+pub fn resolve_with(
+    scoring: &ScoringArgs,
+    output: &OutputArgs,
+    load: &dyn Fn(&std::path::Path) -> Result<Calibration>,
     (j1, j2): (usize, usize),
     (rows, cols): (usize, usize),
 ) -> Result<RunSettings> {
@@ -67,7 +85,7 @@ pub fn resolve(
     let scorer = scorer(&config)?;
     let calibration = match &output.calibration {
         Some(path) => {
-            let c = Calibration::load(path)?;
+            let c = load(path)?;
             c.threshold_for(path, &config, &scorer)?;
             Some(c)
         }

@@ -419,6 +419,24 @@ pub fn default_truth_path(out: &Path) -> PathBuf {
     out.with_file_name(format!("{stem}.truth.npy"))
 }
 
+/// The simulator run over `cfg` on `threads` worker threads (default:
+/// the global pool), `tick` called after each row.
+pub fn simulate_with(
+    cfg: &Config,
+    threads: Option<u16>,
+    tick: &(dyn Fn() + Sync),
+) -> Result<cvm_sim::Scan> {
+    match threads {
+        Some(t) => rayon::ThreadPoolBuilder::new()
+            .num_threads(usize::from(t))
+            .build()
+            .context("starting worker threads")?
+            .install(|| cvm_sim::simulate(cfg, tick)),
+        None => cvm_sim::simulate(cfg, tick),
+    }
+    .map_err(|e| anyhow::anyhow!(e))
+}
+
 pub fn run(a: &SimulateArgs) -> Result<()> {
     let cfg = config(a)?;
     let geometry = cvm_reference::Geometry::new(cfg.receiver.j1, cfg.receiver.j2)
@@ -447,15 +465,7 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
     );
     let start = Instant::now();
     let tick = || bar.inc(1);
-    let scan = match a.threads {
-        Some(t) => rayon::ThreadPoolBuilder::new()
-            .num_threads(usize::from(t))
-            .build()
-            .context("starting worker threads")?
-            .install(|| cvm_sim::simulate(&cfg, &tick)),
-        None => cvm_sim::simulate(&cfg, &tick),
-    }
-    .map_err(|e| anyhow::anyhow!(e))?;
+    let scan = simulate_with(&cfg, a.threads, &tick)?;
     bar.finish_and_clear();
     let secs = start.elapsed().as_secs_f64();
     crate::npy::write_scan_u16(&a.out, scan.rows, scan.cols, geometry, &scan.data)?;

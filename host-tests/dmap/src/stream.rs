@@ -4,7 +4,7 @@
 
 use crate::npy::ScanFile;
 use crate::options::ScoringArgs;
-use crate::settings::{MAX_COLS, resolve};
+use crate::settings::{MAX_COLS, resolve_with};
 use anyhow::{Result, bail};
 use clap::Args;
 use cvm_core::protocol::{LineSink, Priority};
@@ -115,22 +115,37 @@ pub fn stream_mapped(
     emit(&sink.0)
 }
 
-pub fn run(args: &StreamArgs) -> Result<()> {
-    let scan = ScanFile::open(&args.scan)?;
+/// `dmap stream` on a scan already opened (a file or memory), its
+/// calibration (if `output.calibration` names one) read by `load`: the
+/// run's settings resolved and every sample checked, then the lines
+/// handed to `emit` as they come. Returns the warnings `dmap stream`
+/// prints after its lines.
+pub fn stream_with(
+    scan: &ScanFile,
+    scoring: &ScoringArgs,
+    output: &OutputArgs,
+    load: &dyn Fn(&std::path::Path) -> Result<crate::calibrate::Calibration>,
+    emit: &mut dyn FnMut(&[u8]) -> Result<()>,
+) -> Result<Vec<String>> {
     let (j1, j2) = (scan.geometry.j1(), scan.geometry.j2());
-    let run = resolve(
-        &args.scoring,
-        &args.output,
-        (j1, j2),
-        (scan.rows, scan.cols),
-    )?;
+    let run = resolve_with(scoring, output, load, (j1, j2), (scan.rows, scan.cols))?;
     // Every sample is checked before the first line goes out.
     scan.validate(true)?;
-    stream_mapped(&run.scorer, run.settings, &scan, &mut |bytes| {
-        crate::out::stdout(bytes)
-    })?;
+    stream_mapped(&run.scorer, run.settings, scan, emit)?;
+    Ok(run.warnings)
+}
+
+pub fn run(args: &StreamArgs) -> Result<()> {
+    let scan = ScanFile::open(&args.scan)?;
+    let warnings = stream_with(
+        &scan,
+        &args.scoring,
+        &args.output,
+        &|path| crate::calibrate::Calibration::load(path),
+        &mut |bytes| crate::out::stdout(bytes),
+    )?;
     // After the lines, so that a failed run says one thing only.
-    for w in &run.warnings {
+    for w in &warnings {
         crate::out::warn(w);
     }
     Ok(())

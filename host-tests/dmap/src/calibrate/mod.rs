@@ -263,13 +263,14 @@ fn statistics(c: &Calibrator, rule: &CoreRule) -> Result<Statistics> {
 
 /// Scores the references and calibrates each on its own; refuses any
 /// that cannot calibrate. Returns them with the scoring configuration.
-fn references(a: &CalibrateArgs) -> Result<(Vec<Reference>, Config, Scorer)> {
+fn references<'a>(
+    a: &CalibrateArgs,
+    open: &mut dyn FnMut(usize) -> Result<ScanFile<'a>>,
+) -> Result<(Vec<Reference>, Config, Scorer)> {
     let mut refs = Vec::new();
     let mut setup: Option<(Config, Scorer, (usize, usize))> = None;
     for (i, path) in a.refs.iter().enumerate() {
-        let earlier: Vec<&Path> = a.refs[..i].iter().map(PathBuf::as_path).collect();
-        checks::refuse_duplicate(path, &earlier)?;
-        let scan = ScanFile::open(path)?;
+        let scan = open(i)?;
         scan.validate(true)
             .with_context(|| format!("{}", path.display()))?;
         let g = (scan.geometry.j1(), scan.geometry.j2());
@@ -315,14 +316,19 @@ fn references(a: &CalibrateArgs) -> Result<(Vec<Reference>, Config, Scorer)> {
     Ok((refs, config, scorer))
 }
 
-pub fn run(a: &CalibrateArgs) -> Result<()> {
-    let rule = Rule::from_options(&Options {
+/// The rule a run's options choose.
+pub fn rule(a: &CalibrateArgs) -> Result<Rule> {
+    Rule::from_options(&Options {
         name: a.rule,
         quantile: a.quantile,
         k: a.k,
         rate: a.rate,
         tail: a.tail_fraction,
-    })?;
+    })
+}
+
+pub fn run(a: &CalibrateArgs) -> Result<()> {
+    let rule = rule(a)?;
     if a.out.as_os_str() != "-" {
         let inputs: Vec<&Path> = a.refs.iter().map(PathBuf::as_path).collect();
         crate::out::refuse_inputs(&a.out, &inputs)?;
@@ -333,8 +339,40 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
         }
         return run_scores(a, &rule);
     }
+    let out = calibrate_with(a, &rule, &mut |i| {
+        let earlier: Vec<&Path> = a.refs[..i].iter().map(PathBuf::as_path).collect();
+        checks::refuse_duplicate(&a.refs[i], &earlier)?;
+        ScanFile::open(&a.refs[i])
+    })?;
+    let target = crate::out::Target::new(&a.out);
+    crate::out::write_target(&target, |w| {
+        w.write_all(out.text.as_bytes()).map_err(|e| anyhow!("{e}"))
+    })?;
+    let _ = writeln!(std::io::stderr(), "{}", out.summary);
+    for w in &out.warnings {
+        crate::out::warn(w);
+    }
+    Ok(())
+}
+
+/// What a calibration makes: the file's text, the summary line and the
+/// warnings `dmap calibrate` prints.
+pub struct Outcome {
+    pub text: String,
+    pub summary: String,
+    pub warnings: Vec<String>,
+}
+
+/// `dmap calibrate` (not `--scores`) on references that `open` gives, the
+/// `i`-th named `a.refs[i]` in the file and in messages, without writing
+/// anything.
+pub fn calibrate_with<'a>(
+    a: &CalibrateArgs,
+    rule: &Rule,
+    open: &mut dyn FnMut(usize) -> Result<ScanFile<'a>>,
+) -> Result<Outcome> {
     let exact = rule.exact()?;
-    let (refs, config, scorer) = references(a)?;
+    let (refs, config, scorer) = references(a, open)?;
     let st = statistics(&merged(&refs, None), &exact)?;
     // Leave one out: per reference, both channels' thresholds of the
     // others and how many of its own positions reach them.
@@ -392,22 +430,14 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
             })
         })
         .collect::<Result<_>>()?;
-    let doc = report::document(&config, &scorer, &rule, &exact, &st, &per_ref)?;
+    let doc = report::document(&config, &scorer, rule, &exact, &st, &per_ref)?;
     let text = format!(
         "{}\n",
         serde_json::to_string_pretty(&doc).context("encoding the calibration")?
     );
-    let target = crate::out::Target::new(&a.out);
-    crate::out::write_target(&target, |w| {
-        w.write_all(text.as_bytes()).map_err(|e| anyhow!("{e}"))
-    })?;
-    let _ = writeln!(
-        std::io::stderr(),
-        "{}",
-        report::summary(&scorer, &st, refs.len())
-    );
-    for w in &warnings {
-        crate::out::warn(w);
-    }
-    Ok(())
+    Ok(Outcome {
+        text,
+        summary: report::summary(&scorer, &st, refs.len()),
+        warnings,
+    })
 }

@@ -322,6 +322,14 @@ impl ScanResult {
         self.plane(|v| cvm_core::power::to_units(v.pmag as u32), |d| d.power)
     }
 
+    /// The spread channel's image in the layout of [`ScanResult::image`]:
+    /// the spread magnitude (a share of the power) in component 2, NaN
+    /// elsewhere and where only a defect line arrived (it carries no
+    /// spread).
+    pub fn spread_image(&self) -> Vec<f64> {
+        self.plane(|v| cvm_core::spread::to_units(v.smag), |_| f64::NAN)
+    }
+
     /// `(rows, cols, 3)` with `value` of each score in component 2 (from
     /// the defect lines when the scan has no score lines).
     fn plane(

@@ -23,7 +23,18 @@ pub enum ScanDtype {
 }
 
 impl ScanDtype {
-    pub(super) fn name(self) -> &'static str {
+    /// Bytes per sample.
+    pub fn item(self) -> usize {
+        match self {
+            Self::U8 => 1,
+            Self::U16 => 2,
+            Self::U32 | Self::F32 => 4,
+            Self::F64 => 8,
+        }
+    }
+
+    /// NumPy's name of the dtype.
+    pub fn name(self) -> &'static str {
         match self {
             Self::U8 => "uint8",
             Self::U16 => "uint16",
@@ -143,8 +154,13 @@ pub fn scan_from_bytes(path: &Path, bytes: &[u8]) -> Result<Scan> {
 
 /// Rows, columns and detector geometry of a scan's header.
 pub(super) fn scan_shape(path: &Path, npy: &NpyFile<&[u8]>) -> Result<(usize, usize, Geometry)> {
+    check_shape(path, npy.shape())
+}
+
+/// Rows, columns and detector geometry of a scan's shape, checked.
+pub(super) fn check_shape(path: &Path, shape: &[u64]) -> Result<(usize, usize, Geometry)> {
     let p = path.display();
-    let shape: Vec<u64> = npy.shape().to_vec();
+    let shape: Vec<u64> = shape.to_vec();
     if shape.len() != 4 {
         bail!(
             "{p}: a scan must have rank 4 (rows, cols, J1, J2), got shape {shape:?} (rank {})",

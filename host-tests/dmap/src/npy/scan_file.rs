@@ -8,7 +8,7 @@ use npyz::{DType, TypeChar};
 use std::path::{Path, PathBuf};
 
 use crate::npy::format::{FileBytes, map_file, open_npy, plain};
-use crate::npy::scan::{ScanDtype, scan_shape};
+use crate::npy::scan::{ScanDtype, check_shape, scan_shape};
 
 /// A scan file whose samples are read and decoded a few maps at a time,
 /// when asked, so that `score` and `stream` hold a few rows of a scan and a
@@ -19,9 +19,9 @@ use crate::npy::scan::{ScanDtype, scan_shape};
 /// mapping), so a file that shrinks during the run is an error naming the
 /// position whose samples are gone, not a fault of the process. A pipe is
 /// read whole.
-pub struct ScanFile {
+pub struct ScanFile<'a> {
     path: PathBuf,
-    samples: Samples,
+    samples: Samples<'a>,
     /// Where the samples start in the file.
     offset: usize,
     /// Positions along the slow axis.
@@ -36,14 +36,16 @@ pub struct ScanFile {
 }
 
 /// Where a scan's samples come from.
-enum Samples {
+enum Samples<'a> {
     /// A regular file, read when maps are asked for.
     File(std::fs::File),
     /// What could not be mapped (a pipe, `/dev/stdin`), read at open.
     Memory(Vec<u8>),
+    /// Memory the caller holds (a NumPy array's buffer), never copied.
+    Borrowed(&'a [u8]),
 }
 
-impl ScanFile {
+impl ScanFile<'static> {
     /// Opens `path` and checks its header and its length. What cannot be
     /// mapped (a pipe, `/dev/stdin`) is read into memory instead.
     pub fn open(path: &Path) -> Result<Self> {
@@ -84,14 +86,46 @@ impl ScanFile {
             big_endian,
         })
     }
+}
+
+impl<'a> ScanFile<'a> {
+    /// A scan whose samples are `bytes` in memory (C order, `dtype`, big
+    /// endian or not), of shape `(rows, cols, j1, j2)`, with the header
+    /// checks of [`ScanFile::open`] on that shape and the size; `name`
+    /// stands for the file in messages. The samples are read in place.
+    pub fn from_bytes(
+        name: &str,
+        bytes: &'a [u8],
+        shape: &[usize],
+        (dtype, big_endian): (ScanDtype, bool),
+    ) -> Result<Self> {
+        let path = PathBuf::from(name);
+        let shape64: Vec<u64> = shape.iter().map(|&d| d as u64).collect();
+        let (rows, cols, geometry) = check_shape(&path, &shape64)?;
+        let expected = [cols, geometry.cells(), dtype.item()]
+            .iter()
+            .try_fold(rows, |n, &d| n.checked_mul(d));
+        if expected != Some(bytes.len()) {
+            bail!(
+                "{name}: {} bytes of {} samples do not fill its shape {shape:?}",
+                bytes.len(),
+                dtype.name()
+            );
+        }
+        Ok(ScanFile {
+            path,
+            samples: Samples::Borrowed(bytes),
+            offset: 0,
+            rows,
+            cols,
+            geometry,
+            dtype,
+            big_endian,
+        })
+    }
 
     fn item(&self) -> usize {
-        match self.dtype {
-            ScanDtype::U8 => 1,
-            ScanDtype::U16 => 2,
-            ScanDtype::U32 | ScanDtype::F32 => 4,
-            ScanDtype::F64 => 8,
-        }
+        self.dtype.item()
     }
 
     /// Positions of the scan.
@@ -99,22 +133,21 @@ impl ScanFile {
         self.rows * self.cols
     }
 
-    /// The samples of maps `first..first + out.len() / cells`, as f64,
-    /// checked finite and non-negative.
-    pub fn maps_f64(&self, first: usize, out: &mut [f64]) -> Result<()> {
+    /// The bytes of `count` samples from map `first` on.
+    fn sample_bytes(&self, first: usize, count: usize) -> Result<std::borrow::Cow<'_, [u8]>> {
         let n = self.geometry.cells();
         let item = self.item();
         let p = self.path.display();
-        if first * n + out.len() > self.maps() * n {
+        if first * n + count > self.maps() * n {
             bail!(
                 "{p}: maps from {first} on are outside the scan's {} positions",
                 self.maps()
             );
         }
-        let (start, len) = (self.offset + first * n * item, out.len() * item);
-        let read;
-        let bytes: &[u8] = match &self.samples {
-            Samples::Memory(v) => &v[start..start + len],
+        let (start, len) = (self.offset + first * n * item, count * item);
+        Ok(match &self.samples {
+            Samples::Memory(v) => std::borrow::Cow::Borrowed(&v[start..start + len]),
+            Samples::Borrowed(v) => std::borrow::Cow::Borrowed(&v[start..start + len]),
             Samples::File(file) => {
                 use std::os::unix::fs::FileExt;
                 let mut buf = vec![0u8; len];
@@ -123,16 +156,23 @@ impl ScanFile {
                         anyhow!(
                             "{p}: the file ends before the samples of positions {:?} to {:?}: it is shorter than when it was opened (truncated while being read?)",
                             self.locate(first * n).0,
-                            self.locate((first * n + out.len()).max(1) - 1).0
+                            self.locate((first * n + count).max(1) - 1).0
                         )
                     } else {
                         anyhow!("{p}: cannot read: {e}")
                     }
                 })?;
-                read = buf;
-                &read
+                std::borrow::Cow::Owned(buf)
             }
-        };
+        })
+    }
+
+    /// The samples of maps `first..first + out.len() / cells`, as f64,
+    /// checked finite and non-negative.
+    pub fn maps_f64(&self, first: usize, out: &mut [f64]) -> Result<()> {
+        let n = self.geometry.cells();
+        let item = self.item();
+        let bytes = self.sample_bytes(first, out.len())?;
         let be = self.big_endian;
         macro_rules! decode {
             ($t:ty) => {
@@ -147,13 +187,18 @@ impl ScanFile {
             };
         }
         match self.dtype {
-            ScanDtype::U8 => out.iter_mut().zip(bytes).for_each(|(o, &b)| *o = b.into()),
+            ScanDtype::U8 => out
+                .iter_mut()
+                .zip(&bytes[..])
+                .for_each(|(o, &b)| *o = b.into()),
             ScanDtype::U16 => decode!(u16),
             ScanDtype::U32 => decode!(u32),
             ScanDtype::F32 => decode!(f32),
             ScanDtype::F64 => decode!(f64),
         }
-        if let Some(i) = out.iter().position(|x| !(x.is_finite() && *x >= 0.0)) {
+        // Integers are finite and non-negative.
+        let float = matches!(self.dtype, ScanDtype::F32 | ScanDtype::F64);
+        if float && let Some(i) = out.iter().position(|x| !(x.is_finite() && *x >= 0.0)) {
             let (pos, cell) = self.locate(first * n + i);
             bail!(
                 "{}: sample {} at position {pos:?} cell {cell:?} is not a finite non-negative intensity",
@@ -166,21 +211,61 @@ impl ScanFile {
 
     /// The samples of maps `first..first + out.len() / cells` as `u16`
     /// counts, the firmware's input; fails on any value that is not an
-    /// integer in `0..=65535`.
+    /// integer in `0..=65535`. Integer samples are read as they are
+    /// (`scratch`, the f64 staging, serves float scans only).
     pub fn maps_u16(&self, first: usize, out: &mut [u16], scratch: &mut Vec<f64>) -> Result<()> {
         let n = self.geometry.cells();
-        scratch.resize(out.len(), 0.0);
-        self.maps_f64(first, scratch)?;
-        for (i, (o, &x)) in out.iter_mut().zip(scratch.iter()).enumerate() {
-            if x.fract() == 0.0 && (0.0..=65535.0).contains(&x) {
-                *o = x as u16;
-            } else {
-                let (pos, cell) = self.locate(first * n + i);
-                bail!(
-                    "{}: {} scan value {x} at {pos:?} cell {cell:?} is not a u16 count (integer 0..=65535)",
-                    self.path.display(),
-                    self.dtype.name()
-                );
+        let not_a_count = |i: usize, x: &dyn std::fmt::Display| {
+            let (pos, cell) = self.locate(first * n + i);
+            anyhow!(
+                "{}: {} scan value {x} at {pos:?} cell {cell:?} is not a u16 count (integer 0..=65535)",
+                self.path.display(),
+                self.dtype.name()
+            )
+        };
+        let be = self.big_endian;
+        match self.dtype {
+            ScanDtype::U8 => {
+                let bytes = self.sample_bytes(first, out.len())?;
+                out.iter_mut()
+                    .zip(&bytes[..])
+                    .for_each(|(o, &b)| *o = b.into());
+            }
+            ScanDtype::U16 => {
+                let bytes = self.sample_bytes(first, out.len())?;
+                for (o, b) in out.iter_mut().zip(bytes.chunks_exact(2)) {
+                    let b = [b[0], b[1]];
+                    *o = if be {
+                        u16::from_be_bytes(b)
+                    } else {
+                        u16::from_le_bytes(b)
+                    };
+                }
+            }
+            ScanDtype::U32 => {
+                let bytes = self.sample_bytes(first, out.len())?;
+                for (i, (o, b)) in out.iter_mut().zip(bytes.chunks_exact(4)).enumerate() {
+                    let b = [b[0], b[1], b[2], b[3]];
+                    let x = if be {
+                        u32::from_be_bytes(b)
+                    } else {
+                        u32::from_le_bytes(b)
+                    };
+                    *o = u16::try_from(x).map_err(|_| not_a_count(i, &x))?;
+                }
+            }
+            ScanDtype::F32 | ScanDtype::F64 => {
+                scratch.resize(out.len(), 0.0);
+                self.maps_f64(first, scratch)?;
+                for (i, (o, &x)) in out.iter_mut().zip(scratch.iter()).enumerate() {
+                    // `as` saturates (and takes NaN to 0): only an integer
+                    // in 0..=65535 converts back to itself.
+                    let c = x as u16;
+                    if f64::from(c) != x {
+                        return Err(not_a_count(i, &x));
+                    }
+                    *o = c;
+                }
             }
         }
         Ok(())
