@@ -5,6 +5,7 @@ pub mod bench;
 pub mod calibrate;
 pub mod child;
 pub mod cli_values;
+pub mod console;
 pub mod elf;
 pub mod emulate;
 pub mod eval;

@@ -148,6 +148,28 @@ impl Decoder {
         self.interrupted = Some(signal);
     }
 
+    /// The scan under way (its header arrived, its end line not yet).
+    pub fn current(&self) -> Option<&ScanResult> {
+        self.current.as_ref()
+    }
+
+    /// Lines fed so far (the number of the last one).
+    pub fn line_no(&self) -> usize {
+        self.line_no
+    }
+
+    /// Takes the scans filed so far out of the decoder and gives back what
+    /// they held of its budget, so that a decoder that runs for ever
+    /// (`dmap console`) holds one scan at a time.
+    pub fn take_scans(&mut self) -> Vec<ScanResult> {
+        let scans = std::mem::take(&mut self.scans);
+        for s in &scans {
+            let held = s.rows.len() + s.defects.len() + s.n_scores + s.objects.len();
+            self.kept = self.kept.saturating_sub(held);
+        }
+        scans
+    }
+
     /// Scans that have ended (an end line arrived).
     pub fn ended(&self) -> usize {
         self.scans.iter().filter(|s| s.end.is_some()).count()
