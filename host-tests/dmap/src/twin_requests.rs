@@ -343,6 +343,7 @@ mod tests {
             flash: Some(dir.path().join("bank2.bin")),
             power_cut: Some(3),
             commands: Vec::new(),
+            live: Default::default(),
         };
         assert!(args.check(8).is_ok());
         assert!(args.check(7).is_err(), "beam 7 of a 7-beam scan");

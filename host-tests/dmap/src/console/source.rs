@@ -42,6 +42,39 @@ impl Read for Chunks {
     }
 }
 
+/// A recording: a file opened at once, a FIFO when it is first read (so
+/// that the page is served while the writer has yet to come).
+enum Input {
+    File(std::fs::File),
+    Fifo(PathBuf),
+}
+
+impl Input {
+    fn open(path: &std::path::Path) -> Result<Input> {
+        use std::os::unix::fs::FileTypeExt;
+        let meta = std::fs::metadata(path)
+            .with_context(|| format!("cannot open {}", path.display()))?;
+        if meta.file_type().is_fifo() {
+            return Ok(Input::Fifo(path.to_path_buf()));
+        }
+        Ok(Input::File(std::fs::File::open(path).with_context(|| {
+            format!("cannot open {}", path.display())
+        })?))
+    }
+}
+
+impl Read for Input {
+    fn read(&mut self, out: &mut [u8]) -> std::io::Result<usize> {
+        if let Input::Fifo(p) = self {
+            *self = Input::File(std::fs::File::open(&*p)?);
+        }
+        match self {
+            Input::File(f) => f.read(out),
+            Input::Fifo(_) => Ok(0),
+        }
+    }
+}
+
 /// A recording read at a pace: `bytes_per_s` or `lines_per_s`.
 struct Paced<R> {
     inner: R,
@@ -98,8 +131,7 @@ pub fn open(args: &ConsoleArgs, note: Arc<dyn Fn(String) + Send + Sync>) -> Resu
         });
     }
     if let Some(path) = &args.input {
-        let f = std::fs::File::open(path)
-            .with_context(|| format!("cannot open {}", path.display()))?;
+        let f = Input::open(path)?;
         let (reader, pace): (Box<dyn Read + Send>, String) = match args.rate {
             Rate::Full => (Box::new(f), "in full".into()),
             Rate::Link => (
