@@ -11,11 +11,11 @@ use std::io::{BufReader, Read};
 use std::sync::Arc;
 use std::time::Instant;
 
-/// The row a score (`S`) or row (`R`) line names.
-fn row_of(line: &[u8]) -> Option<u32> {
-    let rest = line.get(2..)?;
-    let end = rest.iter().position(|&b| b == b',')?;
-    std::str::from_utf8(&rest[..end]).ok()?.parse().ok()
+/// The `k`-th field of a line (from 0, the type): the row a score (`S`)
+/// or row (`R`) line names is field 1, a score line's first column field 2.
+fn field(line: &[u8], k: usize) -> Option<u32> {
+    let f = line.split(|&b| b == b',').nth(k)?;
+    std::str::from_utf8(f).ok()?.parse().ok()
 }
 
 /// Decodes `reader` to its end into `hub`; `rt` runs the `status`
@@ -73,7 +73,12 @@ fn after(hub: &Arc<Hub>, dec: &mut Decoder, line: &[u8], rt: &tokio::runtime::Ha
     let errors = std::mem::take(&mut dec.errors);
     let ended = dec.take_scans();
     let mut ask_status = false;
-    hub.change(|s| {
+    // A verdict, an object, a new part, a reply or damage wakes the
+    // viewers at once; a row waits for the next wake-up.
+    let now = !errors.is_empty()
+        || !ended.is_empty()
+        || matches!(line.first(), Some(b'H' | b'E' | b'O' | b'A'));
+    let v = hub.quietly(|s| {
         s.counters.lines = dec.line_no() as u64;
         for e in &errors {
             s.line_error(e.kind.name(), e.line, &e.what);
@@ -89,13 +94,14 @@ fn after(hub: &Arc<Hub>, dec: &mut Decoder, line: &[u8], rt: &tokio::runtime::Ha
                 s.want_status &= !ask_status;
             }
             (Some(b'R'), Some(_)) => {
-                if let (Some(p), Some(row)) = (s.current.as_mut(), row_of(line)) {
+                if let (Some(p), Some(row)) = (s.current.as_mut(), field(line, 1)) {
                     p.saw_row(row);
                 }
             }
             (Some(b'S'), Some(c)) => {
-                if let (Some(p), Some(row)) = (s.current.as_mut(), row_of(line)) {
-                    p.scores(c, row);
+                let at = (field(line, 1), field(line, 2));
+                if let (Some(p), (Some(row), Some(col0))) = (s.current.as_mut(), at) {
+                    p.scores(c, row, col0);
                 }
             }
             (Some(b'D'), Some(c)) => {
@@ -119,10 +125,12 @@ fn after(hub: &Arc<Hub>, dec: &mut Decoder, line: &[u8], rt: &tokio::runtime::Ha
             };
             if let Some(p) = part {
                 p.keep_line(line);
-                p.keep_line(b"\n");
             }
         }
     });
+    if now {
+        hub.tick.send_replace(v);
+    }
     if ask_status {
         let hub = Arc::clone(hub);
         rt.spawn(async move {

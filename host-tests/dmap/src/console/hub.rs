@@ -15,6 +15,9 @@ use std::sync::{Mutex, MutexGuard};
 use std::time::Duration;
 use tokio::sync::{mpsc, watch};
 
+/// Longest a change waits before the viewers are woken.
+pub const WAKE: Duration = Duration::from_millis(20);
+
 /// A reply routed to the request that waits for it.
 #[derive(Debug)]
 pub enum Routed {
@@ -58,6 +61,8 @@ pub struct Hub {
     pub reply_timeout: Duration,
     /// One request on the link at a time, as `dmap sensor` sends them.
     pub one_at_a_time: tokio::sync::Mutex<()>,
+    /// Pages connected to the event stream.
+    pub viewers: std::sync::atomic::AtomicUsize,
 }
 
 fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
@@ -77,6 +82,7 @@ impl Hub {
             token,
             reply_timeout,
             one_at_a_time: tokio::sync::Mutex::new(()),
+            viewers: Default::default(),
         }
     }
 
@@ -86,13 +92,29 @@ impl Hub {
 
     /// Changes the state and wakes the viewers.
     pub fn change(&self, f: impl FnOnce(&mut State)) {
-        let v = {
-            let mut s = self.state();
-            f(&mut s);
-            s.version += 1;
-            s.version
-        };
+        let v = self.quietly(f);
         self.tick.send_replace(v);
+    }
+
+    /// Changes the state; the viewers see it at the next wake-up
+    /// ([`Hub::wake`], at most [`WAKE`] later): a row of scores need not
+    /// wake every viewer as it arrives.
+    pub fn quietly(&self, f: impl FnOnce(&mut State)) -> u64 {
+        let mut s = self.state();
+        f(&mut s);
+        s.version += 1;
+        s.version
+    }
+
+    /// Wakes the viewers when the state changed since they were last woken.
+    pub async fn wake(&self) {
+        loop {
+            tokio::time::sleep(WAKE).await;
+            let v = self.state().version;
+            if *self.tick.borrow() != v {
+                self.tick.send_replace(v);
+            }
+        }
     }
 
     /// A reply line that arrived: into the state, and to its request.

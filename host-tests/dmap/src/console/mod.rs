@@ -81,6 +81,8 @@ pub fn run(args: &ConsoleArgs) -> Result<()> {
     let handle = rt.handle().clone();
     let reader = opened.reader;
     std::thread::spawn(move || feed::decode(decoding, reader, handle));
+    let waking = Arc::clone(&hub);
+    rt.spawn(async move { waking.wake().await });
     rt.block_on(async move {
         axum::serve(listener, server::router(hub))
             .await

@@ -87,9 +87,11 @@ impl Part {
         }
     }
 
+    /// Keeps `line` (and a newline) for the download.
     pub fn keep_line(&mut self, line: &[u8]) {
-        if self.lines.len() + line.len() <= MAX_LINES_BYTES {
+        if self.lines.len() + line.len() < MAX_LINES_BYTES {
             self.lines.extend_from_slice(line);
+            self.lines.push(b'\n');
         } else {
             self.lines_dropped += 1;
         }
@@ -110,14 +112,15 @@ impl Part {
         self.rows_seen = self.rows_seen.max(row as usize + 1).min(self.rows);
     }
 
-    /// Row `row`'s scores as the decoder holds them.
-    pub fn scores(&mut self, s: &ScanResult, row: u32) {
+    /// Row `row`'s scores from column `col0` on, as the decoder holds them
+    /// (a score line's).
+    pub fn scores(&mut self, s: &ScanResult, row: u32, col0: u32) {
         self.saw_row(row);
         let Some(line) = s.scores.get(&row) else {
             return;
         };
         let scale = (-(s.q as f64)).exp2();
-        for (&c, v) in line {
+        for (&c, v) in line.range(col0..) {
             if v.flags & flags::NO_DATA == 0 {
                 self.set(row as usize, c as usize, v.mag as f64 * scale, v.flags);
             }

@@ -17,6 +17,7 @@ use serde_json::{Value, json};
 use std::collections::HashMap;
 use std::convert::Infallible;
 use std::sync::Arc;
+use std::sync::atomic::Ordering;
 use std::time::Duration;
 
 /// Shortest time between two events to one viewer.
@@ -50,10 +51,27 @@ struct Cursor {
     last: u64,
 }
 
+/// A connected viewer, counted while its stream lives.
+struct Viewer(Arc<Hub>);
+
+impl Viewer {
+    fn new(hub: Arc<Hub>) -> Self {
+        hub.viewers.fetch_add(1, Ordering::Relaxed);
+        Viewer(hub)
+    }
+}
+
+impl Drop for Viewer {
+    fn drop(&mut self) {
+        self.0.viewers.fetch_sub(1, Ordering::Relaxed);
+    }
+}
+
 /// The state for one viewer: everything but the picture rows it has.
 fn snapshot(hub: &Hub, cur: &mut Cursor) -> Value {
     let s = hub.state();
     let mut v = s.summary();
+    v["viewers"] = hub.viewers.load(Ordering::Relaxed).into();
     v["current"] = match &s.current {
         Some(p) => {
             let from = if p.n == cur.current {
@@ -87,15 +105,15 @@ async fn events(
 ) -> Sse<impl Stream<Item = Result<Event, Infallible>>> {
     let rx = hub.tick.subscribe();
     let stream = futures_util::stream::unfold(
-        (hub, rx, Cursor::default(), true),
-        |(hub, mut rx, mut cur, first)| async move {
+        (Viewer::new(hub), rx, Cursor::default(), true),
+        |(viewer, mut rx, mut cur, first)| async move {
             if !first {
                 tokio::time::sleep(EVENT_GAP).await;
                 rx.changed().await.ok()?;
             }
             rx.borrow_and_update();
-            let data = snapshot(&hub, &mut cur).to_string();
-            Some((Ok(Event::default().event("state").data(data)), (hub, rx, cur, false)))
+            let data = snapshot(&viewer.0, &mut cur).to_string();
+            Some((Ok(Event::default().event("state").data(data)), (viewer, rx, cur, false)))
         },
     );
     Sse::new(stream).keep_alive(KeepAlive::default())

@@ -48,6 +48,8 @@ pub struct Decoder {
     /// Row lines, defects and scores held, over all scans, and at most.
     pub(super) kept: usize,
     pub(super) max_kept: usize,
+    /// Scans taken out by [`Decoder::take_scans`].
+    taken: usize,
 }
 
 impl Default for Decoder {
@@ -76,6 +78,7 @@ impl Decoder {
             max_scans: max_scans.max(1),
             kept: 0,
             max_kept: MAX_KEPT,
+            taken: 0,
         }
     }
 
@@ -163,6 +166,7 @@ impl Decoder {
     /// (`dmap console`) holds one scan at a time.
     pub fn take_scans(&mut self) -> Vec<ScanResult> {
         let scans = std::mem::take(&mut self.scans);
+        self.taken += scans.len();
         for s in &scans {
             let held = s.rows.len() + s.defects.len() + s.n_scores + s.objects.len();
             self.kept = self.kept.saturating_sub(held);
@@ -306,7 +310,7 @@ impl Decoder {
             self.error(Kind::ScanCut, what);
             self.scans.push(s);
         }
-        if self.scans.is_empty() && self.scans_skipped == 0 {
+        if self.scans.is_empty() && self.taken == 0 && self.scans_skipped == 0 {
             let lines = self.line_no;
             self.error(
                 Kind::NoScan,

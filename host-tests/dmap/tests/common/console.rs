@@ -62,6 +62,10 @@ impl Console {
         }
     }
 
+    pub fn pid(&self) -> u32 {
+        self.child.id()
+    }
+
     pub fn state(&self) -> serde_json::Value {
         let (status, body) = http(&self.addr, "GET", "/api/state", &[], "");
         assert_eq!(status, 200, "{body}");
