@@ -19,6 +19,7 @@ pub mod objects;
 pub mod options;
 pub mod out;
 pub mod render;
+pub mod render_marks;
 pub mod repo;
 pub mod score;
 pub mod sensor;
