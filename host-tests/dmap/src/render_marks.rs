@@ -54,13 +54,16 @@ pub fn read_objects(path: &Path) -> Result<Vec<ObjectBox>> {
         return list
             .iter()
             .map(|o| {
-                one(o).with_context(|| format!("--objects {p}: an object without id, rows and cols"))
+                one(o)
+                    .with_context(|| format!("--objects {p}: an object without id, rows and cols"))
             })
             .collect();
     }
     let dec = crate::listen::decode(bytes.as_slice(), 0)?;
     let Some(scan) = dec.scans.last() else {
-        bail!("--objects {p}: no scan in it (neither result lines nor a `dmap listen --json` document)");
+        bail!(
+            "--objects {p}: no scan in it (neither result lines nor a `dmap listen --json` document)"
+        );
     };
     Ok(scan
         .objects
@@ -86,7 +89,13 @@ fn fill(rgb: &mut [u8], width: usize, (x, y, w, h): (usize, usize, usize, usize)
 /// Draws each box (shifted by the crop's first row and column, `origin`)
 /// that falls on the map, two pixels wide inside its positions, its id
 /// above it.
-pub fn draw_boxes(rgb: &mut [u8], width: usize, m: MapPlace, boxes: &[ObjectBox], origin: (usize, usize)) {
+pub fn draw_boxes(
+    rgb: &mut [u8],
+    width: usize,
+    m: MapPlace,
+    boxes: &[ObjectBox],
+    origin: (usize, usize),
+) {
     let line = 2.min(m.px).max(1);
     for b in boxes {
         let (r0, r1) = (b.rows.0 as usize, b.rows.1 as usize);
@@ -99,11 +108,20 @@ pub fn draw_boxes(rgb: &mut [u8], width: usize, m: MapPlace, boxes: &[ObjectBox]
         let (left, right) = (clip(c0, origin.1, m.cols), clip(c1, origin.1, m.cols) + 1);
         let (x0, y0) = (m.x + left * m.px, m.y + top * m.px);
         let (w, h) = ((right - left) * m.px, (bottom - top) * m.px);
-        for rect in [(x0, y0, w, line), (x0, y0 + h - line, w, line), (x0, y0, line, h), (x0 + w - line, y0, line, h)] {
+        for rect in [
+            (x0, y0, w, line),
+            (x0, y0 + h - line, w, line),
+            (x0, y0, line, h),
+            (x0 + w - line, y0, line, h),
+        ] {
             fill(rgb, width, rect, BOX_RGB);
         }
         let th = text_height(FONT);
-        let ty = if y0 >= m.y + th + 2 { y0 - th - 2 } else { y0 + h + 2 };
+        let ty = if y0 >= m.y + th + 2 {
+            y0 - th - 2
+        } else {
+            y0 + h + 2
+        };
         draw_text(rgb, width, x0 + 1, ty, &b.id.to_string(), FONT, BOX_RGB);
     }
 }
@@ -122,7 +140,12 @@ fn mm_ticks(n: usize, pitch_um: f64) -> Vec<(f64, String)> {
     (0..)
         .map(|k| k as f64 * step)
         .take_while(|t| *t <= span + 1e-9)
-        .map(|t| (t * 1000.0 / pitch_um, crate::fmt::fmt_num((t * 1000.0).round() / 1000.0)))
+        .map(|t| {
+            (
+                t * 1000.0 / pitch_um,
+                crate::fmt::fmt_num((t * 1000.0).round() / 1000.0),
+            )
+        })
         .collect()
 }
 
@@ -151,5 +174,13 @@ pub fn draw_axes(rgb: &mut [u8], width: usize, m: MapPlace, pitch_um: f64) {
         let tx = m.x.saturating_sub(6 + text_width(&label, FONT));
         draw_text(rgb, width, tx, y.saturating_sub(th / 2), &label, FONT, INK);
     }
-    draw_text(rgb, width, m.x + m.cols * m.px + 4, m.y + m.rows * m.px + 6, "mm", FONT, INK);
+    draw_text(
+        rgb,
+        width,
+        m.x + m.cols * m.px + 4,
+        m.y + m.rows * m.px + 6,
+        "mm",
+        FONT,
+        INK,
+    );
 }

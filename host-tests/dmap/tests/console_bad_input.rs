@@ -35,7 +35,10 @@ fn a_damaged_stream_shows_its_damage_and_no_wrong_verdict() {
         .lines()
         .map(|l| {
             if l.starts_with("E,") {
-                resealed(l, |b| b.replace("bad=0", "bad=1").replace("verdict=obj", "verdict=good"))
+                resealed(l, |b| {
+                    b.replace("bad=0", "bad=1")
+                        .replace("verdict=obj", "verdict=good")
+                })
             } else {
                 format!("{l}\n")
             }
@@ -57,8 +60,15 @@ fn a_damaged_stream_shows_its_damage_and_no_wrong_verdict() {
     let rec = dir.join("damaged.txt");
     std::fs::write(&rec, format!("{whole}{lied}{flipped}")).unwrap();
     let console = Console::start(&["--input", common::s(&rec), "--rate", "full"]);
-    let s = console.wait(60, "the stream's end", |s| s["health"]["source_end"].is_string());
-    let verdicts: Vec<&str> = s["history"].as_array().unwrap().iter().map(|h| h["verdict"].as_str().unwrap()).collect();
+    let s = console.wait(60, "the stream's end", |s| {
+        s["health"]["source_end"].is_string()
+    });
+    let verdicts: Vec<&str> = s["history"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|h| h["verdict"].as_str().unwrap())
+        .collect();
     assert_eq!(verdicts.len(), 3, "{verdicts:?}");
     // Newest first: the lying part and the one that lost a score line are
     // damaged, neither good nor obj.
@@ -68,9 +78,20 @@ fn a_damaged_stream_shows_its_damage_and_no_wrong_verdict() {
     let kinds = &s["health"]["kinds"];
     assert!(kinds["checksum"].as_u64() >= Some(1), "{kinds}");
     assert!(kinds["verdict"].as_u64() >= Some(1), "{kinds}");
-    assert!(s["counters"]["line_errors"].as_u64() >= Some(1), "{}", s["counters"]);
-    assert!(s["counters"]["damaged"].as_u64() >= Some(1), "{}", s["counters"]);
-    assert_eq!(s["counters"]["rejects"].as_u64(), Some(verdicts.iter().filter(|v| **v == "obj").count() as u64));
+    assert!(
+        s["counters"]["line_errors"].as_u64() >= Some(1),
+        "{}",
+        s["counters"]
+    );
+    assert!(
+        s["counters"]["damaged"].as_u64() >= Some(1),
+        "{}",
+        s["counters"]
+    );
+    assert_eq!(
+        s["counters"]["rejects"].as_u64(),
+        Some(verdicts.iter().filter(|v| **v == "obj").count() as u64)
+    );
     let recent = s["health"]["recent"].to_string();
     assert!(recent.contains("checksum"), "{recent}");
     if verdicts[0] == "damaged" {
@@ -83,14 +104,24 @@ fn requests_are_refused_with_their_reasons() {
     let dir = common::tmp_in("console-bad-requests", "");
     let rec = dir.join("one.txt");
     std::fs::write(&rec, part(&dir)).unwrap();
-    let console = Console::start(&["--input", common::s(&rec), "--rate", "full", "--token", TOKEN]);
+    let console = Console::start(&[
+        "--input",
+        common::s(&rec),
+        "--rate",
+        "full",
+        "--token",
+        TOKEN,
+    ]);
     let a = &console.addr;
     // Read-only viewers need no token.
     let (status, _) = http(a, "GET", "/api/state", &[], "");
     assert_eq!(status, 200);
     let (status, v) = ask(a, "set thr=5", None);
     assert_eq!(status, 401, "{v}");
-    assert!(v["error"].as_str().unwrap().contains("needs the token"), "{v}");
+    assert!(
+        v["error"].as_str().unwrap().contains("needs the token"),
+        "{v}"
+    );
     let (status, v) = ask(a, "set thr=5", Some("not-the-token-at-all"));
     assert_eq!(status, 401, "{v}");
     assert!(v["error"].as_str().unwrap().contains("wrong token"), "{v}");
@@ -117,7 +148,10 @@ fn requests_are_refused_with_their_reasons() {
     // A valid request, to a recording: refused for what it is.
     let (status, v) = ask(a, "set thr=5", Some(TOKEN));
     assert_eq!(status, 409, "{v}");
-    assert!(v["error"].as_str().unwrap().contains("takes no requests"), "{v}");
+    assert!(
+        v["error"].as_str().unwrap().contains("takes no requests"),
+        "{v}"
+    );
 }
 
 #[test]
@@ -125,13 +159,33 @@ fn the_lines_network_needs_a_token() {
     let dir = common::tmp_in("console-listen", "");
     let rec = dir.join("empty.txt");
     std::fs::write(&rec, "").unwrap();
-    let out = common::dmap(&["console", "--input", common::s(&rec), "--listen", "0.0.0.0:0"]);
+    let out = common::dmap(&[
+        "console",
+        "--input",
+        common::s(&rec),
+        "--listen",
+        "0.0.0.0:0",
+    ]);
     assert_eq!(out.status.code(), Some(1));
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("serves the line's network: give --token"), "{err}");
-    let out = common::dmap(&["console", "--input", common::s(&rec), "--listen", "0.0.0.0:0", "--token", "short"]);
+    assert!(
+        err.contains("serves the line's network: give --token"),
+        "{err}"
+    );
+    let out = common::dmap(&[
+        "console",
+        "--input",
+        common::s(&rec),
+        "--listen",
+        "0.0.0.0:0",
+        "--token",
+        "short",
+    ]);
     assert_eq!(out.status.code(), Some(1));
-    assert!(String::from_utf8_lossy(&out.stderr).contains("at least 16"), "{out:?}");
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("at least 16"),
+        "{out:?}"
+    );
     // A fresh token, printed in the address at start.
     let console = Console::start(&["--input", common::s(&rec), "--token", "auto"]);
     let token = console.url.split("?token=").nth(1).unwrap().to_string();

@@ -22,14 +22,24 @@ fn recording(dir: &std::path::Path) -> (Vec<u8>, Vec<&'static str>) {
     let scan = common::demo_scan(dir);
     let obj = common::dmap_ok(&["stream", common::s(&scan), "--scores"]).stdout;
     let good = common::dmap_ok(&[
-        "stream", common::s(&scan), "--scores", "--threshold", "100", "--power-threshold", "inf",
+        "stream",
+        common::s(&scan),
+        "--scores",
+        "--threshold",
+        "100",
+        "--power-threshold",
+        "inf",
     ])
     .stdout;
     assert!(String::from_utf8_lossy(&good).contains("verdict=good"));
     let mut out = Vec::new();
     let mut verdicts = Vec::new();
     for k in 0..PARTS {
-        let (part, v) = if k % 3 == 2 { (&good, "good") } else { (&obj, "obj") };
+        let (part, v) = if k % 3 == 2 {
+            (&good, "good")
+        } else {
+            (&obj, "obj")
+        };
         out.extend_from_slice(part);
         verdicts.push(v);
     }
@@ -77,30 +87,63 @@ fn a_thousand_parts_in_full_to_ten_viewers_lose_no_verdict() {
     std::fs::write(&rec, &stream).unwrap();
     let fifo = dir.join("link.fifo");
     let _ = std::fs::remove_file(&fifo);
-    assert!(std::process::Command::new("mkfifo").arg(&fifo).status().unwrap().success());
+    assert!(
+        std::process::Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .unwrap()
+            .success()
+    );
 
     let console = Console::start(&["--input", common::s(&fifo), "--rate", "full"]);
     let readers: Vec<_> = (0..9).map(|_| viewer(console.addr.clone())).collect();
     // The tenth viewer asks and never reads.
     let mut stalled = TcpStream::connect(&console.addr).unwrap();
-    write!(stalled, "GET /api/events HTTP/1.1\r\nHost: {}\r\n\r\n", console.addr).unwrap();
-    console.wait(30, "10 viewers", |s| s["counters"].is_object() && viewers(&console) == 10);
+    write!(
+        stalled,
+        "GET /api/events HTTP/1.1\r\nHost: {}\r\n\r\n",
+        console.addr
+    )
+    .unwrap();
+    console.wait(30, "10 viewers", |s| {
+        s["counters"].is_object() && viewers(&console) == 10
+    });
 
-    std::fs::File::options().write(true).open(&fifo).unwrap().write_all(&stream).unwrap();
-    let s = console.wait(120, "the stream's end", |s| s["health"]["source_end"].is_string());
+    std::fs::File::options()
+        .write(true)
+        .open(&fifo)
+        .unwrap()
+        .write_all(&stream)
+        .unwrap();
+    let s = console.wait(120, "the stream's end", |s| {
+        s["health"]["source_end"].is_string()
+    });
 
     let n_obj = verdicts.iter().filter(|&&v| v == "obj").count() as u64;
     let c = &s["counters"];
     assert_eq!(c["parts"], PARTS as u64, "{c}");
     assert_eq!(c["rejects"], n_obj, "{c}");
-    assert_eq!((c["faults"].as_u64(), c["damaged"].as_u64(), c["line_errors"].as_u64()), (Some(0), Some(0), Some(0)), "{c}");
+    assert_eq!(
+        (
+            c["faults"].as_u64(),
+            c["damaged"].as_u64(),
+            c["line_errors"].as_u64()
+        ),
+        (Some(0), Some(0), Some(0)),
+        "{c}"
+    );
     assert_eq!(s["verdicts"]["obj"], n_obj);
     assert_eq!(s["verdicts"]["good"], PARTS as u64 - n_obj);
     let history: Vec<(u64, String)> = s["history"]
         .as_array()
         .unwrap()
         .iter()
-        .map(|h| (h["n"].as_u64().unwrap(), h["verdict"].as_str().unwrap().to_string()))
+        .map(|h| {
+            (
+                h["n"].as_u64().unwrap(),
+                h["verdict"].as_str().unwrap().to_string(),
+            )
+        })
         .collect();
     let expected: Vec<(u64, String)> = (0..50)
         .map(|k| ((PARTS - k) as u64, verdicts[PARTS - 1 - k].to_string()))
@@ -130,7 +173,14 @@ fn a_thousand_parts_in_full_to_ten_viewers_lose_no_verdict() {
     };
     let max = PARTS.to_string();
     let listen_s = best(&|| {
-        common::dmap_ok(&["listen", "--input", common::s(&rec), "--max-scans", &max, "--json"]);
+        common::dmap_ok(&[
+            "listen",
+            "--input",
+            common::s(&rec),
+            "--max-scans",
+            &max,
+            "--json",
+        ]);
     });
     let decoder_s = best(&|| {
         let f = std::fs::File::open(&rec).unwrap();
@@ -145,7 +195,10 @@ fn a_thousand_parts_in_full_to_ten_viewers_lose_no_verdict() {
         rss / 1024
     );
     assert!(rss < 150 * 1024, "peak resident set {} MB", rss / 1024);
-    assert!(console_s <= listen_s * 1.10, "console {console_s:.3} s against listen {listen_s:.3} s");
+    assert!(
+        console_s <= listen_s * 1.10,
+        "console {console_s:.3} s against listen {listen_s:.3} s"
+    );
     drop(stalled);
 }
 

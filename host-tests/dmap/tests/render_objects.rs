@@ -23,19 +23,56 @@ fn object_boxes_and_mm_axes_are_drawn_where_the_lines_put_them() {
     let dir = common::tmp_in("render-objects", "");
     let scan = common::demo_scan(&dir);
     let lines = dir.join("lines.txt");
-    std::fs::write(&lines, common::dmap_ok(&["stream", s(&scan), "--scores"]).stdout).unwrap();
+    std::fs::write(
+        &lines,
+        common::dmap_ok(&["stream", s(&scan), "--scores"]).stdout,
+    )
+    .unwrap();
     let scores = dir.join("scores.npy");
     common::dmap_ok(&["listen", "--input", s(&lines), "-o", s(&scores)]);
     let json = dir.join("listen.json");
-    std::fs::write(&json, common::dmap(&["listen", "--input", s(&lines), "--json"]).stdout).unwrap();
+    std::fs::write(
+        &json,
+        common::dmap(&["listen", "--input", s(&lines), "--json"]).stdout,
+    )
+    .unwrap();
     let plain = dir.join("plain.png");
     let boxed = dir.join("boxed.png");
     let from_json = dir.join("json.png");
     let axes = ["--pitch-um", "334", "--scale", "10"];
     common::dmap_ok(&[&["render", s(&scores), "-o", s(&plain)][..], &axes].concat());
-    common::dmap_ok(&[&["render", s(&scores), "-o", s(&boxed), "--objects", s(&lines)][..], &axes].concat());
-    common::dmap_ok(&[&["render", s(&scores), "-o", s(&from_json), "--objects", s(&json)][..], &axes].concat());
-    assert_eq!(std::fs::read(&boxed).unwrap(), std::fs::read(&from_json).unwrap());
+    common::dmap_ok(
+        &[
+            &[
+                "render",
+                s(&scores),
+                "-o",
+                s(&boxed),
+                "--objects",
+                s(&lines),
+            ][..],
+            &axes,
+        ]
+        .concat(),
+    );
+    common::dmap_ok(
+        &[
+            &[
+                "render",
+                s(&scores),
+                "-o",
+                s(&from_json),
+                "--objects",
+                s(&json),
+            ][..],
+            &axes,
+        ]
+        .concat(),
+    );
+    assert_eq!(
+        std::fs::read(&boxed).unwrap(),
+        std::fs::read(&from_json).unwrap()
+    );
     let (w, a) = rgb(&plain);
     let (_, b) = rgb(&boxed);
     let red = dmap::render_marks::BOX_RGB;
@@ -55,10 +92,13 @@ fn object_boxes_and_mm_axes_are_drawn_where_the_lines_put_them() {
         let width = (o["cols"][1].as_u64().unwrap() - o["cols"][0].as_u64().unwrap() + 1) * 10;
         let rows_with_a_full_edge = changed
             .iter()
-            .fold(std::collections::BTreeMap::<usize, u64>::new(), |mut m, &(_, y)| {
-                *m.entry(y).or_default() += 1;
-                m
-            })
+            .fold(
+                std::collections::BTreeMap::<usize, u64>::new(),
+                |mut m, &(_, y)| {
+                    *m.entry(y).or_default() += 1;
+                    m
+                },
+            )
             .into_values()
             .filter(|&n| n >= width)
             .count();

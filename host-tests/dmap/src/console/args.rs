@@ -66,7 +66,11 @@ pub struct ConsoleArgs {
           value_parser = clap::value_parser!(u32).range(1..=1000))]
     pub parts: u32,
     /// --twin: more options of `dmap twin` (e.g. --twin-option=--beam-us=300), repeatable
-    #[arg(long = "twin-option", value_name = "OPTION", allow_hyphen_values = true)]
+    #[arg(
+        long = "twin-option",
+        value_name = "OPTION",
+        allow_hyphen_values = true
+    )]
     pub twin_options: Vec<String>,
     /// --twin: bank 2 of the chip's flash, kept between runs (as `dmap twin --flash`;
     /// default: a temporary file)

@@ -70,7 +70,12 @@ fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
 }
 
 impl Hub {
-    pub fn new(state: State, writer: Writer, token: Option<String>, reply_timeout: Duration) -> Self {
+    pub fn new(
+        state: State,
+        writer: Writer,
+        token: Option<String>,
+        reply_timeout: Duration,
+    ) -> Self {
         let seed = std::collections::hash_map::RandomState::new();
         let first = std::hash::BuildHasher::hash_one(&seed, super::part::now_ms()) as u32;
         Hub {

@@ -75,7 +75,11 @@ impl Part {
             } else {
                 Vec::new()
             },
-            fired: if fits { vec![0; rows * cols] } else { Vec::new() },
+            fired: if fits {
+                vec![0; rows * cols]
+            } else {
+                Vec::new()
+            },
             rows_seen: 0,
             threshold: s.threshold,
             objects: Vec::new(),

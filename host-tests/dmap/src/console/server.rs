@@ -29,9 +29,18 @@ const STYLE: &str = include_str!("assets/style.css");
 
 pub fn router(hub: Arc<Hub>) -> Router {
     Router::new()
-        .route("/", get(|| async { asset("text/html; charset=utf-8", INDEX) }))
-        .route("/app.js", get(|| async { asset("text/javascript; charset=utf-8", APP_JS) }))
-        .route("/style.css", get(|| async { asset("text/css; charset=utf-8", STYLE) }))
+        .route(
+            "/",
+            get(|| async { asset("text/html; charset=utf-8", INDEX) }),
+        )
+        .route(
+            "/app.js",
+            get(|| async { asset("text/javascript; charset=utf-8", APP_JS) }),
+        )
+        .route(
+            "/style.css",
+            get(|| async { asset("text/css; charset=utf-8", STYLE) }),
+        )
         .route("/api/state", get(state))
         .route("/api/events", get(events))
         .route("/api/request", post(request))
@@ -40,7 +49,14 @@ pub fn router(hub: Arc<Hub>) -> Router {
 }
 
 fn asset(kind: &'static str, body: &'static str) -> Response {
-    ([(header::CONTENT_TYPE, kind), (header::CACHE_CONTROL, "no-cache")], body).into_response()
+    (
+        [
+            (header::CONTENT_TYPE, kind),
+            (header::CACHE_CONTROL, "no-cache"),
+        ],
+        body,
+    )
+        .into_response()
 }
 
 /// Which pictures a viewer already has.
@@ -100,9 +116,7 @@ async fn state(State(hub): State<Arc<Hub>>) -> Response {
     ([(header::CACHE_CONTROL, "no-cache")], axum::Json(v)).into_response()
 }
 
-async fn events(
-    State(hub): State<Arc<Hub>>,
-) -> Sse<impl Stream<Item = Result<Event, Infallible>>> {
+async fn events(State(hub): State<Arc<Hub>>) -> Sse<impl Stream<Item = Result<Event, Infallible>>> {
     let rx = hub.tick.subscribe();
     let stream = futures_util::stream::unfold(
         (Viewer::new(hub), rx, Cursor::default(), true),
@@ -113,7 +127,10 @@ async fn events(
             }
             rx.borrow_and_update();
             let data = snapshot(&viewer.0, &mut cur).to_string();
-            Some((Ok(Event::default().event("state").data(data)), (viewer, rx, cur, false)))
+            Some((
+                Ok(Event::default().event("state").data(data)),
+                (viewer, rx, cur, false),
+            ))
         },
     );
     Sse::new(stream).keep_alive(KeepAlive::default())

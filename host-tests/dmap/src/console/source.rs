@@ -52,14 +52,14 @@ enum Input {
 impl Input {
     fn open(path: &std::path::Path) -> Result<Input> {
         use std::os::unix::fs::FileTypeExt;
-        let meta = std::fs::metadata(path)
-            .with_context(|| format!("cannot open {}", path.display()))?;
+        let meta =
+            std::fs::metadata(path).with_context(|| format!("cannot open {}", path.display()))?;
         if meta.file_type().is_fifo() {
             return Ok(Input::Fifo(path.to_path_buf()));
         }
-        Ok(Input::File(std::fs::File::open(path).with_context(|| {
-            format!("cannot open {}", path.display())
-        })?))
+        Ok(Input::File(std::fs::File::open(path).with_context(
+            || format!("cannot open {}", path.display()),
+        )?))
     }
 }
 
@@ -215,7 +215,12 @@ fn twin(args: &ConsoleArgs, note: Arc<dyn Fn(String) + Send + Sync>) -> Result<O
     words.extend(["--flash".into(), flash.display().to_string()]);
     words.extend(args.twin_options.iter().cloned());
     let base = <Twin as clap::Parser>::try_parse_from(&words)
-        .map_err(|e| anyhow::anyhow!("--twin-option: {}", e.to_string().lines().next().unwrap_or("")))?
+        .map_err(|e| {
+            anyhow::anyhow!(
+                "--twin-option: {}",
+                e.to_string().lines().next().unwrap_or("")
+            )
+        })?
         .args;
     let (tx, rx) = channel::<Vec<u8>>();
     let (req_tx, req_rx) = channel::<Vec<u8>>();
@@ -225,7 +230,11 @@ fn twin(args: &ConsoleArgs, note: Arc<dyn Fn(String) + Send + Sync>) -> Result<O
     let name = format!(
         "H743 firmware on the chip model, {} part(s) a run: {}",
         args.parts,
-        args.twin.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", ")
+        args.twin
+            .iter()
+            .map(|p| p.display().to_string())
+            .collect::<Vec<_>>()
+            .join(", ")
     );
     std::thread::spawn(move || {
         let _dir = dir;

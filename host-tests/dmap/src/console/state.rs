@@ -169,7 +169,11 @@ impl State {
 
     fn settings_json(&self) -> Vec<Value> {
         let cap = self.capacity.unwrap_or(crate::sensor::WIDEST);
-        let scan_src = self.current.as_ref().or(self.last.as_ref()).map(|p| p.src.clone());
+        let scan_src = self
+            .current
+            .as_ref()
+            .or(self.last.as_ref())
+            .map(|p| p.src.clone());
         Key::ALL
             .iter()
             .map(|&k| {
@@ -217,14 +221,18 @@ impl State {
             .as_ref()
             .or(self.last.as_ref())
             .map(|p| p.header["version"].clone());
-        let outputs = self.last.as_ref().and_then(|p| p.verdict.as_deref()).map(|v| {
-            let (ready, reject) = match v {
-                "good" => (true, false),
-                "obj" => (true, true),
-                _ => (false, true),
-            };
-            json!({"ready": ready, "reject": reject, "trusted": v != DAMAGED})
-        });
+        let outputs = self
+            .last
+            .as_ref()
+            .and_then(|p| p.verdict.as_deref())
+            .map(|v| {
+                let (ready, reject) = match v {
+                    "good" => (true, false),
+                    "obj" => (true, true),
+                    _ => (false, true),
+                };
+                json!({"ready": ready, "reject": reject, "trusted": v != DAMAGED})
+            });
         json!({
             "version": self.version,
             "source": self.source,

@@ -74,7 +74,7 @@ pub fn asks_of(request: &str) -> Result<Vec<Ask>, String> {
     if request.trim().is_empty() {
         return Err(format!("no request ({ACTIONS})"));
     }
-let words = Words::try_parse_from(request.split_whitespace()).map_err(|e| {
+    let words = Words::try_parse_from(request.split_whitespace()).map_err(|e| {
         use clap::error::ErrorKind;
         match e.kind() {
             // Help is no answer to a request: say what a request is.
@@ -102,7 +102,7 @@ let words = Words::try_parse_from(request.split_whitespace()).map_err(|e| {
     } = words.action
     {
         return Err(
-            "--scan-timeout is for dmap sensor (the model runs to the scan's end)".to_string()
+            "--scan-timeout is for dmap sensor (the model runs to the scan's end)".to_string(),
         );
     }
     words.action.asks().map_err(|f| f.message)

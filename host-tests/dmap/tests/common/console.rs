@@ -44,7 +44,11 @@ impl Console {
             .find(|w| w.starts_with("http://"))
             .unwrap_or_else(|| panic!("dmap console did not say where it serves: {first}"))
             .to_string();
-        let addr = url["http://".len()..].split('/').next().unwrap().to_string();
+        let addr = url["http://".len()..]
+            .split('/')
+            .next()
+            .unwrap()
+            .to_string();
         let stderr = Arc::new(Mutex::new(first));
         let keep = Arc::clone(&stderr);
         std::thread::spawn(move || {
@@ -73,7 +77,12 @@ impl Console {
     }
 
     /// Polls the state until `f` holds, at most `secs` seconds.
-    pub fn wait(&self, secs: u64, what: &str, f: impl Fn(&serde_json::Value) -> bool) -> serde_json::Value {
+    pub fn wait(
+        &self,
+        secs: u64,
+        what: &str,
+        f: impl Fn(&serde_json::Value) -> bool,
+    ) -> serde_json::Value {
         let until = Instant::now() + Duration::from_secs(secs);
         loop {
             let s = self.state();
@@ -92,10 +101,19 @@ impl Console {
 }
 
 /// One HTTP/1.1 request on the loopback: the status and the body.
-pub fn http(addr: &str, method: &str, path: &str, headers: &[(&str, &str)], body: &str) -> (u16, String) {
+pub fn http(
+    addr: &str,
+    method: &str,
+    path: &str,
+    headers: &[(&str, &str)],
+    body: &str,
+) -> (u16, String) {
     let mut s = TcpStream::connect(addr).unwrap();
     s.set_read_timeout(Some(Duration::from_secs(60))).unwrap();
-    let mut req = format!("{method} {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\nContent-Length: {}\r\n", body.len());
+    let mut req = format!(
+        "{method} {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\nContent-Length: {}\r\n",
+        body.len()
+    );
     for (k, v) in headers {
         req += &format!("{k}: {v}\r\n");
     }
@@ -105,9 +123,16 @@ pub fn http(addr: &str, method: &str, path: &str, headers: &[(&str, &str)], body
     let mut out = Vec::new();
     s.read_to_end(&mut out).unwrap();
     let text = String::from_utf8_lossy(&out).to_string();
-    let status = text.split_whitespace().nth(1).and_then(|c| c.parse().ok()).unwrap_or(0);
+    let status = text
+        .split_whitespace()
+        .nth(1)
+        .and_then(|c| c.parse().ok())
+        .unwrap_or(0);
     let (head, rest) = text.split_once("\r\n\r\n").unwrap_or((&text, ""));
-    let body = if head.to_ascii_lowercase().contains("transfer-encoding: chunked") {
+    let body = if head
+        .to_ascii_lowercase()
+        .contains("transfer-encoding: chunked")
+    {
         unchunk(rest)
     } else {
         rest.to_string()
@@ -133,5 +158,8 @@ pub fn ask(addr: &str, words: &str, token: Option<&str>) -> (u16, serde_json::Va
     let body = serde_json::json!({ "request": words }).to_string();
     let headers: Vec<(&str, &str)> = token.map(|t| ("X-Console-Token", t)).into_iter().collect();
     let (status, text) = http(addr, "POST", "/api/request", &headers, &body);
-    (status, serde_json::from_str(&text).unwrap_or(serde_json::Value::String(text)))
+    (
+        status,
+        serde_json::from_str(&text).unwrap_or(serde_json::Value::String(text)),
+    )
 }
