@@ -29,7 +29,7 @@ fn rate(s: &str) -> Result<Rate, String> {
 }
 
 #[derive(Args, Clone, Debug)]
-#[command(group(ArgGroup::new("source").args(["port", "twin", "input"]).required(true)))]
+#[command(group(ArgGroup::new("source").args(["port", "twin", "emulate", "input"]).required(true)))]
 pub struct ConsoleArgs {
     /// The sensor's serial port (e.g. /dev/ttyACM0): its result lines are decoded while the
     /// page's requests go out on the same link
@@ -42,6 +42,10 @@ pub struct ConsoleArgs {
     /// and again (the scans must have one shape); the page's requests reach it live
     #[arg(long, value_name = "SCAN.npy", num_args = 1..)]
     pub twin: Vec<PathBuf>,
+    /// Run the emulated board (QEMU mps2-an386) over these scans, one part each, again and
+    /// again; it has no command channel, so it takes no requests
+    #[arg(long, value_name = "SCAN.npy", num_args = 1..)]
+    pub emulate: Vec<PathBuf>,
     /// Replay a recorded stream of result lines (`dmap listen`'s input); it takes no requests
     #[arg(long, value_name = "FILE")]
     pub input: Option<PathBuf>,

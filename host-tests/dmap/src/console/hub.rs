@@ -172,7 +172,7 @@ impl Hub {
         if !self.state().requests {
             return Err(Refusal::new(
                 409,
-                "a recorded stream takes no requests (the console replays it)",
+                "this source takes no requests (a recording, which the console replays, or the emulated board, which has no command channel)",
             ));
         }
         let _one = self.one_at_a_time.lock().await;

@@ -40,7 +40,7 @@ pub fn run(args: &ConsoleArgs) -> Result<()> {
         .with_context(|| format!("cannot serve on {}", args.listen))?;
     let addr = listener.local_addr()?;
     let st = state::State {
-        requests: args.input.is_none(),
+        requests: args.input.is_none() && args.emulate.is_empty(),
         pitch_um: args.pitch_um,
         want_status: true,
         ..Default::default()

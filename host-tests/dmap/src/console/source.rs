@@ -162,10 +162,70 @@ pub fn open(args: &ConsoleArgs, note: Arc<dyn Fn(String) + Send + Sync>) -> Resu
             reply_timeout: Duration::from_secs(2),
         });
     }
+    if !args.emulate.is_empty() {
+        return emulate(args, note);
+    }
     if args.twin.is_empty() {
-        bail!("give --port DEV, --twin SCAN.npy or --input FILE");
+        bail!("give --port DEV, --twin SCAN.npy, --emulate SCAN.npy or --input FILE");
     }
     twin(args, note)
+}
+
+/// The emulated board: each scan a run of QEMU, one part, round and round.
+fn emulate(args: &ConsoleArgs, note: Arc<dyn Fn(String) + Send + Sync>) -> Result<Opened> {
+    #[derive(clap::Parser)]
+    struct Emulate {
+        #[command(flatten)]
+        args: crate::emulate::EmulateArgs,
+    }
+    let mut files = Vec::new();
+    for scan in &args.emulate {
+        let words = ["emulate", &scan.display().to_string(), "--scores"];
+        let a = <Emulate as clap::Parser>::try_parse_from(words)?.args;
+        files.push(crate::emulate::scan_file(&a)?);
+    }
+    let root = crate::repo::find(None)?;
+    let (tx, rx) = channel::<Vec<u8>>();
+    std::thread::spawn(move || {
+        let dir = tempfile::Builder::new().prefix("dmap-console-").tempdir();
+        let run = || -> Result<()> {
+            let dir = dir.as_ref().map_err(|e| anyhow::anyhow!("{e}"))?;
+            let elf = crate::emulate::build_elf_in(&root)?;
+            let mut paths = Vec::new();
+            for (k, f) in files.iter().enumerate() {
+                let p = dir.path().join(format!("scan{k}.cvmscan"));
+                std::fs::write(&p, f)?;
+                paths.push(p);
+            }
+            for p in paths.iter().cycle() {
+                crate::emulate::run_qemu(&elf, p, false, None, &mut |b| {
+                    tx.send(b.to_vec())
+                        .map_err(|_| anyhow::anyhow!("the console stopped"))
+                })?;
+            }
+            Ok(())
+        };
+        if let Err(e) = run() {
+            note(format!("the emulated board failed: {e:#}"));
+        }
+    });
+    Ok(Opened {
+        reader: Box::new(Chunks {
+            rx,
+            held: Vec::new(),
+            at: 0,
+        }),
+        writer: Writer::None,
+        name: format!(
+            "emulated board (QEMU): {}",
+            args.emulate
+                .iter()
+                .map(|p| p.display().to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+        reply_timeout: Duration::from_secs(2),
+    })
 }
 
 /// The scans, each one part, repeated to `parts` parts in one `.npy`.
