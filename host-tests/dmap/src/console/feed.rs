@@ -44,7 +44,8 @@ pub fn decode(hub: Arc<Hub>, reader: Box<dyn Read + Send>, rt: tokio::runtime::H
     after(&hub, &mut dec, b"", &rt);
     let seconds = first.map(|t| t.elapsed().as_secs_f64());
     hub.change(|s| {
-        s.source_end = Some(end);
+        // A source that failed said why (`note`); that stays.
+        s.source_end.get_or_insert(end);
         s.decode_seconds = seconds;
     });
 }

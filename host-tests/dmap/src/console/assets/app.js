@@ -178,7 +178,7 @@ function settings(s) {
     tr.querySelector(".scan-source").textContent = k.scan_source || "–";
   }
   const st = s.status;
-  $("sensor").textContent = st ? `firmware ${st.firmware}, detector ${st.detector}, capacity ${st.capacity}, store ${st.store}, started by ${st.reset_cause} (${st.boots})` : (s.requests ? "" : "a recording takes no requests");
+  $("sensor").textContent = st ? `firmware ${st.firmware}, detector ${st.detector}, capacity ${st.capacity}, store ${st.store}, started by ${st.reset_cause} (${st.boots})` : (s.requests ? "" : "this source takes no requests: read-only");
   const c = s.calibration;
   $("calibration").textContent = !c ? "" : c.result
     ? `calibrated on ${c.result.scans} scans (${c.result.positions} positions): thr ${c.result.thr}, pthr ${c.result.pthr}, sthr ${c.result.sthr} (in effect from the next scan, not saved)`
