@@ -239,16 +239,23 @@ fn the_page_shows_the_demo_part_its_objects_and_changes_settings() {
             .await
             .unwrap();
         assert_eq!(reject, "REJECT asserted");
-        let rows = c
-            .find_all(Locator::Css("#last-objects tbody tr"))
+        // Read at once: every event draws the table anew.
+        let boxes = c
+            .execute(
+                "return [...document.querySelectorAll('#last-objects tbody tr')].map(r => r.dataset.box)",
+                vec![],
+            )
             .await
             .unwrap();
-        let mut shown = Vec::new();
-        for r in &rows {
-            let b = r.attr("data-box").await.unwrap().unwrap();
-            let v: Vec<u32> = b.split(',').map(|x| x.parse().unwrap()).collect();
-            shown.push((v[0], v[1], v[2], v[3]));
-        }
+        let shown: Vec<(u32, u32, u32, u32)> = boxes
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|b| {
+                let v: Vec<u32> = b.as_str().unwrap().split(',').map(|x| x.parse().unwrap()).collect();
+                (v[0], v[1], v[2], v[3])
+            })
+            .collect();
         let (status, lines) = http(&console.addr, "GET", "/api/lines?part=last", &[], "");
         assert_eq!(status, 200);
         let fw = object_boxes(&lines);

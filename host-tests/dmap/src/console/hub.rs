@@ -33,6 +33,23 @@ pub enum Writer {
     Twin(std::sync::Arc<Mutex<std::sync::mpsc::Sender<Vec<u8>>>>),
 }
 
+/// A reply as JSON: a setting's `key`, `value` and `source` letter, else
+/// what the board said.
+fn answer_json(a: &Answer) -> Value {
+    match a {
+        Answer::Value { key, value, source } => json!({
+            "key": key.name(),
+            "value": crate::sensor::show_value(*key, *value),
+            "source": (source.as_char() as char).to_string(),
+        }),
+        Answer::Calibrating(n) => json!({"calibrating": n}),
+        Answer::Saved => json!("saved"),
+        Answer::Defaults => json!("defaults"),
+        Answer::Resetting => json!("resetting"),
+        other => json!(format!("{other:?}")),
+    }
+}
+
 /// Why a request was not carried out: an HTTP status and the reason in words.
 #[derive(Debug)]
 pub struct Refusal {
@@ -217,7 +234,7 @@ impl Hub {
                 };
                 let finished = match (&ask.request, &a) {
                     (Request::Status, Answer::Value { .. }) => {
-                        values.push(format!("{a:?}"));
+                        values.push(answer_json(&a));
                         values.len() == Key::ALL.len()
                     }
                     (Request::Status, _) => false,
@@ -225,7 +242,11 @@ impl Hub {
                     _ => true,
                 };
                 if finished {
-                    return Ok(json!({"id": id, "words": ask.words, "reply": format!("{a:?}")}));
+                    let reply = match ask.request {
+                        Request::Status => json!(values),
+                        _ => answer_json(&a),
+                    };
+                    return Ok(json!({"id": id, "words": ask.words, "reply": reply}));
                 }
             }
         }
