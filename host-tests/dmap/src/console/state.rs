@@ -29,7 +29,8 @@ pub struct Counters {
 pub struct Calibrating {
     pub id: u32,
     pub scans: u16,
-    /// Parts ended when the sensor accepted.
+    /// Parts ended when the sensor accepted, and the one under way then
+    /// (the calibration takes the scans that start after it).
     pub from_part: u64,
     pub result: Option<Value>,
     pub refused: Option<String>,
@@ -139,7 +140,7 @@ impl State {
                 self.calibration = Some(Calibrating {
                     id: id.unwrap_or(0),
                     scans: *n,
-                    from_part: self.counters.parts,
+                    from_part: self.counters.parts + u64::from(self.current.is_some()),
                     result: None,
                     refused: None,
                 });
@@ -207,7 +208,7 @@ impl State {
             None => Value::Null,
             Some(c) => json!({
                 "id": c.id, "scans": c.scans,
-                "done": (self.counters.parts - c.from_part).min(u64::from(c.scans)),
+                "done": self.counters.parts.saturating_sub(c.from_part).min(u64::from(c.scans)),
                 "result": c.result, "refused": c.refused,
             }),
         }
