@@ -1,5 +1,5 @@
 //! `dmap console` under test: started on a free loopback port, its
-//! address read from its first line, ended when dropped; a plain HTTP
+//! address read from the line it prints, ended when dropped; a plain HTTP
 //! client for its API.
 
 use std::io::{BufRead, BufReader, Read, Write};
@@ -37,13 +37,20 @@ impl Console {
             .spawn()
             .expect("starting dmap console");
         let mut lines = BufReader::new(child.stderr.take().unwrap());
+        // Its own line says where it serves; a source may warn before it.
         let mut first = String::new();
-        lines.read_line(&mut first).unwrap();
-        let url = first
-            .split_whitespace()
-            .find(|w| w.starts_with("http://"))
-            .unwrap_or_else(|| panic!("dmap console did not say where it serves: {first}"))
-            .to_string();
+        let url = loop {
+            let mut line = String::new();
+            if lines.read_line(&mut line).unwrap_or(0) == 0 {
+                panic!("dmap console did not say where it serves: {first}");
+            }
+            first.push_str(&line);
+            if line.starts_with("dmap console: serving ")
+                && let Some(u) = line.split_whitespace().find(|w| w.starts_with("http://"))
+            {
+                break u.to_string();
+            }
+        };
         let addr = url["http://".len()..]
             .split('/')
             .next()
