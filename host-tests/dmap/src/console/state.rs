@@ -186,7 +186,11 @@ impl State {
                     None => (None, None),
                 };
                 let range = match k.kind() {
-                    Kind::Choice(words) => json!(words),
+                    // The words the board takes (`ready`: `high` only).
+                    Kind::Choice(_) => {
+                        let (a, b) = k.range(&cap);
+                        json!((a..=b).map(|v| show_value(k, v)).collect::<Vec<_>>())
+                    }
                     Kind::Flag => json!(["0", "1"]),
                     Kind::Number => {
                         let (a, b) = k.range(&cap);
