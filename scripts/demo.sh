@@ -36,7 +36,8 @@ t1=$(date +%s.%N)
 
 echo "== decoding the UART lines" >&2
 "$dmap" listen --input "$out/uart.txt" --pitch-um "$pitch_um" -o "$out/scores.npy" > "$out/listen.txt"
-"$dmap" render "$out/scores.npy" -o "$out/defects.png" --titles "emulated firmware: CVM gradient magnitude"
+"$dmap" render "$out/scores.npy" -o "$out/defects.png" --titles "emulated firmware: CVM gradient magnitude" \
+    --objects "$out/uart.txt" --pitch-um "$pitch_um"
 
 # The same scan on the host pipeline must give the same bytes.
 "$dmap" stream "$out/scan.npy" --scores --threshold "$threshold" > "$out/host.txt"

@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Installs what the project needs on a fresh Debian machine with rustup:
 # the Cortex-M target, rustfmt/clippy, QEMU for the emulated board, and the
-# Python packages of the H743 chip model (Unicorn, pyelftools), and Python's
-# venv and libpython for the Python package (scripts/python.sh).
+# Python packages of the H743 chip model (Unicorn, pyelftools), Python's
+# venv and libpython for the Python package (scripts/python.sh), and
+# Chromium with its WebDriver for the console's browser test.
 # Idempotent: does nothing that is already done.
 set -euo pipefail
 
@@ -37,4 +38,9 @@ fi
 if ! python3 -c "import unicorn, elftools" >/dev/null 2>&1; then
     echo "setup: installing the chip model's Python packages (unicorn, pyelftools)" >&2
     python3 -m pip install --quiet --disable-pip-version-check unicorn==2.1.4 pyelftools==0.33
+fi
+if ! command -v chromium >/dev/null 2>&1 || ! command -v chromedriver >/dev/null 2>&1; then
+    echo "setup: installing chromium and chromium-driver (dmap console's browser test)" >&2
+    need_sudo apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive need_sudo apt-get install -y -qq chromium chromium-driver >/dev/null
 fi

@@ -56,6 +56,15 @@ pub fn trimmed(s: &str) -> Result<String, String> {
     Ok(s.trim().to_string())
 }
 
+/// A finite number above 0 (a pitch in µm).
+pub fn positive_f64(s: &str) -> Result<f64, String> {
+    s.trim()
+        .parse::<f64>()
+        .ok()
+        .filter(|v| v.is_finite() && *v > 0.0)
+        .ok_or_else(|| "expected a finite number above 0".to_string())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -39,6 +39,8 @@ enum Command {
     Twin(dmap::twin::TwinArgs),
     /// Talk to the sensor over its serial port: status, get, set, calibrate, save, defaults, reset
     Sensor(dmap::sensor::SensorArgs),
+    /// A live console in the browser: the defect map, objects, verdicts, settings and the link's health
+    Console(dmap::console::ConsoleArgs),
     /// Maps scored per second by each implementation (f64 brute/SAT/embedding, fixed point, EMD), one thread
     Bench(dmap::bench::BenchArgs),
     /// Write (or --check) the line protocol's conformance vectors: streams and their expected decode
@@ -86,6 +88,7 @@ fn main() {
         Command::Twin(args) => dmap::twin::run(&args),
         Command::Bench(args) => dmap::bench::run(&args),
         Command::Sensor(args) => dmap::sensor::run(&args),
+        Command::Console(args) => dmap::console::run(&args),
         Command::Vectors(args) => dmap::vectors::run(&args),
     };
     if let Err(e) = result {

@@ -10,6 +10,7 @@ use clap::{ArgAction, Args};
 use crate::cli_values::{index, trimmed};
 use crate::fmt::fmt_num;
 use crate::font::{draw_text, text_height, text_width};
+use crate::render_marks::{MapPlace, axis_pad, draw_axes, draw_boxes, read_objects};
 
 const NAN_RGB: [u8; 3] = [255, 0, 255];
 const INK: [u8; 3] = [0, 0, 0];
@@ -62,6 +63,14 @@ pub struct RenderArgs {
     /// Pixels per scan position, 1..=64 (default: about 400 pixels per panel side)
     #[arg(long, value_parser = clap::value_parser!(u8).range(1..=64))]
     pub scale: Option<u8>,
+    /// Draw the defect objects' boxes and ids on every panel: the objects of the last scan of
+    /// FILE, result lines (as `dmap listen --input` reads them) or a `dmap listen --json`
+    /// document
+    #[arg(long, value_name = "FILE")]
+    pub objects: Option<PathBuf>,
+    /// Scan pitch in µm (the same on both axes): millimetre axes along each panel
+    #[arg(long, value_name = "P", value_parser = crate::cli_values::positive_f64)]
+    pub pitch_um: Option<f64>,
 }
 
 /// One image to draw: `values[row * cols + col]`.
@@ -81,6 +90,8 @@ pub struct Style {
     pub vmax: Option<f64>,
     pub shared: bool,
     pub scale: Option<usize>,
+    /// Millimetre axes at this scan pitch (µm).
+    pub pitch_um: Option<f64>,
 }
 
 /// An RGB image, row-major, 3 bytes per pixel.
@@ -89,6 +100,8 @@ pub struct Image {
     pub width: usize,
     pub height: usize,
     pub rgb: Vec<u8>,
+    /// Where each panel's map is.
+    pub maps: Vec<MapPlace>,
 }
 
 impl Image {
@@ -230,17 +243,22 @@ pub fn render(panels: &[Panel], s: &Style) -> Result<Image> {
         .collect();
     let th = text_height(FONT);
     let legend_h = th + 8;
+    let pads: Vec<usize> = panels
+        .iter()
+        .map(|p| s.pitch_um.map_or(0, |pitch| axis_pad(p.rows, pitch)))
+        .collect();
     let widths: Vec<usize> = panels
         .iter()
         .zip(&labels)
-        .map(|(p, l)| {
+        .zip(&pads)
+        .map(|((p, l), pad)| {
             let label_w = l
                 .iter()
                 .map(|(_, t)| text_width(t, FONT))
                 .max()
                 .unwrap_or(0)
                 .max(text_width("NAN", FONT) + th + 4);
-            (p.cols * px + 10 + BAR_W + 6 + label_w).max(text_width(&p.title, FONT)) + MARGIN
+            (pad + p.cols * px + 10 + BAR_W + 6 + label_w).max(text_width(&p.title, FONT)) + MARGIN
         })
         .collect();
     let img_h = panels.iter().map(|p| p.rows * px).max().unwrap_or(0);
@@ -253,12 +271,31 @@ pub fn render(panels: &[Panel], s: &Style) -> Result<Image> {
         width,
         height,
         rgb: vec![255; width * height * 3],
+        maps: Vec::new(),
     };
-    let mut x0 = MARGIN;
-    for (((p, &(lo, hi)), ticks), w) in panels.iter().zip(&ranges).zip(&labels).zip(&widths) {
+    let mut left = MARGIN;
+    for ((((p, &(lo, hi)), ticks), w), pad) in panels
+        .iter()
+        .zip(&ranges)
+        .zip(&labels)
+        .zip(&widths)
+        .zip(&pads)
+    {
         let y_title = MARGIN;
-        draw_text(&mut im.rgb, width, x0, y_title, &p.title, FONT, INK);
+        draw_text(&mut im.rgb, width, left, y_title, &p.title, FONT, INK);
         let y0 = MARGIN + th + 8;
+        let x0 = left + pad;
+        let place = MapPlace {
+            x: x0,
+            y: y0,
+            px,
+            rows: p.rows,
+            cols: p.cols,
+        };
+        im.maps.push(place);
+        if let Some(pitch) = s.pitch_um {
+            draw_axes(&mut im.rgb, width, place, pitch);
+        }
         for r in 0..p.rows {
             for c in 0..p.cols {
                 im.fill(
@@ -293,7 +330,7 @@ pub fn render(panels: &[Panel], s: &Style) -> Result<Image> {
             im.fill(bx, ly, th, th, NAN_RGB);
             draw_text(&mut im.rgb, width, bx + th + 4, ly, "NAN", FONT, INK);
         }
-        x0 += w;
+        left += w;
     }
     Ok(im)
 }
@@ -521,8 +558,17 @@ pub fn run(a: &RenderArgs) -> Result<()> {
             vmax: a.vmax,
             shared: a.shared,
             scale: a.scale.map(usize::from),
+            pitch_um: a.pitch_um,
         },
     )?;
+    let mut im = im;
+    if let Some(path) = &a.objects {
+        let boxes = read_objects(path)?;
+        let origin = crop.map_or((0, 0), |(r0, c0, _, _)| (r0, c0));
+        for &m in &im.maps.clone() {
+            draw_boxes(&mut im.rgb, im.width, m, &boxes, origin);
+        }
+    }
     write_png_to(&target, &im)
 }
 
@@ -537,6 +583,7 @@ mod tests {
             vmax: None,
             shared: false,
             scale: Some(2),
+            pitch_um: None,
         }
     }
 

@@ -318,6 +318,7 @@ impl Supervised {
     fn spawn(
         cmd: &mut Command,
         dir: tempfile::TempDir,
+        live: &crate::twin_requests::LiveRequests,
     ) -> Result<(Supervised, ChildStdout, ChildStderr)> {
         use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
         let shared: Shared = Arc::new(Mutex::new(None));
@@ -338,12 +339,19 @@ impl Supervised {
         // signal in between finds the child to end.
         let mut slot = lock(&me.shared);
         let child = crate::child::dies_with_parent(cmd)
-            .stdin(Stdio::null())
+            .stdin(if live.is_live() {
+                Stdio::piped()
+            } else {
+                Stdio::null()
+            })
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
             .spawn()
             .context("starting python3 (the chip model needs python3 with unicorn and pyelftools: scripts/setup.sh)")?;
         let running = slot.insert(Running { child, _dir: dir });
+        if let Some(stdin) = running.child.stdin.take() {
+            live.forward(stdin);
+        }
         let pipes = (running.child.stdout.take(), running.child.stderr.take());
         drop(slot);
         let (Some(stdout), Some(stderr)) = pipes else {
@@ -438,7 +446,7 @@ pub fn run_model(
         cmd.arg("--debugger");
     }
     args.link.apply(&mut cmd);
-    let (model, mut stdout, stderr) = Supervised::spawn(&mut cmd, dir)?;
+    let (model, mut stdout, stderr) = Supervised::spawn(&mut cmd, dir, &args.link.live)?;
     let errors = pass_stderr(stderr);
     let mut buf = [0u8; 8192];
     loop {
@@ -512,6 +520,12 @@ fn check_files(args: &TwinArgs) -> Result<()> {
 }
 
 pub fn run(args: &TwinArgs) -> Result<()> {
+    run_to(args, &mut |bytes| crate::out::stdout(bytes))
+}
+
+/// [`run`] with the firmware's UART bytes handed to `out` as they come
+/// (`dmap console` decodes them) instead of standard output.
+pub fn run_to(args: &TwinArgs, out: &mut dyn FnMut(&[u8]) -> Result<()>) -> Result<()> {
     if !(args.beam_us.is_finite() && args.beam_us > 0.0) {
         bail!("--beam-us must be a positive number of microseconds");
     }
@@ -594,7 +608,7 @@ pub fn run(args: &TwinArgs) -> Result<()> {
     let mut uart = Vec::new();
     let ran = run_model(&root, &elf, &scan_path, dir, &for_model, &mut |bytes| {
         uart.extend_from_slice(bytes);
-        crate::out::stdout(bytes)
+        out(bytes)
     });
     // The bank as the run left it, even a failed run's (the model saves it
     // whatever stopped it).

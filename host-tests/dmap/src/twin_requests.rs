@@ -14,6 +14,43 @@ use clap::Args;
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 use std::process::Command;
+use std::sync::mpsc::Receiver;
+use std::sync::{Arc, Mutex};
+
+/// Bytes a live host sends while the model runs (`dmap console`): handed
+/// to the model's standard input as they come (its `--stdin-requests`),
+/// which puts them on USART3's line at the model time it reads them.
+#[derive(Clone, Debug, Default)]
+pub struct LiveRequests(pub Arc<Mutex<Option<Receiver<Vec<u8>>>>>);
+
+impl LiveRequests {
+    pub fn new(rx: Receiver<Vec<u8>>) -> Self {
+        LiveRequests(Arc::new(Mutex::new(Some(rx))))
+    }
+
+    pub fn is_live(&self) -> bool {
+        self.0.lock().map(|r| r.is_some()).unwrap_or(false)
+    }
+
+    /// Forwards every burst to `stdin` on a thread of its own until the
+    /// sender or the model is gone.
+    pub fn forward(&self, mut stdin: std::process::ChildStdin) {
+        let Some(rx) = self.0.lock().ok().and_then(|mut r| r.take()) else {
+            return;
+        };
+        std::thread::spawn(move || {
+            for bytes in rx {
+                if stdin
+                    .write_all(&bytes)
+                    .and_then(|()| stdin.flush())
+                    .is_err()
+                {
+                    return;
+                }
+            }
+        });
+    }
+}
 
 #[derive(Args, Clone, Debug, Default)]
 pub struct TwinRequestArgs {
@@ -46,6 +83,9 @@ pub struct TwinRequestArgs {
     /// than N operations fails, after its counters
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
     pub power_cut: Option<u32>,
+    /// A live host's bytes (`dmap console`), not an option of `dmap twin`.
+    #[arg(skip)]
+    pub live: LiveRequests,
 }
 
 impl TwinRequestArgs {
@@ -59,6 +99,9 @@ impl TwinRequestArgs {
         }
         if let Some(n) = self.power_cut {
             cmd.args(["--power-cut", &n.to_string()]);
+        }
+        if self.live.is_live() {
+            cmd.arg("--stdin-requests");
         }
     }
 
@@ -304,6 +347,7 @@ mod tests {
             flash: Some(dir.path().join("bank2.bin")),
             power_cut: Some(3),
             commands: Vec::new(),
+            live: Default::default(),
         };
         assert!(args.check(8).is_ok());
         assert!(args.check(7).is_err(), "beam 7 of a 7-beam scan");

@@ -10,7 +10,7 @@ import sys
 
 from .core import Stop
 from .flash import ECC_MODES, PSIZE_NAMES, Bank2, PowerCut
-from .usart_rx import parse_requests
+from .usart_rx import LiveHost, parse_requests
 from .detector import Detector, Scan, parse_fault
 from .machine import Machine, cycles_of_ms
 
@@ -31,6 +31,9 @@ def main(argv=None):
     ap.add_argument("--profile", action="store_true",
                     help="instructions per function from the first beam on (in the JSON)")
     ap.add_argument("--requests", help="what the host sends on USART3 and at which beams (usart_rx.py)")
+    ap.add_argument("--stdin-requests", action="store_true",
+                    help="also send on USART3 what arrives on standard input, as it arrives "
+                         "(a live host: dmap console)")
     ap.add_argument("--flash", help="bank 2's contents: loaded if the file exists, saved at the end")
     ap.add_argument("--power-cut", type=int, metavar="N", help="cut power at the N-th flash operation")
     ap.add_argument("--psize", choices=["x8", "x16", "x32", "x64", "any"], default="x64",
@@ -74,6 +77,7 @@ def main(argv=None):
     except Exception as e:  # noqa: BLE001
         print(f"h743twin: cannot load the scan {args.scan}: {type(e).__name__}: {e}", file=sys.stderr)
         return 4
+    live = LiveHost(sys.stdin.buffer) if args.stdin_requests else None
     status = "time"
     error = None
     sent = 0
@@ -83,6 +87,8 @@ def main(argv=None):
         # whoever reads sees lines as the firmware sends them, and an
         # interrupted run has shown what it got to.
         nonlocal sent
+        if live is not None:
+            live.deliver(m.usart.rx)
         n = len(m.uart)
         if n > sent and (final or n - sent >= 4096 or m.uart[n - 1][0] == 0x0A):
             sys.stdout.buffer.write(bytes(b for b, _ in m.uart[sent:n]))

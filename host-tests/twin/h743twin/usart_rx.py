@@ -163,6 +163,35 @@ class Receiver:
         return bool(self.usart.r[0x08] >> 6 & 1) and bool(self.fifo)
 
 
+class LiveHost:
+    """A host that sends as it likes (`--stdin-requests`, for `dmap
+    console`): what arrives on `stream` (standard input) is read by a
+    thread and put on the line, in the order it came, at the model time
+    when the run next looks (`deliver`), as a host typing at the port."""
+
+    def __init__(self, stream):
+        import os
+        import queue
+        import threading
+        self.queue = queue.Queue()
+        fd = stream.fileno()
+
+        def read():
+            while True:
+                try:
+                    data = os.read(fd, 4096)
+                except OSError:
+                    return
+                if not data:
+                    return
+                self.queue.put(data)
+        threading.Thread(target=read, daemon=True).start()
+
+    def deliver(self, rx):
+        while not self.queue.empty():
+            rx.send(self.queue.get_nowait())
+
+
 def parse_requests(path):
     """A file of what the host sends and when: one line per burst,
     `BEAM HEX [KIND@INDEX ...]`, BEAM the beam (from 0) at whose DRDY the

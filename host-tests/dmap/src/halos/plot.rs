@@ -96,6 +96,7 @@ pub fn draw(charts: &[Chart], x_range: (f64, f64), x_ticks: &[f64], x_label: &st
             width: w,
             height: h,
             rgb: vec![255; w * h * 3],
+            maps: Vec::new(),
         },
     };
     let sx = |x: f64| ((x - x_range.0) / (x_range.1 - x_range.0) * PLOT_W as f64).round() as i64;

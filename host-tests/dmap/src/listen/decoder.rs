@@ -48,6 +48,8 @@ pub struct Decoder {
     /// Row lines, defects and scores held, over all scans, and at most.
     pub(super) kept: usize,
     pub(super) max_kept: usize,
+    /// Scans taken out by [`Decoder::take_scans`].
+    taken: usize,
 }
 
 impl Default for Decoder {
@@ -76,6 +78,7 @@ impl Decoder {
             max_scans: max_scans.max(1),
             kept: 0,
             max_kept: MAX_KEPT,
+            taken: 0,
         }
     }
 
@@ -146,6 +149,29 @@ impl Decoder {
     /// The stream was ended by `signal` (before [`Decoder::finish`]).
     pub fn interrupted(&mut self, signal: &'static str) {
         self.interrupted = Some(signal);
+    }
+
+    /// The scan under way (its header arrived, its end line not yet).
+    pub fn current(&self) -> Option<&ScanResult> {
+        self.current.as_ref()
+    }
+
+    /// Lines fed so far (the number of the last one).
+    pub fn line_no(&self) -> usize {
+        self.line_no
+    }
+
+    /// Takes the scans filed so far out of the decoder and gives back what
+    /// they held of its budget, so that a decoder that runs for ever
+    /// (`dmap console`) holds one scan at a time.
+    pub fn take_scans(&mut self) -> Vec<ScanResult> {
+        let scans = std::mem::take(&mut self.scans);
+        self.taken += scans.len();
+        for s in &scans {
+            let held = s.rows.len() + s.defects.len() + s.n_scores + s.objects.len();
+            self.kept = self.kept.saturating_sub(held);
+        }
+        scans
     }
 
     /// Scans that have ended (an end line arrived).
@@ -284,7 +310,7 @@ impl Decoder {
             self.error(Kind::ScanCut, what);
             self.scans.push(s);
         }
-        if self.scans.is_empty() && self.scans_skipped == 0 {
+        if self.scans.is_empty() && self.taken == 0 && self.scans_skipped == 0 {
             let lines = self.line_no;
             self.error(
                 Kind::NoScan,

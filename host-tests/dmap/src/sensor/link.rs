@@ -239,7 +239,7 @@ impl<P: Read + Write> Link<P> {
 }
 
 /// The owned form of an `ok` reply (`None` for a refusal).
-fn answer(r: Reply<'_>) -> Option<Answer> {
+pub fn answer(r: Reply<'_>) -> Option<Answer> {
     Some(match r {
         Reply::Status(s) => Answer::Status(StatusInfo {
             firmware: s.firmware.to_string(),

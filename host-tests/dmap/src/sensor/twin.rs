@@ -9,7 +9,7 @@
 use super::link::printable;
 use super::show::source_text;
 use super::words::{Action, Ask, show_value};
-use anyhow::{Result, anyhow, bail};
+use anyhow::{Result, anyhow};
 use clap::Parser;
 use cvm_core::command::{Reply, parse_reply};
 use std::collections::BTreeMap;
@@ -58,43 +58,54 @@ pub fn plan(commands: &[String], beams: u64) -> Result<Vec<Planned>> {
         if request.trim().is_empty() {
             return Err(bad(format!("no request after `{beam}:` ({ACTIONS})")));
         }
-        let words = Words::try_parse_from(request.split_whitespace()).map_err(|e| {
-            use clap::error::ErrorKind;
-            match e.kind() {
-                // Help is no answer to a request: say what a request is.
-                ErrorKind::DisplayHelp
-                | ErrorKind::DisplayVersion
-                | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand => {
-                    bad(format!("`{}` is not a request ({ACTIONS})", request.trim()))
-                }
-                // The message up to the usage, on one line: it names what
-                // is missing or wrong ("... not provided: <KEY=VALUE>...").
-                _ => {
-                    let text = e.to_string();
-                    let said: Vec<&str> = text
-                        .lines()
-                        .take_while(|l| !l.trim().is_empty() && !l.starts_with("Usage"))
-                        .map(str::trim)
-                        .collect();
-                    bad(said.join(" ").trim_start_matches("error: ").to_string())
-                }
-            }
-        })?;
-        if let Action::Calibrate {
-            scan_timeout: Some(_),
-            ..
-        } = words.action
-        {
-            bail!(
-                "--command {spec}: --scan-timeout is for dmap sensor (the model runs to the scan's end)"
-            );
-        }
-        for ask in words.action.asks().map_err(|f| bad(f.message))? {
+        for ask in asks_of(request).map_err(bad)? {
             out.push(Planned { beam, id, ask });
             id += 1;
         }
     }
     Ok(out)
+}
+
+/// The requests that `request`, in the words of `dmap sensor`'s actions
+/// (`set thr=100`, `calibrate --scans 2`), stands for, each checked as
+/// `dmap sensor` checks it; the error is one line (`dmap twin --command`,
+/// `dmap console`).
+pub fn asks_of(request: &str) -> Result<Vec<Ask>, String> {
+    if request.trim().is_empty() {
+        return Err(format!("no request ({ACTIONS})"));
+    }
+    let words = Words::try_parse_from(request.split_whitespace()).map_err(|e| {
+        use clap::error::ErrorKind;
+        match e.kind() {
+            // Help is no answer to a request: say what a request is.
+            ErrorKind::DisplayHelp
+            | ErrorKind::DisplayVersion
+            | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand => {
+                format!("`{}` is not a request ({ACTIONS})", request.trim())
+            }
+            // The message up to the usage, on one line: it names what
+            // is missing or wrong ("... not provided: <KEY=VALUE>...").
+            _ => {
+                let text = e.to_string();
+                let said: Vec<&str> = text
+                    .lines()
+                    .take_while(|l| !l.trim().is_empty() && !l.starts_with("Usage"))
+                    .map(str::trim)
+                    .collect();
+                said.join(" ").trim_start_matches("error: ").to_string()
+            }
+        }
+    })?;
+    if let Action::Calibrate {
+        scan_timeout: Some(_),
+        ..
+    } = words.action
+    {
+        return Err(
+            "--scan-timeout is for dmap sensor (the model runs to the scan's end)".to_string(),
+        );
+    }
+    words.action.asks().map_err(|f| f.message)
 }
 
 /// The bytes to send at each beam: the requests of a beam back to back,
