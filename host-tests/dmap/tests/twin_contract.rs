@@ -114,7 +114,7 @@ fn a_commanded_reset_lets_the_result_line_on_the_wire_finish() {
         let text = String::from_utf8_lossy(l);
         if l.starts_with(b"A,") {
             assert_eq!(
-                parse_reply(l).map(|(id, r)| (id, r)),
+                parse_reply(l),
                 Ok((Some(1), Reply::Resetting)),
                 "{text}"
             );
