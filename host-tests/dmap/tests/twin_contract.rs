@@ -113,11 +113,7 @@ fn a_commanded_reset_lets_the_result_line_on_the_wire_finish() {
     for l in out.split_inclusive(|&b| b == b'\n') {
         let text = String::from_utf8_lossy(l);
         if l.starts_with(b"A,") {
-            assert_eq!(
-                parse_reply(l),
-                Ok((Some(1), Reply::Resetting)),
-                "{text}"
-            );
+            assert_eq!(parse_reply(l), Ok((Some(1), Reply::Resetting)), "{text}");
             continue;
         }
         headers += usize::from(l.starts_with(b"H,"));
