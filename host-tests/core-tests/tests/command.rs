@@ -773,3 +773,27 @@ proptest! {
         let _ = parse_reply(&framed(&body.replacen('C', "A", 1)));
     }
 }
+
+/// The refusals docs/commands.md gives for the edges of a request line:
+/// an empty command, a `*` inside a field, a readable id on a malformed
+/// line, `\r\r\n`, and zero-padded numbers.
+#[test]
+fn edge_requests_are_refused_as_the_spec_says() {
+    for (body, want) in [
+        ("C,1,", Err((Some(1), Refusal::UnknownCommand))),
+        ("C,1,get,th*r", Err((Some(1), Refusal::UnknownKey))),
+        ("C,7,status,now", Err((Some(7), Refusal::Malformed))),
+        ("C,x,status", Err((None, Refusal::Malformed))),
+        (
+            "C,0000000000007,set,thr=000000000000000042",
+            Ok((7, Request::Set(Key::Threshold, 42))),
+        ),
+    ] {
+        assert_eq!(parse_request(&framed(body), &CAP), want, "{body}");
+    }
+    // `\r\r\n`: the line `\r`, after its CRC trailer, is no request.
+    let mut l = framed("C,1,status");
+    l.pop();
+    l.extend_from_slice(b"\r\r\n");
+    assert_eq!(parse_request(&l, &CAP), Err((None, Refusal::Malformed)));
+}
