@@ -25,7 +25,7 @@ use embassy_time::{Duration, Timer, with_timeout};
 
 use super::command_rx::{self, RX_READY, Rx};
 use super::settings_store;
-use super::shared::{KICK, ROOM};
+use super::shared::{KICK, RESTARTING, ROOM, SENDING};
 use crate::sink::{QueueSink, SharedQueue};
 
 /// Bytes of the reply queue: a `status` reply (16 lines, about 600
@@ -42,13 +42,6 @@ pub static REPLIES: SharedQueue<REPLY_BYTES> =
 /// Command side -> scoring task: the control has settings or a
 /// calibration for the scan driver.
 pub static CHANGED: AtomicBool = AtomicBool::new(true);
-
-/// Command task -> UART task: a restart is coming; send replies only, so
-/// that no result line is cut by it.
-pub static RESTARTING: AtomicBool = AtomicBool::new(false);
-
-/// UART task -> command task: a line is being written.
-pub static SENDING: AtomicBool = AtomicBool::new(false);
 
 /// Command task -> store task: a `save` (its id and the values).
 static SAVE: Signal<ThreadModeRawMutex, (u32, [u32; KEYS])> = Signal::new();
@@ -144,6 +137,7 @@ pub async fn store_task(control: &'static RefCell<Control>) {
 /// take 3.04 ms, with room to spare).
 async fn restart() -> ! {
     RESTARTING.store(true, Ordering::Release);
+    super::failsafe::drive();
     while !REPLIES.lock(|q| q.borrow().is_empty()) || SENDING.load(Ordering::Acquire) {
         KICK.signal(());
         Timer::after(Duration::from_micros(500)).await;

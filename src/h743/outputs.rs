@@ -6,6 +6,7 @@
 //! timed by TIM14 in one-pulse mode, its interrupt releasing the pin: the
 //! scoring task only starts them and never waits for one.
 
+use super::shared::RESTARTING;
 use core::cell::Cell;
 use core::sync::atomic::{AtomicU32, Ordering};
 
@@ -60,7 +61,14 @@ static PULSES: Mutex<CriticalSectionRawMutex, Cell<Pulses>> =
 /// (`failsafe`).
 static PULSE_US: AtomicU32 = AtomicU32::new(OUTPUTS.pulse_us);
 
+/// A commanded restart is coming ([`RESTARTING`]): the pins hold the
+/// safe state the restart will leave them in.
+fn held() -> bool {
+    RESTARTING.load(Ordering::Acquire)
+}
+
 fn write_ready(asserted: bool) {
+    let asserted = asserted && !held();
     let high = level(asserted, READY_ACTIVE_HIGH);
     pac::GPIOE.bsrr().write(|w| {
         w.set_bs(READY_PIN, high);
@@ -73,6 +81,7 @@ fn write_ready(asserted: bool) {
 }
 
 fn write_reject(asserted: bool) {
+    let asserted = asserted || held();
     let high = level(asserted, REJECT_ACTIVE_HIGH);
     pac::GPIOE.bsrr().write(|w| {
         w.set_bs(REJECT_PIN, high);

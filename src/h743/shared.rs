@@ -2,6 +2,7 @@
 //! frame buffers, the output queue and the signals between them.
 
 use core::cell::RefCell;
+use core::sync::atomic::AtomicBool;
 
 use cvm_fw_app::acquire::Acquisition;
 use cvm_fw_app::queue::LineQueue;
@@ -37,3 +38,12 @@ pub static BEAMS: Signal<CriticalSectionRawMutex, ()> = Signal::new();
 pub static KICK: Signal<ThreadModeRawMutex, ()> = Signal::new();
 /// UART -> scoring: room was made.
 pub static ROOM: Signal<ThreadModeRawMutex, ()> = Signal::new();
+
+/// Command task -> UART task and outputs: a commanded restart is coming.
+/// The UART sends replies only, so that no result line is cut, and the
+/// outputs hold "not ready" and "reject": the scan under way will not be
+/// reported, so nothing may say it passed.
+pub static RESTARTING: AtomicBool = AtomicBool::new(false);
+
+/// UART task -> command task: a line is being written.
+pub static SENDING: AtomicBool = AtomicBool::new(false);

@@ -17,10 +17,10 @@ use embassy_stm32::usart::UartTx;
 use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_time::{Duration, Instant, with_timeout};
 
-use super::commands::{CHANGED, REPLIES, RESTARTING, SENDING};
+use super::commands::{CHANGED, REPLIES};
 use super::memory::Noload;
 use super::outputs::PlcOutputs;
-use super::shared::{ACQ, BEAMS, CELLS, FRAMES, KICK, QUEUE, ROOM};
+use super::shared::{ACQ, BEAMS, CELLS, FRAMES, KICK, QUEUE, RESTARTING, ROOM, SENDING};
 use crate::config::h743::{FEED_MS, IDLE_END_MS, MAX_COLS, SCORE_BURST};
 use crate::frames::Samples;
 use crate::sink::QueueSink;

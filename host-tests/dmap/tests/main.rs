@@ -1,7 +1,8 @@
 //! dmap's integration tests, one binary: each file of this folder is a
 //! module, so the suite links once and its tests share the cores (one
 //! binary per file linked dmap and its dependencies 38 times, and ran the
-//! files one after another).
+//! files one after another). `score_memory.rs` is a binary of its own:
+//! it measures the peak memory of every child the process waited for.
 
 mod common;
 
@@ -34,7 +35,6 @@ mod objects_cli;
 mod outputs_cli;
 mod render_objects;
 mod score_cli;
-mod score_memory;
 mod sensor_cli;
 mod sensor_twin;
 mod sim_render_eval_cli;

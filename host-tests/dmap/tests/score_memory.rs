@@ -3,7 +3,7 @@
 //! `uint8` samples) stays a fraction of a byte per sample. Alone in its
 //! test binary, so that the peak of the children waited for is theirs.
 
-use crate::common;
+mod common;
 
 use std::io::Write;
 use std::path::Path;
