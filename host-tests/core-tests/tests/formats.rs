@@ -326,3 +326,60 @@ fn table_square_root() {
         );
     }
 }
+
+/// docs/protocol.md states `q`'s formula for a decoder that has no
+/// scorer: the largest `q` in -120..=62 with `D 2^q <= 2^31 - 1`, `D =
+/// J1 J2 W` for normalised maps and `J1 J2 W (J1 J2 65535)^2` for raw
+/// ones, `W` 1 with uniform weights, `n1 n2` with unit weights (`n` an
+/// axis's kernel sizes: `J`, or `b` when `0 < b <= J`) and `b + 1` with
+/// square kernels. Every configuration a scorer accepts has that `q`.
+#[test]
+fn the_score_format_is_the_documented_formula() {
+    let mut checked = 0;
+    for (j1, j2) in [
+        (1u8, 1u8),
+        (3, 3),
+        (5, 7),
+        (9, 9),
+        (15, 15),
+        (16, 16),
+        (16, 3),
+    ] {
+        let g = Geometry::new(j1, j2).unwrap();
+        let mut kernels: Vec<Kernels> = (0..=17).map(|bmax| Kernels::Paper { bmax }).collect();
+        kernels.extend((0..=15).map(|kmax| Kernels::Square { kmax }));
+        for k in kernels {
+            for w in [Weights::Uniform, Weights::Unit] {
+                for normalise in [true, false] {
+                    let cfg = Config {
+                        geometry: g,
+                        kernels: k,
+                        weights: w,
+                        normalise,
+                        full_scale: u16::MAX,
+                    };
+                    let Ok(s) = Scorer::new(&cfg) else { continue };
+                    let n = |j: u8, b: u8| if b == 0 || b > j { j } else { b } as f64;
+                    let weight = match (k, w) {
+                        (Kernels::Square { kmax }, _) => kmax as f64 + 1.0,
+                        (_, Weights::Uniform) => 1.0,
+                        (Kernels::Paper { bmax }, _) => n(j1, bmax) * n(j2, bmax),
+                    };
+                    let cells = j1 as f64 * j2 as f64;
+                    let d = if normalise {
+                        cells * weight
+                    } else {
+                        cells * weight * (cells * 65535.0).powi(2)
+                    };
+                    let q = (-120..=62)
+                        .rev()
+                        .find(|&q| d * 2f64.powi(q) <= (2f64.powi(31) - 1.0))
+                        .unwrap_or(-120);
+                    assert_eq!(s.formats().score, q, "{cfg:?}");
+                    checked += 1;
+                }
+            }
+        }
+    }
+    assert!(checked > 300, "{checked}");
+}
