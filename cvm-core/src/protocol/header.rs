@@ -149,6 +149,10 @@ pub fn encode_header(h: &HeaderInfo, sink: &mut impl LineSink) {
     sink.line(l.finish(), Priority::Keep);
 }
 
+/// `sthr`'s place among the settings keys (`command::Key::ALL`; checked
+/// by core-tests `protocol_versions`).
+pub const SPREAD_KEY: usize = 4;
+
 pub(super) fn parse_header<'s>(
     f: &mut Fields<'s, impl Iterator<Item = &'s [u8]>>,
 ) -> Result<HeaderInfo<'s>, ParseError> {
@@ -189,11 +193,19 @@ pub(super) fn parse_header<'s>(
         let rows = f.key_u32("rows")?;
         let src = f.key("src")?;
         let mut sources = [Source::Default; KEYS];
-        if src.len() != KEYS {
+        // Version 6 had 15 settings: `sthr`, the fifth key, came with 7
+        // (its source then reads `d`, as its channel is off).
+        let slots = if version == 6 { KEYS - 1 } else { KEYS };
+        if src.len() != slots {
             return Err(e);
         }
-        for (slot, &c) in sources.iter_mut().zip(src) {
-            *slot = Source::from_char(c).ok_or(e)?;
+        let mut at = 0;
+        for &c in src {
+            if slots < KEYS && at == SPREAD_KEY {
+                at += 1;
+            }
+            *sources.get_mut(at).ok_or(e)? = Source::from_char(c).ok_or(e)?;
+            at += 1;
         }
         let store = Store::parse(f.key("store")?).ok_or(e)?;
         Some(Origin {

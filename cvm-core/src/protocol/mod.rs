@@ -32,7 +32,7 @@ pub use decode::parse;
 pub use end::{DROPPED, END_FIELDS, EndInfo, TotalsField, VERDICT, encode_end};
 pub use fields::ParseError;
 pub use frame::{LineBuf, LineSink, MAX_LINE, MAX_ROW_LINE, Priority, crc16};
-pub use header::{HeaderInfo, MAX_FW, Origin, VERSION, encode_header};
+pub use header::{HeaderInfo, MAX_FW, Origin, SPREAD_KEY, VERSION, encode_header};
 pub use line::Line;
 pub use object::encode_object;
 pub use ranges::{Q_MAX, Q_MIN};

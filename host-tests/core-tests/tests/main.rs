@@ -19,6 +19,7 @@ mod power;
 mod protocol;
 mod protocol_layout;
 mod protocol_ranges;
+mod protocol_versions;
 mod readme;
 mod record;
 mod spread;

@@ -115,6 +115,12 @@ fn header_fields_out_of_range_are_refused() {
         ("norm", "0"),
         ("sthr", "0"),
         ("sthr", "92680"),
+        // Above a channel's largest magnitude: off, as 4294967295 is
+        // (docs/protocol.md, "Field ranges"), and no damage.
+        ("sthr", "92681"),
+        ("sthr", "4294967294"),
+        ("pthr", "46341"),
+        ("pthr", "4294967294"),
     ] {
         assert!(
             matches!(

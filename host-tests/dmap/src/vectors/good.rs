@@ -7,7 +7,7 @@ use super::edit::Lines;
 use super::scenes::{Map, Scene, stream, stream_with, two_defects};
 use anyhow::Result;
 use cvm_core::command::{Key, Refusal, Reply, encode_reply};
-use cvm_core::protocol::{HeaderInfo, ResetCause, encode_header};
+use cvm_core::protocol::ResetCause;
 use cvm_core::settings::Source;
 
 /// Positions without data (a gap of three beams, a whole lost row's
@@ -284,8 +284,13 @@ pub fn all() -> Result<Vec<Vector>> {
     ));
     out.push(v(
         "version-6",
-        "A version 6 header (no sthr) before version 7 lines: a problem of the scan (version 7 changed the D, S and O lines)",
+        "A version 6 header (no sthr, 15 src letters) before version 7 lines: the header parses, the version is a problem of the scan (version 7 changed the D, S and O lines)",
         version_6(&default),
+    ));
+    out.push(v(
+        "version-5",
+        "A version 5 header (no sthr; it ends at boots) before version 7 lines: the header parses, the version is a problem of the scan",
+        old_header(&default, 5),
     ));
     Ok(out)
 }
@@ -312,14 +317,29 @@ fn with_replies(stream: &[u8]) -> Vec<u8> {
 
 /// `stream` with its header written as version 6 wrote it.
 fn version_6(stream: &[u8]) -> Vec<u8> {
+    old_header(stream, 6)
+}
+
+/// `stream` with its header written as a board of `version` (5 or 6)
+/// wrote it: no `sthr`; version 6 with 15 `src` letters (no `sthr`'s),
+/// version 5 ending at `boots`.
+fn old_header(stream: &[u8], version: u32) -> Vec<u8> {
     let mut lines = Lines::of(stream);
-    let first = lines.0[0].clone();
-    let Ok(cvm_core::protocol::Line::Header(h)) = cvm_core::protocol::parse(&first) else {
-        return stream.to_vec();
-    };
-    let old = HeaderInfo { version: 6, ..h };
-    let mut sink = crate::stream::VecSink::default();
-    encode_header(&old, &mut sink);
-    lines.0[0] = sink.0;
+    let body = lines.body(0);
+    let fields: Vec<String> = body
+        .split(',')
+        .filter(|f| !f.starts_with("sthr="))
+        .filter(|f| version >= 6 || !["rows=", "src=", "store="].iter().any(|k| f.starts_with(k)))
+        .map(|f| match f.split_once('=') {
+            Some(("v", _)) => format!("v={version}"),
+            Some(("src", letters)) => {
+                let mut l = letters.to_string();
+                l.remove(cvm_core::protocol::SPREAD_KEY);
+                format!("src={l}")
+            }
+            _ => f.to_string(),
+        })
+        .collect();
+    lines.seal(0, &fields.join(","));
     lines.bytes()
 }
