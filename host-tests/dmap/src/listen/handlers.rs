@@ -4,7 +4,7 @@
 
 use super::checks::{check_complete, header_fault, object_fault};
 use super::decoder::{Decoder, MAX_DEFECTS, OLDEST_VERSION};
-use super::linechecks::{defect_fault, end_fault, row_fault, scores_fault};
+use super::linechecks::{decide, defect_fault, end_fault, row_fault, scores_fault};
 use super::scan::{Defect, Kind, LineError, MAX_IMAGE_POSITIONS, Order, ScanResult};
 use cvm_core::RowSummary;
 use cvm_core::objects::Object;
@@ -368,6 +368,19 @@ impl Decoder {
         }
         if let Some(bad) = object_fault(&o, s.cols) {
             what.push((Kind::Field, format!("object {id}: {bad}")));
+        }
+        // The line against itself: its peak is the strength its own
+        // magnitudes make under the header's thresholds, and the channels
+        // that fired there are among its channels.
+        let (bits, strength) = decide(o.peak_mag, o.peak_power, o.peak_spread, s.thresholds());
+        if strength != o.peak || bits & !o.channels != 0 {
+            what.push((
+                Kind::Field,
+                format!(
+                    "object {id}: peak {} and channels {}, but its peak_mag, peak_power and peak_spread make strength {strength} of channels {bits}",
+                    o.peak, o.channels
+                ),
+            ));
         }
         for (kind, w) in what {
             self.problem(kind, w);

@@ -402,6 +402,17 @@ fn ranges(g: &Lines) -> Vec<Vector> {
         }));
     }
     out.push(one_field(
+        "field-object-peak-mag",
+        "An object line whose peak_mag, doubled, no longer makes its own peak under the header's thresholds",
+        g,
+        "O.peak_mag",
+        |l, f| {
+            let i = l.nth(b'O', 0);
+            let v = l.num_of(i, f) * 2;
+            l.set_field(i, f, &v.to_string());
+        },
+    ));
+    out.push(one_field(
         "field-object-box",
         "An object line whose peak row lies outside its box",
         g,
