@@ -84,20 +84,22 @@ fn header_origin_is_written_as_specified_and_version_5_still_reads() {
         protocol::parse(&framed(&v6_short)).is_err(),
         "version 6 needs its origin"
     );
+    // Version 6 had 15 settings (no `sthr`): 15 `src` letters.
     let d = "d".repeat(KEYS);
-    let short = "d".repeat(KEYS - 1);
+    let v6_letters = "d".repeat(KEYS - 1);
+    let short = "d".repeat(KEYS - 2);
     for bad in [
         format!(",rows=1,src={short},store=none"),
         format!(",rows=1,src={short}x,store=none"),
-        format!(",rows=1,src={d}d,store=none"),
-        format!(",rows=1,src={d},store=maybe"),
-        format!(",rows=1,src={d}"),
-        format!(",rows=x,src={d},store=none"),
+        format!(",rows=1,src={d},store=none"),
+        format!(",rows=1,src={v6_letters},store=maybe"),
+        format!(",rows=1,src={v6_letters}"),
+        format!(",rows=x,src={v6_letters},store=none"),
     ] {
         let l = format!("{v6_short}{bad}");
         assert!(protocol::parse(&framed(&l)).is_err(), "{l}");
     }
-    let good = format!("{v6_short},rows=1,src={d},store=none");
+    let good = format!("{v6_short},rows=1,src={v6_letters},store=none");
     let good_line = framed(&good);
     let Ok(Line::Header(h)) = protocol::parse(&good_line) else {
         panic!("version 6 header refused: {good}")
@@ -105,7 +107,9 @@ fn header_origin_is_written_as_specified_and_version_5_still_reads() {
     // Before version 7 there is no spread channel: it reads as off.
     assert_eq!(h.spread_threshold, cvm_core::spread::SPREAD_OFF);
     // From version 7 on `sthr` follows `pthr`, and must.
-    let v7 = good.replace("v=6", "v=7");
+    let v7 = good
+        .replace("v=6", "v=7")
+        .replace(&format!("src={v6_letters},"), &format!("src={d},"));
     assert!(protocol::parse(&framed(&v7)).is_err(), "{v7}");
     let v7 = v7.replace(",pthr=3277,", ",pthr=3277,sthr=665,");
     let v7_line = framed(&v7);

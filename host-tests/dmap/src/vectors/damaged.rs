@@ -10,7 +10,12 @@ use super::good::scores_scene;
 use super::scenes::{Scene, stream};
 use anyhow::Result;
 use cvm_core::flags;
-use cvm_core::protocol::{SCORE_CHARS, encode_score};
+use cvm_core::protocol::{SCORE_CHARS, encode_score, layout};
+
+/// Where a field stands in its line, by the protocol's layout.
+fn place(kind: u8, name: &str) -> usize {
+    layout::place(kind, name).unwrap_or_else(|| panic!("no field {name}"))
+}
 
 /// One damaged vector: `base` changed by `edit`.
 fn damaged(name: &str, about: &str, base: &Lines, edit: impl FnOnce(&mut Lines)) -> Vector {
@@ -139,7 +144,7 @@ fn framing(g: &Lines, default: &[u8]) -> Vec<Vector> {
         g,
         |l| {
             let mut f: Vec<String> = l.body(0).split(',').map(String::from).collect();
-            f.swap(3, 4);
+            f.swap(place(b'H', "j"), place(b'H', "cols"));
             l.seal(0, &f.join(","));
         },
     ));
@@ -151,7 +156,7 @@ fn framing(g: &Lines, default: &[u8]) -> Vec<Vector> {
             let i = l.nth(b'R', 1);
             let mut f: Vec<String> = l.body(i).split(',').map(String::from).collect();
             while f.join(",").len() + 6 < 257 {
-                f[2].insert(0, '0');
+                f[place(b'R', "max")].insert(0, '0');
             }
             l.seal(i, &f.join(","));
         },
@@ -164,7 +169,7 @@ fn framing(g: &Lines, default: &[u8]) -> Vec<Vector> {
             let i = l.nth(b'R', 1);
             let mut f: Vec<String> = l.body(i).split(',').map(String::from).collect();
             while f.join(",").len() + 6 < 256 {
-                f[2].insert(0, '0');
+                f[place(b'R', "max")].insert(0, '0');
             }
             l.seal(i, &f.join(","));
         },
