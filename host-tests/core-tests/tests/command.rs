@@ -386,6 +386,20 @@ fn every_refusal_of_a_request() {
         parse_request(&pad(256), &CAP),
         Err((None, Refusal::TooLong))
     );
+    // A `\r` before the `\n` counts in the 255 bytes (docs/commands.md).
+    let with_cr = |mut l: Vec<u8>| {
+        l.pop();
+        l.extend_from_slice(b"\r\n");
+        l
+    };
+    assert_eq!(
+        parse_request(&with_cr(pad(254)), &CAP),
+        Err((Some(5), Refusal::UnknownKey))
+    );
+    assert_eq!(
+        parse_request(&with_cr(pad(255)), &CAP),
+        Err((None, Refusal::TooLong))
+    );
     // `\r\n` is accepted like `\n`.
     let mut crlf = good[..good.len() - 1].to_vec();
     crlf.extend_from_slice(b"\r\n");
