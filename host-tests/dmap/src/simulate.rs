@@ -475,9 +475,6 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
         data: scan.truth.clone(),
     };
     crate::npy::write_mask(&truth_path, &mask)?;
-    let b = scan.budget;
-    let beams = (scan.rows * scan.cols) as f64;
-    let pct = |v: f64| 100.0 * v / beams;
     let _ = writeln!(
         std::io::stderr(),
         "dmap simulate: {}x{} positions x {}x{} cells in {secs:.1} s -> {} and {} ({} defect positions)",
@@ -489,8 +486,18 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
         truth_path.display(),
         scan.truth.iter().filter(|&&t| t).count()
     );
-    let _ = writeln!(
-        std::io::stderr(),
+    let _ = writeln!(std::io::stderr(), "{}", budget_summary(&scan, &cfg));
+    Ok(())
+}
+
+/// Where the beams' power went and how many samples clipped, one line
+/// (what `dmap simulate` prints after the scan, and the Python package
+/// returns).
+pub fn budget_summary(scan: &cvm_sim::Scan, cfg: &Config) -> String {
+    let b = scan.budget;
+    let beams = (scan.rows * scan.cols) as f64;
+    let pct = |v: f64| 100.0 * v / beams;
+    format!(
         "beam power: detected {:.2} %, outside receiver aperture {:.2} %, beside detector {:.2} %, backward {:.2} %, part rim {:.2} %, below cut-off {:.2e} %; {} samples clipped at full scale {}",
         pct(b.detected),
         pct(b.aperture),
@@ -500,6 +507,5 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
         pct(b.truncated),
         scan.saturated,
         cfg.noise.full_scale()
-    );
-    Ok(())
+    )
 }

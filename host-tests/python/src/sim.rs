@@ -31,20 +31,7 @@ pub fn simulate<'py>(py: Python<'py>, argv: Vec<String>) -> PyResult<Simulated<'
     let scan = py
         .detach(|| dmap::simulate::simulate_with(&cfg, a.threads, &|| {}))
         .map_err(value_error)?;
-    let b = scan.budget;
-    let beams = (scan.rows * scan.cols) as f64;
-    let pct = |v: f64| 100.0 * v / beams;
-    let summary = format!(
-        "beam power: detected {:.2} %, outside receiver aperture {:.2} %, beside detector {:.2} %, backward {:.2} %, part rim {:.2} %, below cut-off {:.2e} %; {} samples clipped at full scale {}",
-        pct(b.detected),
-        pct(b.aperture),
-        pct(b.off_detector),
-        pct(b.backward),
-        pct(b.edge),
-        pct(b.truncated),
-        scan.saturated,
-        cfg.noise.full_scale()
-    );
+    let summary = dmap::simulate::budget_summary(&scan, &cfg);
     let (rows, cols, j1, j2) = (scan.rows, scan.cols, scan.j1, scan.j2);
     let data = PyArray1::from_vec(py, scan.data).reshape([rows, cols, j1, j2])?;
     let truth = PyArray1::from_vec(py, scan.truth).reshape([rows, cols])?;
