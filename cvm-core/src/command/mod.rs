@@ -24,8 +24,9 @@ mod status;
 mod wire;
 
 pub use crate::calibration::Calibration;
+pub use crate::settings::{Capacity, KEYS, Key, Kind, SETTINGS, Spec};
 pub use crate::settings::{Source, Store};
-pub use key::{Capacity, Key, Kind, conflict};
+pub use key::conflict;
 pub use reader::{Event, IDLE_GAP_MS, LineReader, LinkError};
 pub use refusal::Refusal;
 pub use reply::{Reply, encode_reply, parse_reply};

@@ -2,13 +2,13 @@
 //! `A,<id>,err,<reason>[,<min>,<max>]*XXXX\n`, the id `-` when the
 //! request's own could not be trusted.
 
-use super::key::Key;
 use super::refusal::Refusal;
 use super::status::Status;
 use super::wire::{FrameError, REPLY, checked_body, kv, parse_u32, split_once};
 use crate::calibration::Calibration;
 use crate::calibration::rule::DEFAULT_RATE_PPM;
 use crate::protocol::{LineBuf, LineSink, ParseError, Priority};
+use crate::settings::Key;
 use crate::settings::Source;
 
 /// A reply, decoded.

@@ -1,6 +1,5 @@
 //! Request lines, host to board: `C,<id>,<command>[,<argument>]*XXXX\n`.
 
-use super::key::{Capacity, Key};
 use super::refusal::Refusal;
 use super::wire::{
     FrameError, MAX_CALIBRATION_RATE_PPM, MAX_CALIBRATION_SCANS, MAX_LINE, REQUEST, checked_body,
@@ -8,6 +7,7 @@ use super::wire::{
 };
 use crate::calibration::rule::DEFAULT_RATE_PPM;
 use crate::protocol::{LineBuf, LineSink, Priority};
+use crate::settings::{Capacity, Key};
 
 /// A request, decoded.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -114,6 +114,11 @@ pub fn board_file(path: &Path, scan: &Scan, run: &RunSettings) -> Result<Vec<u8>
         bail!("scan has {} rows", scan.rows);
     }
     let settings = &run.settings;
+    if settings.outputs != cvm_core::settings::Outputs::DEFAULT {
+        bail!(
+            "the board's scan file carries thr, pthr, sthr, scores and dcap; the verdict's and the outputs' settings (area, peak, miss, misp, mode, pulse, delay) are not in it"
+        );
+    }
     let version = settings.firmware_version.as_bytes();
     let mut v = [0u8; cvm_core::protocol::MAX_FW];
     if version.len() > v.len() {

@@ -84,6 +84,11 @@ pub struct OutputArgs {
     #[arg(long, value_name = "N", default_value_t = u16::MAX,
           value_parser = clap::value_parser!(u16).range(1..))]
     pub full_scale: u16,
+    /// A runtime setting by its name, in its unit, as the board's command channel takes it
+    /// (`dmap sensor set`) and its header shows it: `--set thr=4194304`, `--set mode=row`
+    /// (repeatable, applied after the options above; the keys: `dmap sensor --help`)
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub set: Vec<String>,
 }
 
 impl Default for OutputArgs {
@@ -96,6 +101,7 @@ impl Default for OutputArgs {
             max_defect_lines: 0,
             calibration: None,
             full_scale: u16::MAX,
+            set: Vec::new(),
         }
     }
 }

@@ -104,13 +104,26 @@ pub fn resolve_with(
         Some(c) => c.spread_threshold,
         None => spread_threshold_units(output.spread_threshold)?,
     };
-    let settings = pipeline_settings(
+    let mut settings = pipeline_settings(
         &scorer,
         output,
         (rows, cols),
         threshold_units,
         (power_threshold_units, spread_threshold_units),
     );
+    apply_set(&mut settings, &output.set)?;
+    // The units the emulated board's scan file carries, from the integers
+    // (every scale is a power of two, so the board converts them back exactly).
+    let (threshold_units, power_threshold_units, spread_threshold_units) = if output.set.is_empty()
+    {
+        (
+            threshold_units,
+            power_threshold_units,
+            spread_threshold_units,
+        )
+    } else {
+        units_of(&scorer, &settings)?
+    };
     let mut warnings = scoring.warnings(j1, j2)?;
     warnings.extend(threshold_warnings(&scorer, threshold_units));
     warnings.extend(flat_scan_warnings(rows, cols));
@@ -123,6 +136,90 @@ pub fn resolve_with(
         spread_threshold_units,
         warnings,
     })
+}
+
+/// What `--set` may give on the host: any value the wire allows, but the
+/// scan's own shape.
+const HOST_CAPACITY: cvm_core::command::Capacity = cvm_core::command::Capacity {
+    max_cols: u16::MAX,
+    max_rows: u16::MAX,
+    max_dcap: u16::MAX,
+    max_pulse_us: u32::MAX,
+};
+
+/// Applies `--set KEY=VALUE` in order, each checked as the board checks a
+/// `set` request (the same names, units, words and ranges:
+/// [`cvm_core::command::SETTINGS`]).
+fn apply_set(settings: &mut Settings, pairs: &[String]) -> Result<()> {
+    use cvm_core::command::{Key, conflict};
+    for pair in pairs {
+        let Some((name, value)) = pair.split_once('=') else {
+            bail!("--set {pair}: expected KEY=VALUE (the keys: dmap sensor --help)");
+        };
+        let Some(key) = Key::from_name(name.as_bytes()) else {
+            let names: Vec<_> = Key::ALL.iter().map(|k| k.name()).collect();
+            bail!(
+                "--set {pair}: no setting {name:?} (one of {})",
+                names.join(", ")
+            );
+        };
+        if matches!(key, Key::Cols | Key::Rows) {
+            bail!("--set {pair}: a run's {name} are its scan's");
+        }
+        let v = key
+            .parse_value(value.as_bytes(), &HOST_CAPACITY)
+            .map_err(|e| anyhow::anyhow!("--set {pair}: {e}"))?;
+        let max = match key {
+            Key::PowerThreshold => Some(cvm_core::power::POWER_MAX),
+            Key::SpreadThreshold => Some(cvm_core::spread::SPREAD_MAX),
+            _ => None,
+        };
+        if let Some(max) = max
+            && v > max
+            && v != u32::MAX
+        {
+            bail!(
+                "--set {pair}: above {max} the channel is off; write that as {name}=4294967295, the value the header then shows"
+            );
+        }
+        if !key.set(settings, v) {
+            bail!("--set {pair}: not a value of {name}");
+        }
+        settings.sources[key.index()] = cvm_core::settings::Source::Default;
+    }
+    if conflict(settings) {
+        bail!("--set mode=row needs a pulse width: --set pulse=US (before or after it)");
+    }
+    Ok(())
+}
+
+/// The three thresholds in the units the emulated board's scan file
+/// carries, each checked to convert back to its integer.
+fn units_of(scorer: &Scorer, s: &Settings) -> Result<(f64, f64, f64)> {
+    let t = scorer.score_to_units(s.threshold);
+    let p = cvm_core::power::to_units(s.power_threshold);
+    let sp = cvm_core::spread::to_units(s.spread_threshold);
+    let back = (
+        scorer.threshold_from_units(t),
+        cvm_core::power::threshold_from_units(if s.power_threshold == u32::MAX {
+            f64::INFINITY
+        } else {
+            p
+        }),
+        cvm_core::spread::threshold_from_units(if s.spread_threshold == u32::MAX {
+            f64::INFINITY
+        } else {
+            sp
+        }),
+    );
+    if back != (s.threshold, s.power_threshold, s.spread_threshold) {
+        bail!(
+            "internal: the thresholds {:?} do not convert back exactly",
+            back
+        );
+    }
+    let inf = |v: u32, u: f64| if v == u32::MAX { f64::INFINITY } else { u };
+    Ok((t, inf(s.power_threshold, p), inf(s.spread_threshold, sp)))
 }
 
 /// The core's configuration for `j1 x j2` maps: the scoring options and

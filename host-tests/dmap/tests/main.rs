@@ -37,6 +37,7 @@ mod render_objects;
 mod score_cli;
 mod sensor_cli;
 mod sensor_twin;
+mod settings_set;
 mod sim_render_eval_cli;
 mod stream_listen;
 mod threshold_zero;

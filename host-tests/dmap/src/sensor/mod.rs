@@ -28,26 +28,20 @@ use std::io::{Read, Write};
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
-const SENSOR_HELP: &str = "\
-Settings (KEY; the board refuses a value outside its own range with that range):
-  cols    columns of a scan, 1 .. the firmware's capacity (status: capacity)
-  rows    rows of a scan, 1 .. the capacity's rows
-  thr     magnitude threshold, an integer as the H line's thr (0..4294967295)
-  pthr    power threshold, as the H line's pthr (above 46340 the power channel is off)
-  sthr    spread threshold, Q16 (above 92680 the spread channel is off; calibrate sets it)
-  scores  per-position score lines (S): 0 or 1
-  dcap    defect lines (D) per row, 0 .. the firmware's largest
-  area    smallest object (positions) that rejects its part
-  peak    smallest object peak strength (Q16, as the O line's peak) that rejects its part
-  miss    positions without data a scan may have and still be inspected
-  misp    misplaced frames a scan may have and still be inspected
-  mode    when REJECT is asserted: part (at the scan's end) or row (a pulse per object)
-  pulse   REJECT's pulse width in us (0: held until the next scan starts, part mode only;
-          set it before mode=row)
-  delay   row mode: rows between an object's closing row and its pulse
-  ready   READY's asserted level: high or low
-  reject  REJECT's asserted level: high or low
+/// The settings part of `dmap sensor --help`, from the core's table of
+/// settings ([`cvm_core::command::SETTINGS`]), so that a new key shows here
+/// by itself.
+fn settings_help() -> String {
+    let mut s = String::from(
+        "Settings (KEY; the board refuses a value outside its own range with that range):\n",
+    );
+    for key in cvm_core::command::Key::ALL {
+        s += &format!("  {:<7} {} [{}]\n", key.name(), key.about(), key.unit());
+    }
+    s
+}
 
+const SENSOR_HELP: &str = "\
 Examples:
   dmap sensor --port /dev/ttyACM0 status
   dmap sensor --port /dev/ttyACM0 set thr=4194304 scores=1
@@ -65,7 +59,7 @@ bad checksum or another request's id is reported on stderr and skipped.
 
 #[derive(Args, Clone, Debug)]
 #[command(subcommand_value_name = "ACTION", subcommand_help_heading = "Actions")]
-#[command(after_help = format!("{SENSOR_HELP}\n{}", failure::EXIT_HELP))]
+#[command(after_help = format!("{}\n{SENSOR_HELP}\n{}", settings_help(), failure::EXIT_HELP))]
 pub struct SensorArgs {
     /// The sensor's serial port (e.g. /dev/ttyACM0, the NUCLEO's ST-LINK virtual COM port)
     #[arg(long, value_name = "DEV", global = true)]
