@@ -7,6 +7,8 @@
 //! path, so a root file would shadow the other board's map.)
 //! `defmt.x` is only passed when defmt is linked (the H743 board).
 
+use cvm_core::command::{Capacity, Key, Kind};
+use cvm_core::{Config, Geometry, Kernels, RejectMode, Scorer, Settings, Weights, power, spread};
 use std::env;
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -32,11 +34,7 @@ fn main() {
     if h743 {
         let out = PathBuf::from(env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
         let spec = env::var("CVM_H743_SCAN").unwrap_or_default();
-        let cal = env::var_os("CVM_H743_CALIBRATION").map(PathBuf::from);
-        if let Some(path) = &cal {
-            println!("cargo:rerun-if-changed={}", path.display());
-        }
-        let consts = match h743_scan(&spec, cal.as_deref()) {
+        let consts = match h743_scan(&spec) {
             Ok(c) => c,
             Err(e) => {
                 println!("cargo:warning=CVM_H743_SCAN: {e}");
@@ -45,7 +43,15 @@ fn main() {
         };
         std::fs::write(out.join("h743_scan.rs"), consts).expect("writing OUT_DIR/h743_scan.rs");
         println!("cargo:rerun-if-env-changed=CVM_H743_SCAN");
+        // Named so that a build that still sets it fails instead of
+        // silently compiling other thresholds than the file's.
         println!("cargo:rerun-if-env-changed=CVM_H743_CALIBRATION");
+        if env::var_os("CVM_H743_CALIBRATION").is_some() {
+            println!(
+                "cargo:warning=CVM_H743_CALIBRATION is no longer read: give the calibration's thr, pthr and sthr in CVM_H743_SCAN (`dmap calibrate` prints them), or set them on the board (`dmap sensor set`, `save`)"
+            );
+            std::process::exit(1);
+        }
     }
 
     println!("cargo:rustc-link-arg-bins=--nmagic");
@@ -59,45 +65,16 @@ fn main() {
 /// `src/config.rs`). `CVM_H743_SCAN` overrides the defaults with
 /// space-separated `key=value` pairs; `dmap twin` sets it to the
 /// configuration of the scan it runs. See docs/firmware.md.
-/// Keys: j1, j2, cols, rows, kernels (paper|square), b, weights
-/// (uniform|unit), normalise, threshold, pthr (the power channel's
-/// threshold, a contrast; `inf` turns it off), sthr (the spread channel's,
-/// a share of the power; `inf`, the default, turns it off), scores, max_defect_lines,
-/// fs (full scale), fw (the version in the header), reject (part|row:
-/// REJECT's mode), pulse_us (its pulse width; 0 in part mode: held),
-/// row_delay (row mode: rows between the closing row and the pulse).
 ///
-/// `CVM_H743_CALIBRATION` names a calibration file (`dmap calibrate`): its
-/// thresholds are compiled in (the spread channel's from version 5; off
-/// before), after checking that it was made for this very configuration
-/// (geometry, kernels, weights, normalisation, full scale); `threshold`,
-/// `pthr` and `sthr` may then not be given.
-fn h743_scan(spec: &str, calibration: Option<&std::path::Path>) -> Result<String, String> {
-    let mut scan = Scan::parse(spec)?;
-    if let Some(path) = calibration {
-        if spec.split_whitespace().any(|p| {
-            ["threshold=", "pthr=", "sthr="]
-                .iter()
-                .any(|k| p.starts_with(k))
-        }) {
-            return Err(
-                "threshold, pthr and sthr come from CVM_H743_CALIBRATION; do not give them too"
-                    .into(),
-            );
-        }
-        let config = serde_json::json!({
-            "j1": scan.j1,
-            "j2": scan.j2,
-            "kernels": scan.kernels,
-            "b": scan.resolved_b(),
-            "weights": scan.weights,
-            "normalise": scan.normalise,
-            "full_scale": scan.full_scale,
-        });
-        (scan.threshold, scan.pthr, scan.sthr) = calibration_thresholds(path, &config)?;
-    }
-    scan.check_thresholds()?;
-    Ok(scan.rust(spec))
+/// The build's own keys: j1, j2, cols and rows (the capacity, and the
+/// defaults of the settings `cols` and `rows`), kernels (paper|square), b,
+/// weights (uniform|unit), normalise (true|false), fs (full scale), fw
+/// (the version in the header). Every other key is a runtime setting's
+/// default, by its name and in its unit on the wire (`cvm_core::settings`'s
+/// table: `thr`, `pthr`, `sthr`, `scores`, `dcap`, `area`, `peak`, `miss`,
+/// `misp`, `mode`, `pulse`, `delay`, `ready`, `reject`).
+fn h743_scan(spec: &str) -> Result<String, String> {
+    Scan::parse(spec)?.rust(spec)
 }
 
 /// The values of `CVM_H743_SCAN`, each at its default until given.
@@ -110,16 +87,10 @@ struct Scan {
     b: Option<u8>,
     weights: String,
     normalise: bool,
-    threshold: f64,
-    pthr: f64,
-    sthr: f64,
-    scores: bool,
-    max_defect_lines: u16,
     full_scale: u16,
     fw: Option<String>,
-    reject_row: bool,
-    pulse_us: u32,
-    row_delay: u32,
+    /// The runtime settings given, in the order given (a later one wins).
+    set: Vec<(Key, u32)>,
 }
 
 fn num<T: std::str::FromStr>(k: &str, v: &str) -> Result<T, String> {
@@ -135,6 +106,19 @@ fn flag(k: &str, v: &str) -> Result<bool, String> {
     }
 }
 
+/// The spelling a key had before the settings got one name and one unit
+/// everywhere, and what to write now.
+fn renamed(k: &str, v: &str) -> Option<&'static str> {
+    Some(match k {
+        "threshold" => "thr (an integer, as the header's thr: the magnitude times 2^q)",
+        "max_defect_lines" => "dcap",
+        "reject" if v == "part" || v == "row" => "mode=part|row (reject= is REJECT's level: low)",
+        "pulse_us" => "pulse",
+        "row_delay" => "delay",
+        _ => return None,
+    })
+}
+
 impl Scan {
     fn parse(spec: &str) -> Result<Scan, String> {
         let mut s = Scan {
@@ -146,16 +130,9 @@ impl Scan {
             b: None,
             weights: "uniform".into(),
             normalise: true,
-            threshold: 0.5,
-            pthr: 0.1,
-            sthr: f64::INFINITY,
-            scores: true,
-            max_defect_lines: 0,
             full_scale: u16::MAX,
             fw: None,
-            reject_row: false,
-            pulse_us: 0,
-            row_delay: 0,
+            set: Vec::new(),
         };
         for pair in spec.split_whitespace() {
             let (k, v) = pair
@@ -170,15 +147,7 @@ impl Scan {
                 "b" => s.b = Some(num(k, v)?),
                 "weights" if v == "uniform" || v == "unit" => s.weights = v.into(),
                 "normalise" => s.normalise = flag(k, v)?,
-                "threshold" => s.threshold = num(k, v)?,
-                "pthr" => s.pthr = num(k, v)?,
-                "sthr" => s.sthr = num(k, v)?,
-                "scores" => s.scores = flag(k, v)?,
-                "max_defect_lines" => s.max_defect_lines = num(k, v)?,
                 "fs" => s.full_scale = num(k, v)?,
-                "reject" if v == "part" || v == "row" => s.reject_row = v == "row",
-                "pulse_us" => s.pulse_us = num(k, v)?,
-                "row_delay" => s.row_delay = num(k, v)?,
                 // The version the header announces (`dmap twin` passes the
                 // host's, so that its output compares byte for byte).
                 "fw" if !v.is_empty()
@@ -188,7 +157,20 @@ impl Scan {
                 {
                     s.fw = Some(v.into())
                 }
-                _ => return Err(format!("unknown key or value in {pair:?}")),
+                _ => {
+                    if let Some(now) = renamed(k, v) {
+                        return Err(format!("{pair}: write {now} instead"));
+                    }
+                    let key = Key::from_name(k.as_bytes())
+                        .ok_or_else(|| format!("unknown key or value in {pair:?}"))?;
+                    let value = key.decode(v.as_bytes()).ok_or_else(|| {
+                        format!(
+                            "{pair}: not a value of {k} ({}, as on the wire)",
+                            key.unit()
+                        )
+                    })?;
+                    s.set.push((key, value));
+                }
             }
         }
         if !(1..=16).contains(&s.j1) || !(1..=16).contains(&s.j2) {
@@ -210,49 +192,118 @@ impl Scan {
         }
     }
 
-    fn check_thresholds(&self) -> Result<(), String> {
-        let (t, p, s) = (self.threshold, self.pthr, self.sthr);
-        if !t.is_finite() || t < 0.0 {
-            return Err(format!("threshold={t}: must be finite and >= 0"));
+    /// The scorer's configuration, as `src/config.rs` builds it.
+    fn config(&self) -> Result<Config, String> {
+        let geometry = Geometry::new(self.j1, self.j2).map_err(|e| format!("{e:?}"))?;
+        let kernels = match self.kernels.as_str() {
+            "paper" => Kernels::Paper {
+                bmax: self.resolved_b(),
+            },
+            _ => Kernels::Square {
+                kmax: self.resolved_b(),
+            },
+        };
+        let weights = if self.weights == "unit" {
+            Weights::Unit
+        } else {
+            Weights::Uniform
+        };
+        Ok(Config {
+            geometry,
+            kernels,
+            weights,
+            normalise: self.normalise,
+            full_scale: self.full_scale,
+        })
+    }
+
+    /// The runtime settings' defaults: the firmware's (threshold 0.5 in
+    /// distance units, a power contrast of 0.1, the spread channel off,
+    /// score lines on, no `D` lines, the verdict's and outputs' defaults),
+    /// then the given keys, each checked as the board checks a `set`.
+    fn settings(&self, scorer: &Scorer) -> Result<Settings, String> {
+        let mut s = Settings::new(
+            self.cols as u32,
+            self.rows,
+            scorer.threshold_from_units(0.5),
+            power::threshold_from_units(0.1),
+            "",
+        );
+        s.scores = true;
+        let cap = Capacity {
+            max_cols: u16::try_from(self.cols).unwrap_or(u16::MAX),
+            max_rows: u16::MAX,
+            max_dcap: u16::MAX,
+            max_pulse_us: u32::MAX,
+        };
+        for &(key, v) in &self.set {
+            let (lo, hi) = key.range(&cap);
+            if v < lo || v > hi || !key.set(&mut s, v) {
+                return Err(format!("{}={v}: out of range {lo}..={hi}", key.name()));
+            }
+            let off = match key {
+                Key::PowerThreshold => Some(power::POWER_MAX),
+                Key::SpreadThreshold => Some(spread::SPREAD_MAX),
+                _ => None,
+            };
+            if off.is_some_and(|max| v > max && v != u32::MAX) {
+                return Err(format!(
+                    "{}={v}: above {} the channel is off; write {}=4294967295",
+                    key.name(),
+                    off.unwrap_or(0),
+                    key.name()
+                ));
+            }
         }
-        if p.is_nan() || p < 0.0 {
-            return Err(format!("pthr={p}: must be >= 0 (inf: off)"));
+        if cvm_core::command::conflict(&s) {
+            return Err("mode=row needs a pulse width (pulse=US)".into());
         }
-        if s.is_nan() || s < 0.0 {
-            return Err(format!("sthr={s}: must be >= 0 (inf: off)"));
-        }
-        Ok(())
+        Ok(s)
     }
 
     /// The constants `src/config.rs` includes, and the `.cvm_config`
     /// section: what the ELF was built for, in a section that is not loaded
     /// (no flash), which `dmap twin --elf` reads to refuse a run it does
-    /// not fit.
-    fn rust(&self, spec: &str) -> String {
+    /// not fit. The thresholds go in as distance units, a contrast and a
+    /// share, which the firmware's scorer turns back into exactly the
+    /// integers given (every scale is a power of two).
+    fn rust(&self, spec: &str) -> Result<String, String> {
+        let scorer = Scorer::new(&self.config()?).map_err(|e| format!("{e:?}"))?;
+        let st = self.settings(&scorer)?;
         let Scan {
             j1, j2, cols, rows, ..
         } = *self;
-        let (threshold, pthr, sthr) = (self.threshold, self.pthr, self.sthr);
-        let (scores, max_defect_lines, full_scale) =
-            (self.scores, self.max_defect_lines, self.full_scale);
+        let units = |v: u32, f: fn(u32) -> f64| {
+            if v == u32::MAX {
+                "f64::INFINITY".to_string()
+            } else {
+                format!("{:?}", f(v))
+            }
+        };
+        let full_scale = self.full_scale;
         let (kernels, weights, normalise) = (&self.kernels, &self.weights, self.normalise);
         let section_b = self.resolved_b();
-        let built_for = format!(
-            "j1={j1} j2={j2} cols={cols} rows={rows} kernels={kernels} b={section_b} weights={weights} normalise={normalise} threshold={threshold:?} pthr={pthr:?} sthr={sthr:?} scores={scores} max_defect_lines={max_defect_lines} fs={full_scale}"
+        let mut built_for = format!(
+            "j1={j1} j2={j2} cols={cols} rows={rows} kernels={kernels} b={section_b} weights={weights} normalise={normalise} fs={full_scale}"
         );
+        for key in Key::ALL {
+            if !matches!(key, Key::Cols | Key::Rows) {
+                let v = key.get(&st);
+                let _ = match key.kind() {
+                    Kind::Choice(words) => {
+                        write!(built_for, " {}={}", key.name(), words[v as usize & 1])
+                    }
+                    _ => write!(built_for, " {}={v}", key.name()),
+                };
+            }
+        }
         let kernels = match (kernels.as_str(), self.b) {
             ("paper", b) => format!("Kernels::Paper {{ bmax: {} }}", b.unwrap_or(0)),
             (_, Some(k)) => format!("Kernels::Square {{ kmax: {k} }}"),
             (_, None) => "Kernels::square_default(GEOMETRY)".into(),
         };
         let weights = if weights == "unit" { "Unit" } else { "Uniform" };
-        let f = |x: f64| {
-            if x.is_infinite() {
-                "f64::INFINITY".to_string()
-            } else {
-                format!("{x:?}")
-            }
-        };
+        let o = &st.outputs;
         let mut s = String::new();
         let _ = writeln!(s, "// Generated by build.rs from CVM_H743_SCAN={spec:?}.");
         let _ = writeln!(s, "pub const J1: u8 = {j1};\npub const J2: u8 = {j2};");
@@ -263,18 +314,39 @@ impl Scan {
         let _ = writeln!(s, "pub const KERNELS: Kernels = {kernels};");
         let _ = writeln!(s, "pub const WEIGHTS: Weights = Weights::{weights};");
         let _ = writeln!(s, "pub const NORMALISE: bool = {normalise};");
-        let _ = writeln!(s, "pub const THRESHOLD_UNITS: f64 = {threshold:?};");
-        let _ = writeln!(s, "pub const POWER_THRESHOLD_UNITS: f64 = {};", f(pthr));
-        let _ = writeln!(s, "pub const SPREAD_THRESHOLD_UNITS: f64 = {};", f(sthr));
-        let _ = writeln!(s, "pub const SCORES: bool = {scores};");
         let _ = writeln!(
             s,
-            "pub const MAX_DEFECT_LINES_PER_ROW: u16 = {max_defect_lines};"
+            "pub const THRESHOLD_UNITS: f64 = {:?};",
+            scorer.score_to_units(st.threshold)
+        );
+        let _ = writeln!(
+            s,
+            "pub const POWER_THRESHOLD_UNITS: f64 = {};",
+            units(st.power_threshold, power::to_units)
+        );
+        let _ = writeln!(
+            s,
+            "pub const SPREAD_THRESHOLD_UNITS: f64 = {};",
+            units(st.spread_threshold, spread::to_units)
+        );
+        let _ = writeln!(s, "pub const SCORES: bool = {};", st.scores);
+        let _ = writeln!(
+            s,
+            "pub const MAX_DEFECT_LINES_PER_ROW: u16 = {};",
+            st.max_defect_lines_per_row
         );
         let _ = writeln!(s, "pub const FULL_SCALE: u16 = {full_scale};");
-        let _ = writeln!(s, "pub const REJECT_ROW: bool = {};", self.reject_row);
-        let _ = writeln!(s, "pub const PULSE_US: u32 = {};", self.pulse_us);
-        let _ = writeln!(s, "pub const ROW_DELAY: u32 = {};", self.row_delay);
+        let _ = writeln!(
+            s,
+            "pub const REJECT_ROW: bool = {};",
+            o.reject_mode == RejectMode::Row
+        );
+        let _ = writeln!(s, "pub const PULSE_US: u32 = {};", o.pulse_us);
+        let _ = writeln!(s, "pub const ROW_DELAY: u32 = {};", o.row_delay);
+        let _ = writeln!(s, "pub const MIN_AREA: u32 = {};", o.min_area);
+        let _ = writeln!(s, "pub const MIN_PEAK: u32 = {};", o.min_strength);
+        let _ = writeln!(s, "pub const MAX_MISSING: u32 = {};", o.max_missing);
+        let _ = writeln!(s, "pub const MAX_MISPLACED: u32 = {};", o.max_misplaced);
         let _ = writeln!(
             s,
             "pub const FIRMWARE_VERSION_OVERRIDE: Option<&str> = {:?};",
@@ -284,57 +356,6 @@ impl Scan {
             s,
             r##"core::arch::global_asm!(r#".pushsection .cvm_config,"",%progbits"#, r#".ascii "{built_for}""#, ".popsection");"##
         );
-        s
+        Ok(s)
     }
-}
-
-/// The CVM, power and spread thresholds (distance units, contrast, share
-/// of the power) of a calibration file, refused unless it is a `dmap
-/// calibrate` file of version 2 to 5 (the same thresholds; 3 is the
-/// streaming rule's, 4 adds the tail fit and the rule's name, 5 the spread
-/// channel, off in the earlier ones) made for `config`.
-fn calibration_thresholds(
-    path: &std::path::Path,
-    config: &serde_json::Value,
-) -> Result<(f64, f64, f64), String> {
-    let p = path.display();
-    let text = std::fs::read_to_string(path).map_err(|e| format!("{p}: {e}"))?;
-    let v: serde_json::Value =
-        serde_json::from_str(&text).map_err(|e| format!("{p}: not JSON: {e}"))?;
-    if v["format"] != "dmap-calibration" {
-        return Err(format!("{p}: not a dmap calibration file"));
-    }
-    let version = v["version"].as_u64().unwrap_or(0);
-    if !(2..=5).contains(&version) {
-        return Err(format!(
-            "{p}: calibration file version {} (this firmware reads 2 to 5; run dmap calibrate again)",
-            v["version"]
-        ));
-    }
-    let Some(fields) = config.as_object() else {
-        return Err("internal: configuration is not an object".into());
-    };
-    for (key, want) in fields {
-        let got = &v["config"][key];
-        if got != want {
-            return Err(format!(
-                "{p}: made for {key}={got}, this build has {key}={want} (CVM_H743_SCAN)"
-            ));
-        }
-    }
-    let units = |channel: &str| {
-        v["channels"][channel]["threshold"]
-            .as_f64()
-            .filter(|t| t.is_finite() && *t >= 0.0)
-            .ok_or_else(|| {
-                format!("{p}: channels.{channel}.threshold missing or not a number >= 0")
-            })
-    };
-    // Before version 5 the file has no spread channel: off.
-    let spread = if version >= 5 {
-        units("spread")?
-    } else {
-        f64::INFINITY
-    };
-    Ok((units("cvm")?, units("power")?, spread))
 }

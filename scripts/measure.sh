@@ -65,7 +65,7 @@ twin_start_ms() { if [ "${KERNELS:-paper}" = paper ]; then echo 20; else echo 20
 
 # The H743 release ELF for a J x J scan of COLS x ROWS beams, into target/twin.
 twin_elf() { # J COLS ROWS
-    CVM_H743_SCAN="j1=$1 j2=$1 cols=$2 rows=$3 scores=true kernels=${KERNELS:-paper}" \
+    CVM_H743_SCAN="j1=$1 j2=$1 cols=$2 rows=$3 scores=1 kernels=${KERNELS:-paper}" \
         cargo build --release --target-dir "$root/target/twin" >&2
     echo "$root/target/twin/thumbv7em-none-eabihf/release/cvm-fw"
 }

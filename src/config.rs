@@ -64,12 +64,16 @@ pub mod h743 {
     use cvm_core::{Config, Geometry, Kernels, Outputs, RejectMode, Weights};
 
     /// The part verdict's rules and the READY and REJECT outputs
-    /// (docs/firmware.md, "READY and REJECT outputs"): the verdict's
-    /// rules are `dmap stream`'s and the emulated board's defaults, so the
-    /// three end lines agree; REJECT's mode, pulse width and row delay
-    /// come from `CVM_H743_SCAN` (`reject`, `pulse_us`, `row_delay`). A
-    /// command channel will set the same value at run time.
+    /// (docs/firmware.md, "READY and REJECT outputs"), from `CVM_H743_SCAN`
+    /// (`area`, `peak`, `miss`, `misp`, `mode`, `pulse`, `delay`; by
+    /// default `dmap stream`'s and the emulated board's, so that the three
+    /// end lines agree). The command channel sets the same values at run
+    /// time.
     pub const OUTPUTS: Outputs = Outputs {
+        min_area: MIN_AREA,
+        min_strength: MIN_PEAK,
+        max_missing: MAX_MISSING,
+        max_misplaced: MAX_MISPLACED,
         reject_mode: if REJECT_ROW {
             RejectMode::Row
         } else {

@@ -139,20 +139,24 @@ pub fn h743_config(h: &ScanHeader) -> Result<String> {
         })
         .context("the firmware version of the scan header is not a plain ASCII word")?;
     // The version the host announces, so that the header compares byte for
-    // byte with `dmap stream`'s.
+    // byte with `dmap stream`'s. The thresholds as the settings `thr`,
+    // `pthr` and `sthr`: integers, converted as the firmware converts the
+    // scan file's units.
+    let scorer = cvm_core::Scorer::new(&h.config)
+        .map_err(|e| anyhow::anyhow!("the scan's configuration: {e:?}"))?;
     Ok(format!(
-        "j1={} j2={} cols={} rows={} kernels={kernels} b={b} weights={weights} normalise={} threshold={:?} pthr={:?} sthr={:?} scores={} max_defect_lines={} fs={} fw={fw}",
+        "j1={} j2={} cols={} rows={} kernels={kernels} b={b} weights={weights} normalise={} fs={} fw={fw} thr={} pthr={} sthr={} scores={} dcap={}",
         g.j1,
         g.j2,
         h.cols,
         h.rows,
         h.config.normalise,
-        h.threshold_units,
-        h.power_threshold_units,
-        h.spread_threshold_units,
-        h.scores,
-        h.max_defect_lines_per_row,
         h.config.full_scale,
+        scorer.threshold_from_units(h.threshold_units),
+        cvm_core::power::threshold_from_units(h.power_threshold_units),
+        cvm_core::spread::threshold_from_units(h.spread_threshold_units),
+        u8::from(h.scores),
+        h.max_defect_lines_per_row,
     ))
 }
 

@@ -148,11 +148,11 @@ fn check_config(path: &Path, built: &str, config: &str) -> Result<()> {
                 "j1" | "j2" => "the scan's detector geometry",
                 "cols" | "rows" => "the scan's size",
                 "kernels" | "b" | "weights" | "normalise" => "the scoring options",
-                "threshold" => "--threshold or --calibration",
-                "pthr" => "--power-threshold or --calibration",
-                "sthr" => "--spread-threshold or --calibration",
-                "scores" => "--scores",
-                "max_defect_lines" => "--max-defect-lines",
+                "thr" => "--threshold, --calibration or --set thr=",
+                "pthr" => "--power-threshold, --calibration or --set pthr=",
+                "sthr" => "--spread-threshold, --calibration or --set sthr=",
+                "scores" => "--scores or --set scores=",
+                "dcap" => "--max-defect-lines or --set dcap=",
                 "fs" => "--full-scale",
                 _ => "the run",
             };
@@ -203,17 +203,17 @@ mod tests {
 
     #[test]
     fn an_elf_built_for_another_run_is_refused_naming_the_field() {
-        let config = "j1=9 j2=9 cols=12 rows=6 kernels=paper b=0 weights=uniform normalise=true threshold=0.05 pthr=0.1 scores=true max_defect_lines=0 fs=65535 fw=x";
+        let config = "j1=9 j2=9 cols=12 rows=6 kernels=paper b=0 weights=uniform normalise=true thr=838861 pthr=3277 scores=1 dcap=0 fs=65535 fw=x";
         assert!(check_built_for_text(config, config).is_ok());
         let other = config.replace("j1=9 j2=9", "j1=15 j2=15");
         let e = check_built_for_text(&other, config)
             .unwrap_err()
             .to_string();
         assert!(e.contains("built for j1=15, this run has j1=9"), "{e}");
-        let e = check_built_for_text(&config.replace("scores=true", "scores=false"), config)
+        let e = check_built_for_text(&config.replace("scores=1", "scores=0"), config)
             .unwrap_err()
             .to_string();
-        assert!(e.contains("scores=false") && e.contains("--scores"), "{e}");
+        assert!(e.contains("scores=0") && e.contains("--scores"), "{e}");
     }
 
     /// [`check_built_for`] on a section's text.

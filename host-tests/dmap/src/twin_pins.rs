@@ -43,7 +43,7 @@ impl PinArgs {
             return Ok(String::new());
         }
         Ok(format!(
-            " reject={} pulse_us={} row_delay={}",
+            " mode={} pulse={} delay={}",
             self.reject, self.pulse_us, self.row_delay
         ))
     }

@@ -256,7 +256,12 @@ fn back_to_back_scans_at(j: usize, beam_us: &str) {
     let twin_scan = dir.path().join("both.twin");
     std::fs::write(&twin_scan, file).unwrap();
     let elf = dmap::twin::build_elf(&format!(
-        "j1={j} j2={j} cols={cols} rows={rows} scores=true threshold=0.05 fw={}",
+        "j1={j} j2={j} cols={cols} rows={rows} scores=1 thr={} fw={}",
+        // 0.05 in distance units, as `--threshold 0.05` makes it.
+        dmap::options::ScoringArgs::default()
+            .scorer(j, j)
+            .unwrap()
+            .threshold_from_units(0.05),
         cvm_core::VERSION
     ))
     .unwrap();
@@ -542,10 +547,12 @@ fn twin_model_dies_with_dmap() {
     );
 }
 
-/// The H743 firmware built with a calibration file compiled in
-/// (`CVM_H743_CALIBRATION`) applies both of its thresholds bit for bit:
-/// its output equals `dmap stream --calibration` with that file; and a
-/// build for another configuration than the file's is refused.
+/// The H743 firmware built with a calibration's thresholds compiled in,
+/// as the settings `thr`, `pthr` and `sthr` of `CVM_H743_SCAN` (the
+/// integers of `dmap calibrate`'s file), applies them bit for bit: its
+/// output equals `dmap stream --calibration` with that file. The retired
+/// `CVM_H743_CALIBRATION` and the old spelling `threshold=` are refused,
+/// each naming what to write instead.
 #[test]
 fn twin_firmware_with_a_compiled_in_calibration_file() {
     let dir = tempfile::tempdir().unwrap();
@@ -577,7 +584,7 @@ fn twin_firmware_with_a_compiled_in_calibration_file() {
             .args(["build", "--release", "--target-dir"])
             .arg(&target)
             .env("CVM_H743_SCAN", spec)
-            .env("CVM_H743_CALIBRATION", cal)
+            .env_remove("CVM_H743_CALIBRATION")
             .env_remove("CARGO_TARGET_DIR")
             .env_remove("CARGO_BUILD_TARGET")
             .env_remove("RUSTFLAGS")
@@ -585,9 +592,15 @@ fn twin_firmware_with_a_compiled_in_calibration_file() {
             .output()
             .unwrap()
     };
+    let file: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(cal).unwrap()).unwrap();
+    let thr = |channel: &str| file["channels"][channel]["thr"].as_u64().unwrap();
     let spec = format!(
-        "j1=9 j2=9 cols={COLS} rows={ROWS} scores=true fw={}",
-        cvm_core::VERSION
+        "j1=9 j2=9 cols={COLS} rows={ROWS} scores=1 fw={} thr={} pthr={} sthr={}",
+        cvm_core::VERSION,
+        thr("cvm"),
+        thr("power"),
+        thr("spread"),
     );
     let out = build(&spec);
     assert!(
@@ -619,16 +632,24 @@ fn twin_firmware_with_a_compiled_in_calibration_file() {
     assert!(!text.contains(",thr=4194304,"), "{text}");
     assert!(!text.contains(",pthr=3277,"), "{text}");
 
-    // Made for 9x9 normalised maps: a raw build is refused, naming the field.
-    let out = build(&format!("{spec} normalise=false"));
+    // The retired variable and the old spelling: refused, saying what now.
+    let out = Command::new(env!("CARGO"))
+        .current_dir(&root)
+        .args(["build", "--release", "--target-dir"])
+        .arg(&target)
+        .env("CVM_H743_SCAN", &spec)
+        .env("CVM_H743_CALIBRATION", cal)
+        .output()
+        .unwrap();
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("normalise"), "{err}");
-    // And the thresholds may not be given twice, the spread one included.
-    for twice in ["threshold=0.3", "sthr=0.1"] {
-        let out = build(&format!("{spec} {twice}"));
-        assert!(!out.status.success());
-        assert!(String::from_utf8_lossy(&out.stderr).contains("do not give them too"));
-    }
+    assert!(
+        err.contains("CVM_H743_CALIBRATION is no longer read"),
+        "{err}"
+    );
+    let out = build("j1=9 j2=9 threshold=0.3");
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("threshold=0.3: write thr"), "{err}");
     drop(lock);
 }

@@ -82,7 +82,7 @@ fn an_elf_built_for_another_run_is_refused_naming_the_field() {
             ])
             .output()
             .unwrap(),
-        "threshold=0.05, this run has threshold=0.5",
+        "thr=838861, this run has thr=8388608",
     );
     let wider = dir.path().join("wider.npy");
     common::spot_scan(&wider, 6, 13, 9, 909);
@@ -103,7 +103,7 @@ fn an_elf_built_for_another_run_is_refused_naming_the_field() {
         ])
         .output()
         .unwrap();
-    one_line_error("scores", &out, "scores=true, this run has scores=false");
+    one_line_error("scores", &out, "scores=1, this run has scores=0");
 }
 
 #[test]

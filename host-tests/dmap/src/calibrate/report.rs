@@ -188,7 +188,8 @@ fn estimate(c: &Channel, to_units: &dyn Fn(u32) -> String, off: bool) -> String 
 }
 
 /// The summary: the three channels' statistics and thresholds, then per channel
-/// the estimated false-reject rate and the smallest detected rise.
+/// the estimated false-reject rate and the smallest detected rise, then the
+/// thresholds as the settings `thr`, `pthr` and `sthr`.
 pub fn summary(scorer: &Scorer, st: &Statistics, refs: usize) -> String {
     let units = |v: u32| fmt_num(scorer.score_to_units(v));
     let punits = |v: u32| fmt_num(power::to_units(v));
@@ -197,7 +198,7 @@ pub fn summary(scorer: &Scorer, st: &Statistics, refs: usize) -> String {
     let off = p.threshold == power::POWER_OFF;
     let soff = sp.threshold == spread::SPREAD_OFF;
     format!(
-        "dmap calibrate: {} positions of {refs} reference(s): max {}, median {}, MAD {} -> threshold {} (integer {} in Q({})); power: max {}, median {}, MAD {} -> threshold {}; spread: max {}, median {}, MAD {} -> threshold {}\nCVM: {}\npower: {}\nspread: {}",
+        "dmap calibrate: {} positions of {refs} reference(s): max {}, median {}, MAD {} -> threshold {} (integer {} in Q({})); power: max {}, median {}, MAD {} -> threshold {}; spread: max {}, median {}, MAD {} -> threshold {}\nCVM: {}\npower: {}\nspread: {}\nsettings: thr={} pthr={} sthr={} (as `dmap sensor set`, `--set` and CVM_H743_SCAN take them)",
         c.positions,
         units(c.max),
         units(c.median),
@@ -224,5 +225,8 @@ pub fn summary(scorer: &Scorer, st: &Statistics, refs: usize) -> String {
         estimate(c, &units, false),
         estimate(p, &punits, off),
         estimate(sp, &sunits, soff),
+        c.threshold,
+        p.threshold,
+        sp.threshold,
     )
 }
