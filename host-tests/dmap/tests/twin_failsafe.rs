@@ -188,7 +188,7 @@ fn elf() -> PathBuf {
         return PathBuf::from(p);
     }
     dmap::twin::build_elf(&format!(
-        "j1={J} j2={J} cols={COLS} rows={ROWS} scores=true fw={}",
+        "j1={J} j2={J} cols={COLS} rows={ROWS} scores=1 fw={}",
         cvm_core::VERSION
     ))
     .unwrap()

@@ -118,7 +118,7 @@ fn parts_on_the_twin(parts: usize, faults: &[&str], beam_us: &str) -> (Vec<u8>, 
     let twin_scan = dir.path().join("parts.twin");
     common::write_twin_scan(&twin_scan, parts * ROWS, COLS, J, &all);
     let elf = dmap::twin::build_elf(&format!(
-        "j1={J} j2={J} cols={COLS} rows={ROWS} scores=true fw={}",
+        "j1={J} j2={J} cols={COLS} rows={ROWS} scores=1 fw={}",
         cvm_core::VERSION
     ))
     .unwrap();
