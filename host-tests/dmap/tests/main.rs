@@ -13,6 +13,7 @@ mod calibrate_device;
 mod calibrate_refs;
 mod calibrate_tail;
 mod calibration_input;
+mod cli_flags;
 mod cli_usage;
 mod conformance;
 mod console_bad_input;
