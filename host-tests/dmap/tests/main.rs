@@ -34,6 +34,7 @@ mod listen_verdict;
 mod npy_io;
 mod objects_cli;
 mod outputs_cli;
+mod readme;
 mod render_objects;
 mod score_cli;
 mod sensor_cli;
