@@ -472,7 +472,7 @@ experiments() {
         case $d in
             cvm) for r in "$@"; do refs+=("$r.npy"); done; run calibrate "${refs[@]}" -o "cal_${n}_$d.json" ;;
             raw) for r in "$@"; do refs+=("$r.npy"); done; run calibrate "${refs[@]}" --raw -o "cal_${n}_$d.json" ;;
-            emd | rawf) for r in "$@"; do refs+=("${r}_$d.npy"); done; run calibrate --scores "${refs[@]}" -o "cal_${n}_$d.json" ;;
+            emd | rawf) for r in "$@"; do refs+=("${r}_$d.npy"); done; run calibrate --from-scores "${refs[@]}" -o "cal_${n}_$d.json" ;;
         esac
     }
     # One line per defective part: found/missed/false objects and, per defect,

@@ -340,7 +340,7 @@ impl Control {
         }
     }
 
-    fn status(&self) -> Status<'static> {
+    fn status(&self) -> Status {
         Status {
             firmware: self.compiled.firmware_version,
             j1: self.geometry.0,

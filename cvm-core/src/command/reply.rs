@@ -11,12 +11,13 @@ use crate::protocol::{LineBuf, LineSink, ParseError, Priority};
 use crate::settings::Key;
 use crate::settings::Source;
 
-/// A reply, decoded.
+/// A reply, decoded. `F` is the status's firmware text, borrowed from the
+/// line unless [`Reply::detach`] made it something else.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Reply<'s> {
+pub enum Reply<'s, F = &'s str> {
     /// `ok,status,...` (see [`Status`]), followed by one [`Reply::Value`]
     /// per setting.
-    Status(Status<'s>),
+    Status(Status<F>),
     /// `ok,<key>=<value>:<source>`: the answer to `get`, and to `set`
     /// (the value now in effect for the next scan).
     Value {
@@ -46,6 +47,26 @@ pub enum Reply<'s> {
     Resetting,
     /// `err,<reason>`: nothing changed.
     Refused(Refusal),
+}
+
+impl<'s> Reply<'s> {
+    /// The reply without its borrow of the line, for a client that keeps
+    /// it longer: the status's firmware text goes through `keep` (to an
+    /// owned copy, say). `None` for [`Reply::OtherKey`], which is the
+    /// line's bytes and nothing else.
+    pub fn detach<F>(self, keep: impl FnOnce(&'s str) -> F) -> Option<Reply<'static, F>> {
+        Some(match self {
+            Reply::Status(s) => Reply::Status(s.with_firmware(keep)),
+            Reply::Value { key, value, source } => Reply::Value { key, value, source },
+            Reply::OtherKey { .. } => return None,
+            Reply::Calibrating(n) => Reply::Calibrating(n),
+            Reply::Calibrated(c) => Reply::Calibrated(c),
+            Reply::Saved => Reply::Saved,
+            Reply::Defaults => Reply::Defaults,
+            Reply::Resetting => Reply::Resetting,
+            Reply::Refused(why) => Reply::Refused(why),
+        })
+    }
 }
 
 /// Writes the reply line; `id` is the request's, or `None` when it could

@@ -24,11 +24,13 @@ pub struct LastScan {
     pub verdict: Option<Verdict>,
 }
 
-/// The `status` reply's content.
+/// The `status` reply's content. `F` holds the firmware text: borrowed
+/// from the line as decoded (`&str`), or a copy of it for a client that
+/// keeps the reply after its line is gone ([`Status::with_firmware`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Status<'s> {
+pub struct Status<F = &'static str> {
     /// At most `MAX_FW` characters are sent, as in the header.
-    pub firmware: &'s str,
+    pub firmware: F,
     pub j1: u8,
     pub j2: u8,
     /// The capacity's columns and rows (`cap=`; the defect-line cap's
@@ -41,7 +43,25 @@ pub struct Status<'s> {
     pub last: LastScan,
 }
 
-impl Status<'_> {
+impl<F> Status<F> {
+    /// The same status with `keep` applied to its firmware text (to own
+    /// it, say: `s.with_firmware(String::from)`).
+    pub fn with_firmware<G>(self, keep: impl FnOnce(F) -> G) -> Status<G> {
+        Status {
+            firmware: keep(self.firmware),
+            j1: self.j1,
+            j2: self.j2,
+            max_cols: self.max_cols,
+            max_rows: self.max_rows,
+            store: self.store,
+            reset_cause: self.reset_cause,
+            boots: self.boots,
+            last: self.last,
+        }
+    }
+}
+
+impl Status<&str> {
     /// Appends the fields after `status`.
     pub(super) fn encode(&self, l: &mut LineBuf) {
         l.kv_u64(b"pv", VERSION as u64);
@@ -83,7 +103,7 @@ impl Status<'_> {
     /// Reads the fields after `status`.
     pub(super) fn parse<'s, I: Iterator<Item = &'s [u8]>>(
         mut f: I,
-    ) -> Result<Status<'s>, ParseError> {
+    ) -> Result<Status<&'s str>, ParseError> {
         let mut field = |key: &str| f.next().and_then(|x| kv(x, key.as_bytes()));
         if field("pv").and_then(parse_u32) != Some(VERSION) {
             return Err(ParseError::Format);

@@ -124,7 +124,7 @@ fn requests_are_written_as_specified() {
     }
 }
 
-fn status_example() -> Status<'static> {
+fn status_example() -> Status {
     Status {
         firmware: "0.1.0",
         j1: 15,
@@ -566,6 +566,54 @@ fn the_longest_status_fits_a_line() {
     }
 }
 
+/// A client keeps a reply after its line is gone: `detach` copies the
+/// status's firmware text out of the line and keeps every other reply as it
+/// is; a later board's setting (`OtherKey`) is the line's bytes, so none.
+#[test]
+fn a_reply_detached_from_its_line() {
+    let line = framed(
+        "A,5,ok,status,pv=7,fw=v9-rc,j=3x5,cap=80x60,store=none,rst=wdg,boots=12,last=4/0/0/none,keys=16",
+    );
+    let (_, r) = parse_reply(&line).unwrap();
+    let kept: Reply<'static, String> = r.detach(String::from).unwrap();
+    drop(line);
+    let Reply::Status(s) = &kept else {
+        panic!("{kept:?}")
+    };
+    assert_eq!(s.firmware, "v9-rc");
+    assert_eq!((s.j1, s.j2, s.max_cols, s.max_rows), (3, 5, 80, 60));
+    assert_eq!(
+        (s.store, s.reset_cause, s.boots),
+        (Store::Empty, ResetCause::Watchdog, 12)
+    );
+    assert_eq!(
+        s.last,
+        LastScan {
+            scans: 4,
+            defects: 0,
+            objects: 0,
+            verdict: None
+        }
+    );
+    for body in [
+        "A,6,ok,thr=4194304:f",
+        "A,6,ok,calibrate,5",
+        "A,6,ok,save",
+        "A,6,ok,defaults",
+        "A,6,ok,reset",
+        "A,6,err,busy",
+    ] {
+        let line = framed(body);
+        let (_, r) = parse_reply(&line).unwrap();
+        let kept = r.detach(|fw| fw.len());
+        assert_eq!(format!("{kept:?}"), format!("{:?}", Some(r)), "{body}");
+    }
+    let line = framed("A,6,ok,later_key=3:d");
+    let (_, r) = parse_reply(&line).unwrap();
+    assert!(matches!(r, Reply::OtherKey { .. }));
+    assert_eq!(r.detach(String::from), None);
+}
+
 #[test]
 fn firmware_characters_that_would_break_the_line_are_replaced() {
     let mut s = status_example();
@@ -677,7 +725,7 @@ fn refusal() -> impl Strategy<Value = Refusal> {
     ]
 }
 
-fn status(fw: &str) -> impl Strategy<Value = Status<'_>> {
+fn status(fw: &str) -> impl Strategy<Value = Status<&str>> {
     (
         (1u8..=15, 1u8..=15, any::<u16>(), any::<u16>()),
         prop::sample::select(Store::ALL.to_vec()),

@@ -20,7 +20,6 @@ mod protocol;
 mod protocol_layout;
 mod protocol_ranges;
 mod protocol_versions;
-mod readme;
 mod record;
 mod spread;
 mod square_factors;

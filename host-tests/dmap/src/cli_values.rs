@@ -9,6 +9,29 @@
 //! its `unstable-v5` feature, and flattened they would lose which bubble a
 //! number belongs to. The caller checks how many values a list has.
 
+/// A component of a gradient image (rows x cols x 3, as `dmap score`
+/// writes it): `--component` of `render` and `eval`. Its index (0, 1, 2)
+/// is taken too, as `--channel` took it before.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Component {
+    /// The horizontal gradient, [..., 0]
+    #[value(alias = "0")]
+    Horizontal,
+    /// The vertical gradient, [..., 1]
+    #[value(alias = "1")]
+    Vertical,
+    /// Their magnitude, [..., 2]
+    #[value(alias = "2")]
+    Magnitude,
+}
+
+impl Component {
+    /// Its index in the image's last axis.
+    pub fn index(self) -> usize {
+        self as usize
+    }
+}
+
 /// Largest detector axis: what the scorers take.
 pub const MAX_AXIS: usize = 16;
 

@@ -3,6 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
+use crate::cli_values::Component;
 use crate::fmt::fmt_num;
 use crate::objects::components;
 use anyhow::{Result, bail};
@@ -17,17 +18,17 @@ pub struct EvalArgs {
     /// Ground-truth mask (.npy, bool, rows x cols)
     #[arg(long, value_name = "MASK.npy")]
     pub truth: PathBuf,
-    /// Channel of a rows x cols x C input: 0 horizontal, 1 vertical, 2 magnitude
-    #[arg(long, default_value_t = 2)]
-    pub channel: usize,
+    /// Component of a rows x cols x 3 gradient image (or its index 0, 1, 2)
+    #[arg(long, alias = "channel", value_enum, default_value = "magnitude")]
+    pub component: Component,
     /// Score above which a position counts as defective (default: defect-free mean + K std)
     #[arg(long, allow_hyphen_values = true)]
     pub threshold: Option<f64>,
-    /// Threshold from a calibration file (`dmap calibrate`, with or without --scores), in distance units
+    /// Threshold from a calibration file (`dmap calibrate`, with or without --from-scores), in distance units
     #[arg(long, value_name = "CAL.json", conflicts_with = "threshold")]
     pub calibration: Option<PathBuf>,
-    /// K of the automatic threshold
-    #[arg(long, default_value_t = 5.0)]
+    /// K of the automatic threshold: the defect-free mean plus K standard deviations
+    #[arg(long = "k-std", alias = "k", value_name = "K", default_value_t = 5.0)]
     pub k: f64,
     /// Positions around each truth component searched for above-threshold scores
     #[arg(long, default_value_t = 2)]
@@ -241,7 +242,7 @@ pub fn check_args(a: &EvalArgs) -> Result<()> {
         bail!("--pitch-um must be positive, got {}", fmt_num(a.pitch_um));
     }
     if !a.k.is_finite() {
-        bail!("--k must be finite");
+        bail!("--k-std must be finite");
     }
     if a.threshold.is_some_and(|t| !t.is_finite()) {
         bail!("--threshold must be finite");
@@ -323,7 +324,7 @@ impl Evaluation {
 
 pub fn run(a: &EvalArgs) -> Result<()> {
     check_args(a)?;
-    let (rows, cols, values) = load_scores(&a.input, a.channel)?;
+    let (rows, cols, values) = load_scores(&a.input, a.component.index())?;
     let mask = crate::npy::read_mask(&a.truth)?;
     if (mask.rows, mask.cols) != (rows, cols) {
         bail!(

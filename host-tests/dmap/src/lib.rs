@@ -5,6 +5,7 @@ pub mod bench;
 pub mod calibrate;
 pub mod calibration_file;
 pub mod child;
+pub mod cli;
 pub mod cli_values;
 pub mod console;
 pub mod elf;

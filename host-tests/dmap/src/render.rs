@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, bail};
 use clap::{ArgAction, Args};
 
-use crate::cli_values::{index, trimmed};
+use crate::cli_values::{Component, index, trimmed};
 use crate::fmt::fmt_num;
 use crate::font::{draw_text, text_height, text_width};
 use crate::render_marks::{MapPlace, axis_pad, draw_axes, draw_boxes, read_objects};
@@ -25,11 +25,11 @@ pub struct RenderArgs {
     #[arg(required = true, value_name = "GRAD.npy")]
     pub inputs: Vec<PathBuf>,
     /// Output PNG ("-" for standard output)
-    #[arg(short, long, value_name = "OUT.png")]
+    #[arg(short, long = "output", alias = "out", value_name = "OUT.png")]
     pub out: PathBuf,
-    /// Channel of a rows x cols x C input: 0 horizontal, 1 vertical, 2 magnitude
-    #[arg(long, default_value_t = 2)]
-    pub channel: usize,
+    /// Component of a rows x cols x 3 gradient image (or its index 0, 1, 2)
+    #[arg(long, alias = "channel", value_enum, default_value = "magnitude")]
+    pub component: Component,
     /// Panel titles, comma-separated, one per input (default: file names)
     #[arg(
         long,
@@ -380,7 +380,9 @@ pub fn load_panel(path: &Path, channel: usize, title: String) -> Result<Panel> {
     let (rows, cols, values) = match crate::npy::read_gradient(path) {
         Ok(g) => {
             if channel >= 3 {
-                bail!("--channel {channel} does not exist: 0 horizontal, 1 vertical, 2 magnitude");
+                bail!(
+                    "--component {channel} does not exist: 0 horizontal, 1 vertical, 2 magnitude"
+                );
             }
             (
                 g.rows,
@@ -543,7 +545,7 @@ pub fn run(a: &RenderArgs) -> Result<()> {
         .iter()
         .zip(titles)
         .map(|(p, t)| {
-            let panel = load_panel(p, a.channel, t)?;
+            let panel = load_panel(p, a.component.index(), t)?;
             match crop {
                 Some(c) => crop_panel(&panel, c).with_context(|| p.display().to_string()),
                 None => Ok(panel),

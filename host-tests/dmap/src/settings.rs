@@ -30,6 +30,8 @@ pub const DEFAULT_THRESHOLD: f64 = 0.5;
 /// Default threshold of the power channel: a contrast of 0.1 between the
 /// two neighbours' powers (one has 22 % more light than the other).
 pub const DEFAULT_POWER_THRESHOLD: f64 = 0.1;
+/// Default threshold of the spread channel: off.
+pub const DEFAULT_SPREAD_THRESHOLD: f64 = f64::INFINITY;
 
 /// Everything a `stream`, `emulate` or `twin` run is configured with.
 pub struct RunSettings {
@@ -277,7 +279,7 @@ fn power_threshold_units(given: Option<f64>) -> Result<f64> {
 /// The spread threshold as a share of the power: the one given, or off
 /// (infinite) by default.
 fn spread_threshold_units(given: Option<f64>) -> Result<f64> {
-    let t = given.unwrap_or(f64::INFINITY);
+    let t = given.unwrap_or(DEFAULT_SPREAD_THRESHOLD);
     if t.is_nan() || t < 0.0 {
         bail!(
             "--spread-threshold must be a non-negative share of the power (inf: off), got {}",

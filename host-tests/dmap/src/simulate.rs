@@ -41,7 +41,7 @@ pub struct SimulateArgs {
     #[arg(long, value_enum, default_value = "paper-sim")]
     pub preset: PresetArg,
     /// Output scan (.npy, uint16, shape rows x cols x J1 x J2)
-    #[arg(short, long, value_name = "SCAN.npy")]
+    #[arg(short, long = "output", alias = "out", value_name = "SCAN.npy")]
     pub out: PathBuf,
     /// Output truth mask (.npy, bool, rows x cols); default: SCAN with `.truth.npy`
     #[arg(long, value_name = "MASK.npy")]
@@ -449,7 +449,10 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
         bail!("simulate writes two .npy files (scan and truth mask): give both file names, not -");
     }
     if crate::out::same_destination(&truth_path, &a.out) {
-        bail!("--truth and --out name the same file {}", a.out.display());
+        bail!(
+            "--truth and --output name the same file {}",
+            a.out.display()
+        );
     }
     let bar = ProgressBar::with_draw_target(
         Some(cfg.raster.rows as u64),

@@ -118,7 +118,7 @@ fn a_defective_reference_and_channels_turned_off_are_warned_about() {
     // integers hold (thousandths in a u32); a larger one is refused.
     one_line_error(
         &dmap(&["calibrate", s(&r1), s(&r2), "--k", "1e300", "-o", s(&cal)]),
-        "--k must be a multiple of 0.001 and at most 4294967.295",
+        "--k-mad must be a multiple of 0.001 and at most 4294967.295",
     );
     let out = dmap(&[
         "calibrate",

@@ -247,7 +247,7 @@ fn spread_rule_reports_the_fit_too_and_the_options_stay_apart() {
     for (args, needle) in [
         (
             vec!["--rule", "tail", "--k", "2"],
-            "--k is not a parameter of the tail rule",
+            "--k-mad is not a parameter of the tail rule",
         ),
         (
             vec!["--rule", "tail", "--quantile", "0.9"],
@@ -267,7 +267,7 @@ fn spread_rule_reports_the_fit_too_and_the_options_stay_apart() {
         ),
         (
             vec!["--rule", "tail", "--scores"],
-            "--scores applies the spread rule only",
+            "--from-scores applies the spread rule only",
         ),
     ] {
         one_line_error(

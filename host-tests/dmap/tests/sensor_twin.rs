@@ -103,7 +103,7 @@ fn a_set_during_a_scan_shows_in_the_next_header() {
         replies[replies.len() - 1].1,
         format!(
             "{:?}",
-            Reply::Refused(Refusal::OutOfRange { min: 1, max: 10 })
+            Reply::<&str>::Refused(Refusal::OutOfRange { min: 1, max: 10 })
         )
     );
     let first_thr = first.threshold;

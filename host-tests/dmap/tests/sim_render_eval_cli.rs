@@ -462,9 +462,11 @@ fn eval_and_render_reject_bad_input_in_one_line() {
         &dmap(&["eval", s(&g), "--truth", s(&m), "--pitch-um", "0"]),
         "--pitch-um",
     );
-    assert_one_line_error(
+    // A component by its old name and an index out of range: a usage error.
+    assert_usage_error(
         &dmap(&["eval", s(&g), "--truth", s(&m), "--channel", "3"]),
-        "--channel",
+        "--component",
+        "invalid value '3'",
     );
     let png = tmp("bad.png");
     assert_one_line_error(
@@ -473,9 +475,11 @@ fn eval_and_render_reject_bad_input_in_one_line() {
     );
     assert_one_line_error(&dmap(&["render", s(&junk), "-o", s(&png)]), "junk.npy");
     assert_one_line_error(&dmap(&["render", s(&scan), "-o", s(&png)]), "bad-scan.npy");
-    assert_one_line_error(
+    // A component by its old name and an index out of range: a usage error.
+    assert_usage_error(
         &dmap(&["render", s(&g), "-o", s(&png), "--channel", "3"]),
-        "--channel",
+        "--component",
+        "invalid value '3'",
     );
     assert_one_line_error(
         &dmap(&["render", s(&g), s(&g), "-o", s(&png), "--titles", "one"]),

@@ -54,7 +54,7 @@ fn channel(grad: &Bound<'_, PyAny>, ch: usize) -> PyResult<(usize, usize, Vec<f6
     let pick = |v: Vec<f64>| -> PyResult<Vec<f64>> {
         if ch >= 3 {
             return Err(PyValueError::new_err(format!(
-                "--channel {ch} does not exist: 0 horizontal, 1 vertical, 2 magnitude"
+                "--component {ch} does not exist: 0 horizontal, 1 vertical, 2 magnitude"
             )));
         }
         Ok(v.chunks_exact(3).map(|c| c[ch]).collect())
@@ -97,7 +97,7 @@ pub fn eval(
     all.extend(argv);
     let a = parse::<EvalArgs>("eval", &all)?;
     dmap::eval::check_args(&a).map_err(value_error)?;
-    let (rows, cols, values) = channel(grad, a.channel)?;
+    let (rows, cols, values) = channel(grad, a.component.index())?;
     let mask = truth
         .extract::<PyReadonlyArrayDyn<'_, bool>>()
         .map_err(|_| PyValueError::new_err("truth: a mask must be a bool array (rows, cols)"))?;

@@ -96,7 +96,7 @@ def test_bad_eval_input():
         cvm_dmap.evaluate(g, t.astype(np.uint8))
     with pytest.raises(ValueError, match="is 3x5 but the scores are 3x4"):
         cvm_dmap.evaluate(g, np.zeros((3, 5), bool))
-    with pytest.raises(ValueError, match="--channel 3 does not exist"):
+    with pytest.raises(ValueError, match="invalid value '3' for '--component"):
         cvm_dmap.evaluate(g, t, channel=3)
     with pytest.raises(ValueError, match="--pitch-um must be positive"):
         cvm_dmap.evaluate(g, t, pitch_um=0.0)

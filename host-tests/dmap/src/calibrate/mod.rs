@@ -34,7 +34,7 @@
 //! ([`power::POWER_MAX`], a reference with a dark neighbour) is recorded
 //! as [`power::POWER_OFF`]: the channel is off.
 //!
-//! That is the spread rule (`--rule spread`, or `--k`/`--quantile` given).
+//! That is the spread rule (`--rule spread`, or `--k-mad`/`--quantile` given).
 //! The default, `--rule tail` (the board's too), sets each threshold
 //! instead where an exponential fit of the channel's upper tail (the top
 //! `--tail-fraction` of the magnitudes, default 1 %, at least ten values)
@@ -44,7 +44,7 @@
 //! positions per part it predicts at the threshold, and the smallest rise
 //! above the median the threshold detects (`min_strength`).
 //!
-//! `--scores` is another thing: a rule in f64 with exact medians on
+//! `--from-scores` is another thing: a rule in f64 with exact medians on
 //! precomputed gradient images of any distance, for `dmap eval` only.
 //!
 //! The file records the scoring configuration (geometry, kernels, weights,
@@ -103,7 +103,7 @@ pub struct CalibrateArgs {
     pub quantile: Option<f64>,
     /// Spread rule: margin above the quantile, in robust standard deviations (1.4826 MAD) of the
     /// reference magnitudes (default 3; a multiple of 0.001)
-    #[arg(long, value_name = "K")]
+    #[arg(long = "k-mad", alias = "k", value_name = "K")]
     pub k: Option<f64>,
     /// Tail rule: target false positions per part, per channel (default 0.001: one in 1000
     /// parts; a multiple of 0.000001)
@@ -115,10 +115,10 @@ pub struct CalibrateArgs {
     pub tail_fraction: Option<f64>,
     /// The references are gradient images (`dmap score` output, any distance), not scans:
     /// the same rule in f64 on their magnitudes, for `dmap eval --calibration` only
-    #[arg(long)]
+    #[arg(long = "from-scores", alias = "scores")]
     pub scores: bool,
     /// Output calibration file (JSON; - for standard output)
-    #[arg(short, long, value_name = "CAL.json")]
+    #[arg(short, long = "output", alias = "out", value_name = "CAL.json")]
     pub out: PathBuf,
 }
 
@@ -180,7 +180,7 @@ pub fn score(scorer: &Scorer, scan: &ScanFile) -> Result<Scored> {
     Ok(Scored { scores, samples })
 }
 
-/// `dmap calibrate --scores`: the rule on precomputed gradient images.
+/// `dmap calibrate --from-scores`: the rule on precomputed gradient images.
 fn run_scores(a: &CalibrateArgs, rule: &Rule) -> Result<()> {
     let mut all = Vec::new();
     let mut refs = Vec::new();
@@ -335,7 +335,7 @@ pub fn run(a: &CalibrateArgs) -> Result<()> {
     }
     if a.scores {
         if rule.name != RuleName::Spread {
-            bail!("--scores applies the spread rule only (--rule spread)");
+            bail!("--from-scores applies the spread rule only (--rule spread)");
         }
         return run_scores(a, &rule);
     }
@@ -363,7 +363,7 @@ pub struct Outcome {
     pub warnings: Vec<String>,
 }
 
-/// `dmap calibrate` (not `--scores`) on references that `open` gives, the
+/// `dmap calibrate` (not `--from-scores`) on references that `open` gives, the
 /// `i`-th named `a.refs[i]` in the file and in messages, without writing
 /// anything.
 pub fn calibrate_with<'a>(
@@ -402,7 +402,7 @@ pub fn calibrate_with<'a>(
         warnings.push(format!(
             "the CVM channel is off: its threshold is past the largest score ({})",
             match rule.name {
-                RuleName::Spread => format!("--k {} is too large", fmt_num(rule.k)),
+                RuleName::Spread => format!("--k-mad {} is too large", fmt_num(rule.k)),
                 RuleName::Tail => "the references' tail is too wide".into(),
             }
         ));

@@ -1,6 +1,6 @@
 //! The options of the calibration rules and their exact integer form
 //! (`cvm_core::calibration::Rule`, the rules themselves), the power
-//! channel's off rule, and the f64 rule `--scores` applies to precomputed
+//! channel's off rule, and the f64 rule `--from-scores` applies to precomputed
 //! scores.
 
 use anyhow::{Result, bail};
@@ -17,7 +17,7 @@ pub const MAD_TO_SIGMA: f64 = 1.4826;
 /// Which rule sets the thresholds.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum RuleName {
-    /// thr = Q_p + ceil(k * 1.4826 * MAD) + 1 (--quantile, --k)
+    /// thr = Q_p + ceil(k * 1.4826 * MAD) + 1 (--quantile, --k-mad)
     Spread,
     /// The threshold at which an exponential fit of the upper tail expects --rate false
     /// positions per part (--rate, --tail-fraction)
@@ -93,7 +93,7 @@ impl Rule {
             (None, true, false) => RuleName::Spread,
             (None, false, true) => RuleName::Tail,
             (None, true, true) => bail!(
-                "--quantile and --k belong to the spread rule, --rate and --tail-fraction to the tail rule: give the parameters of one (and --rule)"
+                "--quantile and --k-mad belong to the spread rule, --rate and --tail-fraction to the tail rule: give the parameters of one (and --rule)"
             ),
             (None, false, false) => RuleName::default_rule(),
         };
@@ -102,7 +102,10 @@ impl Rule {
                 ("--rate", o.rate.is_some()),
                 ("--tail-fraction", o.tail.is_some()),
             ],
-            RuleName::Tail => &[("--quantile", o.quantile.is_some()), ("--k", o.k.is_some())],
+            RuleName::Tail => &[
+                ("--quantile", o.quantile.is_some()),
+                ("--k-mad", o.k.is_some()),
+            ],
         };
         if let Some((flag, _)) = foreign.iter().find(|(_, given)| *given) {
             bail!(
@@ -135,7 +138,10 @@ impl Rule {
             );
         }
         if !(self.k.is_finite() && self.k >= 0.0) {
-            bail!("--k must be a finite number >= 0, got {}", fmt_num(self.k));
+            bail!(
+                "--k-mad must be a finite number >= 0, got {}",
+                fmt_num(self.k)
+            );
         }
         if !(self.rate.is_finite() && self.rate > 0.0 && self.rate <= 1.0) {
             bail!(
@@ -168,7 +174,7 @@ impl Rule {
                 let quantile_ppm = micro(self.quantile, "--quantile")?;
                 let Some(k_milli) = exact_units(self.k, K_DEN) else {
                     bail!(
-                        "--k must be a multiple of 0.001 and at most {}, got {}",
+                        "--k-mad must be a multiple of 0.001 and at most {}, got {}",
                         u32::MAX as f64 / K_DEN as f64,
                         fmt_num(self.k)
                     );
@@ -196,7 +202,7 @@ fn median_sorted(v: &[f64]) -> f64 {
     }
 }
 
-/// `--scores`: a rule in f64 on precomputed magnitudes `m` (not empty),
+/// `--from-scores`: a rule in f64 on precomputed magnitudes `m` (not empty),
 /// for `dmap eval` only and not the board's: the nearest-rank quantile plus
 /// `k * 1.4826 * MAD` with exact medians (mean of the middle two), and at
 /// least the next number above the quantile.
@@ -254,11 +260,11 @@ mod tests {
         assert_eq!(spread(r(1.0, 4294967.295).unwrap()).1, u32::MAX);
         for (q, k, needle) in [
             (0.9999995, 3.0, "--quantile must be a multiple"),
-            (1.0, 0.0005, "--k must be a multiple"),
-            (1.0, 4294967.296, "--k must be a multiple"),
-            (1.0, 1e300, "--k must be a multiple"),
+            (1.0, 0.0005, "--k-mad must be a multiple"),
+            (1.0, 4294967.296, "--k-mad must be a multiple"),
+            (1.0, 1e300, "--k-mad must be a multiple"),
             (0.0, 3.0, "--quantile must be in (0, 1]"),
-            (1.0, -1.0, "--k must be a finite number"),
+            (1.0, -1.0, "--k-mad must be a finite number"),
         ] {
             let e = r(q, k).unwrap_err().to_string();
             assert!(e.contains(needle), "{q} {k}: {e}");
@@ -301,7 +307,10 @@ mod tests {
             ..o(None, None)
         };
         let e = exact(mixed).unwrap_err().to_string();
-        assert!(e.contains("--k is not a parameter of the tail rule"), "{e}");
+        assert!(
+            e.contains("--k-mad is not a parameter of the tail rule"),
+            "{e}"
+        );
         let mixed = Options {
             name: Some(RuleName::Spread),
             rate: Some(0.01),

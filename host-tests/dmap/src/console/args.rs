@@ -35,7 +35,7 @@ pub struct ConsoleArgs {
     /// page's requests go out on the same link
     #[arg(long, value_name = "DEV")]
     pub port: Option<String>,
-    /// Serial baud rate (the firmware's: 921600); with --input --rate link, the recorded rate
+    /// Serial baud rate (the firmware's: 921600); with --input --pace link, the recorded rate
     #[arg(long, default_value_t = 921_600, value_parser = clap::value_parser!(u32).range(1..))]
     pub baud: u32,
     /// Run the H743 release firmware on the chip model over these scans, one part each, again
@@ -51,7 +51,7 @@ pub struct ConsoleArgs {
     pub input: Option<PathBuf>,
     /// --input's pace: `link` (as recorded: 10 bit times a byte at --baud), `full` (as fast
     /// as it decodes) or N lines a second
-    #[arg(long, value_name = "RATE", default_value = "link", value_parser = rate)]
+    #[arg(long = "pace", alias = "rate", value_name = "PACE", default_value = "link", value_parser = rate)]
     pub rate: Rate,
     /// Where to serve the page. Another address than the loopback serves the line's network:
     /// then changes of settings need the token (--token)

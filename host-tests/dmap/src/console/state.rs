@@ -155,6 +155,8 @@ impl State {
                 }
             }
             Answer::Saved | Answer::Defaults | Answer::Resetting => self.want_status = true,
+            // Never routed as an answer (`sensor::answer` keeps neither).
+            Answer::Refused(_) | Answer::OtherKey { .. } => {}
         }
     }
 

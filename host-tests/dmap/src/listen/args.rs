@@ -22,7 +22,7 @@ pub struct ListenArgs {
     /// scan under way is reported cut; a second Ctrl-C ends dmap at once)
     #[arg(long, default_value_t = 1)]
     pub scans: usize,
-    /// Write the score image of docs/method.md §2: float64, shape (rows, cols, 3), the
+    /// Output score image (docs/method.md §2): float64, shape (rows, cols, 3), the
     /// magnitude in [..., 2] (distance units), NaN in [..., 0] and [..., 1] (the components
     /// do not travel) and where no score arrived; a second scan goes to OUT_2.npy, and so on
     #[arg(short, long, value_name = "OUT.npy")]

@@ -7,9 +7,8 @@
 
 use super::failure::Failure;
 use super::words::Ask;
-use cvm_core::command::{Calibration, Key, LastScan, Reply, encode_request, parse_reply};
-use cvm_core::protocol::{LineSink, MAX_LINE, Priority, ResetCause};
-use cvm_core::settings::{Source, Store};
+use cvm_core::command::{Reply, encode_request, parse_reply};
+use cvm_core::protocol::{LineSink, MAX_LINE, Priority};
 use std::collections::VecDeque;
 use std::io::{Read, Write};
 use std::time::Instant;
@@ -18,35 +17,9 @@ use std::time::Instant;
 /// and a `\r`; longer ones are dropped as they come (and counted).
 const LONGEST: usize = MAX_LINE + 1;
 
-/// The `status` reply, owned.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct StatusInfo {
-    pub firmware: String,
-    pub j1: u8,
-    pub j2: u8,
-    pub max_cols: u16,
-    pub max_rows: u16,
-    pub store: Store,
-    pub reset_cause: ResetCause,
-    pub boots: u32,
-    pub last: LastScan,
-}
-
-/// An `ok` reply to the request under way.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub enum Answer {
-    Status(StatusInfo),
-    Value {
-        key: Key,
-        value: u32,
-        source: Source,
-    },
-    Calibrating(u16),
-    Calibrated(Calibration),
-    Saved,
-    Defaults,
-    Resetting,
-}
+/// An `ok` reply to the request under way: the core's reply, kept past
+/// its line (the status's firmware text owned).
+pub type Answer = Reply<'static, String>;
 
 struct Collect(Vec<u8>);
 
@@ -238,26 +211,11 @@ impl<P: Read + Write> Link<P> {
     }
 }
 
-/// The owned form of an `ok` reply (`None` for a refusal).
+/// The owned form of an `ok` reply (`None` for a refusal, and for a
+/// setting of a later board).
 pub fn answer(r: Reply<'_>) -> Option<Answer> {
-    Some(match r {
-        Reply::Status(s) => Answer::Status(StatusInfo {
-            firmware: s.firmware.to_string(),
-            j1: s.j1,
-            j2: s.j2,
-            max_cols: s.max_cols,
-            max_rows: s.max_rows,
-            store: s.store,
-            reset_cause: s.reset_cause,
-            boots: s.boots,
-            last: s.last,
-        }),
-        Reply::Value { key, value, source } => Answer::Value { key, value, source },
-        Reply::Calibrating(n) => Answer::Calibrating(n),
-        Reply::Calibrated(c) => Answer::Calibrated(c),
-        Reply::Saved => Answer::Saved,
-        Reply::Defaults => Answer::Defaults,
-        Reply::Resetting => Answer::Resetting,
-        Reply::Refused(_) | Reply::OtherKey { .. } => return None,
-    })
+    match r {
+        Reply::Refused(_) => None,
+        r => r.detach(String::from),
+    }
 }

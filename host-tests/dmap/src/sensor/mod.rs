@@ -16,7 +16,7 @@ mod words;
 pub use failure::{
     EXIT_LINK, EXIT_OTHER, EXIT_REFUSED, EXIT_TIMEOUT, EXIT_USAGE, Failure, exit_code,
 };
-pub use link::{Answer, Link, StatusInfo, answer};
+pub use link::{Answer, Link, answer};
 pub use show::{Done, source_text};
 pub use words::{Action, Ask, WIDEST, key_names, show_value};
 

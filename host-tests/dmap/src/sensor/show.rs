@@ -2,8 +2,8 @@
 //! `status` settings as a table with their sources spelled out), or one
 //! JSON document (`--json`).
 
-use super::link::StatusInfo;
 use super::words::show_value;
+use cvm_core::command::Status;
 use cvm_core::command::{Calibration, Key, Kind};
 use cvm_core::protocol::ResetCause;
 use cvm_core::settings::{Source, Store};
@@ -14,7 +14,7 @@ use serde_json::{Map, Value, json};
 pub enum Done {
     Status {
         id: u32,
-        status: StatusInfo,
+        status: Status<String>,
         values: Vec<(Key, u32, Source)>,
     },
     /// The answer to `get`, and to each `set`.
@@ -89,7 +89,7 @@ fn cause_text(c: ResetCause) -> &'static str {
     }
 }
 
-fn status_text(s: &StatusInfo, values: &[(Key, u32, Source)]) -> String {
+fn status_text(s: &Status<String>, values: &[(Key, u32, Source)]) -> String {
     let mut t = format!(
         "firmware {}, command protocol {}, detector {}x{}, capacity {} columns x {} rows\n",
         s.firmware,
