@@ -111,31 +111,23 @@ fn readme_thresholds_are_the_settings_keys() {
     assert_eq!(channels, ["CVM gradient", "power", "spread"]);
 }
 
-/// The defaults `build.rs` gives `CVM_H743_SCAN`'s `threshold`, `pthr`
-/// and `sthr`: the lines `threshold: 0.5,` ... of its default scan.
-fn firmware_defaults(build_rs: &str) -> Vec<(String, f64)> {
-    let from = build_rs
-        .find("let mut s = Scan {")
-        .expect("build.rs: the default scan");
-    let block = &build_rs[from..from + build_rs[from..].find("};").unwrap()];
-    ["threshold", "pthr", "sthr"]
+/// The default H743 build's thresholds, as the integers `thr`, `pthr` and
+/// `sthr` of the `.cvm_config` section that build.rs writes into the ELF:
+/// what ships, not a reading of build.rs's text.
+fn firmware_defaults() -> Vec<u32> {
+    let elf = dmap::twin::build_elf("").expect("the default H743 build");
+    let bytes = std::fs::read(&elf).unwrap();
+    let section = dmap::elf::section(&bytes, dmap::elf::CONFIG_SECTION)
+        .expect("the ELF's .cvm_config section");
+    let text = std::str::from_utf8(section).unwrap();
+    ["thr", "pthr", "sthr"]
         .iter()
         .map(|name| {
-            let at = block
-                .find(&format!("{name}: "))
-                .unwrap_or_else(|| panic!("build.rs: no default {name}"));
-            let v = block[at + name.len() + 2..]
-                .split(',')
-                .next()
+            text.split_whitespace()
+                .find_map(|f| f.strip_prefix(&format!("{name}=")))
+                .unwrap_or_else(|| panic!("{text}: no {name}"))
+                .parse()
                 .unwrap()
-                .trim();
-            let v = match v {
-                "f64::INFINITY" => f64::INFINITY,
-                v => v
-                    .parse()
-                    .unwrap_or_else(|_| panic!("build.rs: {name}: {v}")),
-            };
-            (name.to_string(), v)
         })
         .collect()
 }
@@ -152,13 +144,20 @@ fn readme_gives_the_default_thresholds() {
         DEFAULT_SPREAD_THRESHOLD,
     ];
     assert_eq!(readme, dmap, "README's default thresholds against dmap's");
-    let firmware: Vec<f64> = firmware_defaults(&read("build.rs"))
-        .into_iter()
-        .map(|(_, v)| v)
-        .collect();
+    // The README's defaults as the integers the default build (15x15, paper
+    // kernels, uniform weights, normalised) compares with.
+    let scorer = dmap::options::ScoringArgs::default()
+        .scorer(15, 15)
+        .unwrap();
+    let want = vec![
+        scorer.threshold_from_units(readme[0]),
+        cvm_core::power::threshold_from_units(readme[1]),
+        cvm_core::spread::threshold_from_units(readme[2]),
+    ];
     assert_eq!(
-        firmware, readme,
-        "build.rs's default thresholds against README's"
+        firmware_defaults(),
+        want,
+        "the default firmware's thresholds against README's"
     );
 }
 
