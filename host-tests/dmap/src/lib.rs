@@ -30,5 +30,6 @@ pub mod stream;
 pub mod twin;
 pub mod twin_checks;
 pub mod twin_pins;
+pub mod twin_record;
 pub mod twin_requests;
 pub mod vectors;

@@ -115,9 +115,14 @@ pub struct TwinArgs {
     pub repo: crate::repo::RepoArgs,
 }
 
-/// The `CVM_H743_SCAN` value that builds the H743 firmware for the
-/// configuration of an emulated-board scan header (see the root `build.rs`).
-pub fn h743_config(h: &ScanHeader) -> Result<String> {
+/// The compile-time part of the `CVM_H743_SCAN` value that builds the
+/// H743 firmware for an emulated-board scan header (see the root
+/// `build.rs`): what the firmware's tables and buffers are built for
+/// (geometry, columns, kernels, weights, normalisation, full scale) and
+/// the version it announces. One ELF serves every run of such a scan;
+/// the rest reaches the firmware as a settings record
+/// ([`crate::twin_record`]).
+pub fn h743_build_config(h: &ScanHeader) -> Result<String> {
     let g = h.config.geometry;
     let (kernels, b) = match h.config.kernels {
         Kernels::Paper { bmax } => ("paper", bmax),
@@ -141,18 +146,25 @@ pub fn h743_config(h: &ScanHeader) -> Result<String> {
     // The version the host announces, so that the header compares byte for
     // byte with `dmap stream`'s.
     Ok(format!(
-        "j1={} j2={} cols={} rows={} kernels={kernels} b={b} weights={weights} normalise={} threshold={:?} pthr={:?} sthr={:?} scores={} max_defect_lines={} fs={} fw={fw}",
-        g.j1,
-        g.j2,
-        h.cols,
+        "j1={} j2={} cols={} kernels={kernels} b={b} weights={weights} normalise={} fs={} fw={fw}",
+        g.j1, g.j2, h.cols, h.config.normalise, h.config.full_scale,
+    ))
+}
+
+/// The whole `CVM_H743_SCAN` value for an emulated-board scan header:
+/// [`h743_build_config`] and the scan's settings compiled in (rows,
+/// thresholds, score lines, defect lines per row), for a run whose bank
+/// 2 is the user's (`--flash`).
+pub fn h743_config(h: &ScanHeader) -> Result<String> {
+    Ok(format!(
+        "{} rows={} threshold={:?} pthr={:?} sthr={:?} scores={} max_defect_lines={}",
+        h743_build_config(h)?,
         h.rows,
-        h.config.normalise,
         h.threshold_units,
         h.power_threshold_units,
         h.spread_threshold_units,
         h.scores,
         h.max_defect_lines_per_row,
-        h.config.full_scale,
     ))
 }
 
@@ -578,7 +590,23 @@ pub fn run_to(args: &TwinArgs, out: &mut dyn FnMut(&[u8]) -> Result<()>) -> Resu
         rows: header.rows / args.parts,
         ..header
     };
-    let config = h743_config(&part)? + &args.pins.build_keys()?;
+    let outputs = args.pins.build_keys()?;
+    // The settings reach the firmware as a user's board holds them: in a
+    // settings record in bank 2, for one ELF per compile-time
+    // configuration. When bank 2 is the user's (`--flash`), they are
+    // compiled in instead.
+    let record = match &args.link.flash {
+        Some(_) => None,
+        None => Some(crate::twin_record::settings_record(
+            &run.settings,
+            &part,
+            &args.pins,
+        )?),
+    };
+    let config = match &record {
+        Some(_) => h743_build_config(&part)?,
+        None => h743_config(&part)? + &outputs,
+    };
     let file = twin_file(&header, &emufile)?;
     drop(emufile);
     for w in &warnings {
@@ -599,10 +627,16 @@ pub fn run_to(args: &TwinArgs, out: &mut dyn FnMut(&[u8]) -> Result<()>) -> Resu
     std::fs::write(&scan_path, &file)
         .with_context(|| format!("writing {}", scan_path.display()))?;
     let planned = args.link.planned(beams)?;
+    let mut link =
+        args.link
+            .for_model(&planned, requests.as_deref(), dir.path(), flash.as_ref())?;
+    if let Some(image) = &record {
+        let bank = dir.path().join("bank2.bin");
+        std::fs::write(&bank, image).with_context(|| format!("writing {}", bank.display()))?;
+        link.flash = Some(bank);
+    }
     let for_model = TwinArgs {
-        link: args
-            .link
-            .for_model(&planned, requests.as_deref(), dir.path(), flash.as_ref())?,
+        link,
         ..args.clone()
     };
     let mut uart = Vec::new();

@@ -27,7 +27,7 @@ fn leading_zeros_an_empty_crlf_line_and_a_request_after_an_overrun_are_answered(
     common::blob_scan(&scan, 30, 12, 9, 5);
     let scan_s = scan.to_str().unwrap();
     let opts = ["--threshold", "0.05"];
-    let host = dmap(&[&["stream", scan_s][..], &opts].concat());
+    let host = dmap(&[&["stream", scan_s, "--from-flash"][..], &opts].concat());
     let thr: u32 = String::from_utf8_lossy(&host.stdout)
         .split(',')
         .find_map(|f| f.strip_prefix("thr="))
@@ -71,7 +71,7 @@ fn leading_zeros_an_empty_crlf_line_and_a_request_after_an_overrun_are_answered(
     assert_eq!(
         got,
         vec![
-            (Some(1), value(Key::Threshold, thr, Source::Default)),
+            (Some(1), value(Key::Threshold, thr, Source::Flash)),
             (Some(2), value(Key::DefectCap, 2, Source::Changed)),
             (None, Reply::Refused(Refusal::Overrun)),
             (Some(4), value(Key::DefectCap, 2, Source::Changed)),

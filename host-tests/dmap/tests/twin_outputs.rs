@@ -294,7 +294,14 @@ fn s(p: &Path) -> String {
 fn demo_part_is_rejected_at_the_scans_end() {
     let dir = tempfile::tempdir().unwrap();
     let scan = common::demo_scan(dir.path());
-    let host = dmap(&["stream", &s(&scan), "--scores", "--threshold", "0.5"]);
+    let host = dmap(&[
+        "stream",
+        &s(&scan),
+        "--from-flash",
+        "--scores",
+        "--threshold",
+        "0.5",
+    ]);
     let pins = dir.path().join("pins.csv");
     let twin = dmap(&[
         "twin",
