@@ -12,7 +12,7 @@ use crate::common;
 use common::dmap_ok as dmap;
 use common::{counters, crc16_bitwise, framed};
 use cvm_core::command::{Key, Refusal, Reply, Source, parse_reply};
-use dmap::twin_requests::write_requests;
+use dmap::twin::requests::write_requests;
 use std::path::Path;
 
 /// A scan of noise with one bright blob (an object) in row 1.

@@ -9,7 +9,7 @@ use crate::common;
 use common::dmap_ok as dmap;
 use common::{counters, framed};
 use cvm_core::command::{Key, Refusal, Reply, Source, parse_reply};
-use dmap::twin_requests::write_requests;
+use dmap::twin::requests::write_requests;
 
 /// Every line of the twin's output: replies decoded, result lines checked.
 fn lines(out: &[u8]) -> Vec<Result<(Option<u32>, Reply<'_>), String>> {

@@ -16,7 +16,7 @@ use cvm_core::command::{Key, Reply, parse_reply};
 use cvm_core::protocol::{self, Line};
 use cvm_core::settings::Source;
 use dmap::npy::{read_scan, write_scan_u16};
-use dmap::twin_requests::write_requests;
+use dmap::twin::requests::write_requests;
 use std::path::{Path, PathBuf};
 
 /// Rows and columns of one part: a window of the prototype preset.

@@ -63,7 +63,7 @@ pub fn values(settings: &Settings, cap: &Capacity) -> Result<Values> {
 pub fn settings_record(
     settings: &cvm_core::Settings,
     part: &cvm_fw_app::emufile::ScanHeader,
-    pins: &crate::twin_pins::PinArgs,
+    pins: &crate::twin::pins::PinArgs,
 ) -> Result<Vec<u8>> {
     let mut s = *settings;
     s.rows = part.rows;
@@ -171,7 +171,7 @@ mod tests {
         let v = values(&settings, &h743_capacity(12)).unwrap();
         assert_eq!(v[Key::Threshold.index()], 1234);
         let image = bank_image(&tag, &v).unwrap();
-        assert_eq!(image.len() as u64, crate::twin_requests::FLASH_IMAGE_BYTES);
+        assert_eq!(image.len() as u64, crate::twin::requests::FLASH_IMAGE_BYTES);
         // Read back by the product's store over the same cells.
         let bank = Bank {
             cells: image[..BANK].to_vec(),

@@ -14,7 +14,7 @@
 //!   is reused while it is newer than every firmware source. `--elf` skips
 //!   the build; the ELF's `.cvm_config` section (written by build.rs) must
 //!   then agree with the run's configuration field by field
-//!   ([`crate::twin_checks::check_built_for`]), and a damaged ELF is refused
+//!   ([`crate::twin::checks::check_built_for`]), and a damaged ELF is refused
 //!   before the model starts ([`crate::elf::read`]).
 //! * The model (`python3 -m h743twin`) reads the scan in its own format,
 //!   written to a temporary file; its standard output (the bytes the
@@ -34,7 +34,7 @@ use crate::fmt::fmt_num;
 use crate::npy::read_scan;
 use crate::options::{OutputArgs, ScoringArgs};
 use crate::settings::resolve;
-use crate::twin_checks::{check_built_for, check_fault, check_model_time};
+use crate::twin::checks::{check_built_for, check_fault, check_model_time};
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use cvm_core::{Kernels, Weights};
@@ -108,9 +108,9 @@ pub struct TwinArgs {
           value_parser = clap::value_parser!(u32).range(1..=1000))]
     pub parts: u32,
     #[command(flatten)]
-    pub link: crate::twin_requests::TwinRequestArgs,
+    pub link: crate::twin::requests::TwinRequestArgs,
     #[command(flatten)]
-    pub pins: crate::twin_pins::PinArgs,
+    pub pins: crate::twin::pins::PinArgs,
     #[command(flatten)]
     pub repo: crate::repo::RepoArgs,
 }
@@ -121,7 +121,7 @@ pub struct TwinArgs {
 /// (geometry, columns, kernels, weights, normalisation, full scale) and
 /// the version it announces. One ELF serves every run of such a scan;
 /// the rest reaches the firmware as a settings record
-/// ([`crate::twin_record`]).
+/// ([`crate::twin::record`]).
 pub fn h743_build_config(h: &ScanHeader) -> Result<String> {
     let g = h.config.geometry;
     let (kernels, b) = match h.config.kernels {
@@ -330,7 +330,7 @@ impl Supervised {
     fn spawn(
         cmd: &mut Command,
         dir: tempfile::TempDir,
-        live: &crate::twin_requests::LiveRequests,
+        live: &crate::twin::requests::LiveRequests,
     ) -> Result<(Supervised, ChildStdout, ChildStderr)> {
         use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
         let shared: Shared = Arc::new(Mutex::new(None));
@@ -597,7 +597,7 @@ pub fn run_to(args: &TwinArgs, out: &mut dyn FnMut(&[u8]) -> Result<()>) -> Resu
     // compiled in instead.
     let record = match &args.link.flash {
         Some(_) => None,
-        None => Some(crate::twin_record::settings_record(
+        None => Some(crate::twin::record::settings_record(
             &run.settings,
             &part,
             &args.pins,
@@ -649,7 +649,7 @@ pub fn run_to(args: &TwinArgs, out: &mut dyn FnMut(&[u8]) -> Result<()>) -> Resu
     let saved = flash.as_ref().map_or(Ok(()), |f| f.write_back());
     let (stats, line) = ran?;
     saved?;
-    crate::twin_pins::report(&args.pins, &stats, &uart)?;
+    crate::twin::pins::report(&args.pins, &stats, &uart)?;
     for l in crate::sensor::twin::summary(&planned, &uart) {
         let _ = writeln!(std::io::stderr(), "dmap: {l}");
     }
