@@ -41,8 +41,7 @@ use cvm_core::{Kernels, Weights};
 use cvm_fw_app::emufile::{HEADER_LEN, ScanHeader};
 use std::io::{BufRead, BufReader, Read, Write};
 use std::path::{Path, PathBuf};
-use std::process::{Child, ChildStderr, ChildStdout, Command, ExitStatus, Stdio};
-use std::sync::{Arc, Mutex};
+use std::process::{ChildStderr, Command, Stdio};
 use std::time::SystemTime;
 
 const FAULTS_HELP: &str = "\
@@ -293,107 +292,6 @@ pub fn build_elf_in(root: &Path, config: &str) -> Result<PathBuf> {
     Ok(elf)
 }
 
-/// The model's process and the directory of its scan file. Dropping it
-/// kills the model if it still runs, reaps it, and only then removes the
-/// directory (fields drop after `drop`).
-struct Running {
-    child: Child,
-    _dir: tempfile::TempDir,
-}
-
-impl Drop for Running {
-    fn drop(&mut self) {
-        if let Ok(None) = self.child.try_wait() {
-            let _ = self.child.kill();
-        }
-        let _ = self.child.wait();
-    }
-}
-
-type Shared = Arc<Mutex<Option<Running>>>;
-
-fn lock(shared: &Shared) -> std::sync::MutexGuard<'_, Option<Running>> {
-    shared.lock().unwrap_or_else(|e| e.into_inner())
-}
-
-/// The model under supervision: whoever takes the child out of `shared`
-/// (this on drop, or the signal thread on SIGINT, SIGTERM or SIGHUP) ends
-/// it.
-struct Supervised {
-    shared: Shared,
-    signals: signal_hook::iterator::Handle,
-}
-
-impl Supervised {
-    /// Installs the signal thread, then starts `cmd` with piped standard
-    /// output and error.
-    fn spawn(
-        cmd: &mut Command,
-        dir: tempfile::TempDir,
-        live: &crate::twin::requests::LiveRequests,
-    ) -> Result<(Supervised, ChildStdout, ChildStderr)> {
-        use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
-        let shared: Shared = Arc::new(Mutex::new(None));
-        let mut signals = signal_hook::iterator::Signals::new([SIGINT, SIGTERM, SIGHUP])
-            .context("installing signal handlers")?;
-        let me = Supervised {
-            shared: shared.clone(),
-            signals: signals.handle(),
-        };
-        std::thread::spawn(move || {
-            if let Some(sig) = signals.forever().next() {
-                drop(lock(&shared).take());
-                let _ = signal_hook::low_level::emulate_default_handler(sig);
-                std::process::exit(128 + sig);
-            }
-        });
-        // Held from before the spawn until the child is in it, so that a
-        // signal in between finds the child to end.
-        let mut slot = lock(&me.shared);
-        let child = crate::child::dies_with_parent(cmd)
-            .stdin(if live.is_live() {
-                Stdio::piped()
-            } else {
-                Stdio::null()
-            })
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .context("starting python3 (the chip model needs python3 with unicorn and pyelftools: scripts/setup.sh)")?;
-        let running = slot.insert(Running { child, _dir: dir });
-        if let Some(stdin) = running.child.stdin.take() {
-            live.forward(stdin);
-        }
-        let pipes = (running.child.stdout.take(), running.child.stderr.take());
-        drop(slot);
-        let (Some(stdout), Some(stderr)) = pipes else {
-            bail!("the chip model's output pipes are missing");
-        };
-        Ok((me, stdout, stderr))
-    }
-
-    /// Waits for the model's exit status without holding the child away
-    /// from the signal thread.
-    fn wait(&self) -> Result<ExitStatus> {
-        loop {
-            if let Some(r) = lock(&self.shared).as_mut()
-                && let Some(status) = r.child.try_wait().context("waiting for the chip model")?
-            {
-                return Ok(status);
-            }
-            // Gone: taken by the signal thread, which ends the process.
-            std::thread::sleep(std::time::Duration::from_millis(5));
-        }
-    }
-}
-
-impl Drop for Supervised {
-    fn drop(&mut self) {
-        drop(lock(&self.shared).take());
-        self.signals.close();
-    }
-}
-
 /// Passes the model's standard error through as it comes, except its last
 /// non-empty line (the JSON counters), which it returns unprinted so that
 /// `dmap` can put its own messages before it.
@@ -458,7 +356,27 @@ pub fn run_model(
         cmd.arg("--debugger");
     }
     args.link.apply(&mut cmd);
-    let (model, mut stdout, stderr) = Supervised::spawn(&mut cmd, dir, &args.link.live)?;
+    // Killed and reaped on every way out, before its scan file is removed.
+    let live = &args.link.live;
+    cmd.stdin(if live.is_live() {
+        Stdio::piped()
+    } else {
+        Stdio::null()
+    })
+    .stdout(Stdio::piped())
+    .stderr(Stdio::piped());
+    let model = crate::child::Supervised::spawn(&mut cmd, dir).context(
+        "starting python3 (the chip model needs python3 with unicorn and pyelftools: scripts/setup.sh)",
+    )?;
+    let pipes = model
+        .with_child(|c| (c.stdin.take(), c.stdout.take(), c.stderr.take()))
+        .unwrap_or_default();
+    if let Some(stdin) = pipes.0 {
+        live.forward(stdin);
+    }
+    let (Some(mut stdout), Some(stderr)) = (pipes.1, pipes.2) else {
+        bail!("the chip model's output pipes are missing");
+    };
     let errors = pass_stderr(stderr);
     let mut buf = [0u8; 8192];
     loop {
@@ -470,7 +388,7 @@ pub fn run_model(
         };
         out(&buf[..n])?;
     }
-    let status = model.wait()?;
+    let status = model.wait().context("waiting for the chip model")?;
     drop(model);
     let last = errors.join().unwrap_or_default();
     let json: Option<serde_json::Value> = serde_json::from_str(&last)
