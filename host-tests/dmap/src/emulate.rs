@@ -13,8 +13,7 @@ use clap::Args;
 use cvm_fw_app::emufile::ScanHeader;
 use std::io::Read;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
-use std::sync::{Arc, Mutex};
+use std::process::{Command, Stdio};
 
 /// Most columns the emulated board's row buffers hold.
 pub const MAX_COLS: usize = 1024;
@@ -96,6 +95,11 @@ pub fn scan_file_and_warnings(args: &EmulateArgs) -> Result<(Vec<u8>, Vec<String
         (j1, j2),
         (scan.rows, scan.cols),
     )?;
+    if run.settings.outputs != cvm_core::settings::Outputs::DEFAULT {
+        bail!(
+            "the emulated board's scan file carries thr, pthr, sthr, scores and dcap; the verdict's and the outputs' settings (area, peak, miss, misp, mode, pulse, delay) are not in it"
+        );
+    }
     let file = board_file(&args.scan, &scan, &run)?;
     Ok((file, run.warnings))
 }
@@ -114,11 +118,6 @@ pub fn board_file(path: &Path, scan: &Scan, run: &RunSettings) -> Result<Vec<u8>
         bail!("scan has {} rows", scan.rows);
     }
     let settings = &run.settings;
-    if settings.outputs != cvm_core::settings::Outputs::DEFAULT {
-        bail!(
-            "the board's scan file carries thr, pthr, sthr, scores and dcap; the verdict's and the outputs' settings (area, peak, miss, misp, mode, pulse, delay) are not in it"
-        );
-    }
     let version = settings.firmware_version.as_bytes();
     let mut v = [0u8; cvm_core::protocol::MAX_FW];
     if version.len() > v.len() {
@@ -147,48 +146,6 @@ pub fn board_file(path: &Path, scan: &Scan, run: &RunSettings) -> Result<Vec<u8>
         out.extend_from_slice(&s.to_le_bytes());
     }
     Ok(out)
-}
-
-/// A running QEMU and the directory of the scan file it reads. Dropping it
-/// kills QEMU if it still runs, reaps it, and only then removes the
-/// directory (fields drop after `drop`).
-struct Running {
-    child: Child,
-    _dir: Option<tempfile::TempDir>,
-}
-
-impl Drop for Running {
-    fn drop(&mut self) {
-        if let Ok(None) = self.child.try_wait() {
-            let _ = self.child.kill();
-        }
-        let _ = self.child.wait();
-    }
-}
-
-/// The child of a run, shared with the thread that handles termination
-/// signals: whoever takes it out ends it.
-type Shared = Arc<Mutex<Option<Running>>>;
-
-fn lock(shared: &Shared) -> std::sync::MutexGuard<'_, Option<Running>> {
-    shared.lock().unwrap_or_else(|e| e.into_inner())
-}
-
-/// On SIGINT, SIGTERM or SIGHUP while QEMU runs: kill and reap it, remove
-/// its scan file, then die of the signal as if it had not been caught.
-fn watch_signals(shared: Shared) -> Result<signal_hook::iterator::Handle> {
-    use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
-    let mut signals = signal_hook::iterator::Signals::new([SIGINT, SIGTERM, SIGHUP])
-        .context("installing signal handlers")?;
-    let handle = signals.handle();
-    std::thread::spawn(move || {
-        if let Some(sig) = signals.forever().next() {
-            drop(lock(&shared).take());
-            let _ = signal_hook::low_level::emulate_default_handler(sig);
-            std::process::exit(128 + sig);
-        }
-    });
-    Ok(handle)
 }
 
 /// Runs QEMU on `elf` with `scan_path`, copying the UART to `out`
@@ -233,36 +190,20 @@ pub fn run_qemu(
     if icount {
         cmd.args(["-icount", "shift=0"]);
     }
-    crate::child::dies_with_parent(&mut cmd);
-    let shared: Shared = Arc::new(Mutex::new(None));
-    let signals = watch_signals(shared.clone())?;
-    let result = (|| {
-        let mut child = cmd
-            .spawn()
-            .context("starting qemu-system-arm (install it: apt-get install -y qemu-system-arm)")?;
-        let stdout = child.stdout.take().context("qemu stdout")?;
-        *lock(&shared) = Some(Running { child, _dir: dir });
-        copy_uart(stdout, out)?;
-        // The UART closed: wait for QEMU's status, without holding the
-        // child away from the signal thread.
-        let status = loop {
-            // `None`: taken by the signal thread, which ends the process.
-            if let Some(r) = lock(&shared).as_mut()
-                && let Some(status) = r.child.try_wait().context("waiting for qemu-system-arm")?
-            {
-                break status;
-            }
-            std::thread::sleep(std::time::Duration::from_millis(5));
-        };
-        if !status.success() {
-            bail!("the emulated firmware failed ({status}); its message, if any, is above");
-        }
-        Ok(())
-    })();
-    // Kills QEMU if still running, reaps it, then removes its scan file.
-    drop(lock(&shared).take());
-    signals.close();
-    result
+    // Killed and reaped on every way out, before its scan file is removed.
+    let qemu = crate::child::Supervised::spawn(&mut cmd, dir)
+        .context("starting qemu-system-arm (install it: apt-get install -y qemu-system-arm)")?;
+    let stdout = qemu
+        .with_child(|c| c.stdout.take())
+        .flatten()
+        .context("qemu stdout")?;
+    copy_uart(stdout, out)?;
+    // The UART closed: QEMU's status.
+    let status = qemu.wait().context("waiting for qemu-system-arm")?;
+    if !status.success() {
+        bail!("the emulated firmware failed ({status}); its message, if any, is above");
+    }
+    Ok(())
 }
 
 fn copy_uart(mut uart: impl Read, out: &mut dyn FnMut(&[u8]) -> Result<()>) -> Result<()> {

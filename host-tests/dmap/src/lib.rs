@@ -29,7 +29,4 @@ pub mod settings;
 pub mod simulate;
 pub mod stream;
 pub mod twin;
-pub mod twin_checks;
-pub mod twin_pins;
-pub mod twin_requests;
 pub mod vectors;

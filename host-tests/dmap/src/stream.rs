@@ -22,6 +22,13 @@ pub struct StreamArgs {
     pub scoring: ScoringArgs,
     #[command(flatten)]
     pub output: OutputArgs,
+    /// Announce the settings as loaded from a board's settings record in
+    /// flash: the header's `src` is `f` for every key and its `store` is
+    /// `ok`, as a board that starts with the settings it saved sends it
+    /// (and `dmap twin`, whose firmware gets the run's settings that way);
+    /// the rest of the output is the same
+    #[arg(long)]
+    pub from_flash: bool,
 }
 
 /// Collects lines in memory.
@@ -118,17 +125,21 @@ pub fn stream_mapped(
 /// `dmap stream` on a scan already opened (a file or memory), its
 /// calibration (if `output.calibration` names one) read by `load`: the
 /// run's settings resolved and every sample checked, then the lines
-/// handed to `emit` as they come. Returns the warnings `dmap stream`
-/// prints after its lines.
+/// handed to `emit` as they come; `from_flash`: the header says the
+/// settings came from a settings record (`--from-flash`). Returns the
+/// warnings `dmap stream` prints after its lines.
 pub fn stream_with(
     scan: &ScanFile,
-    scoring: &ScoringArgs,
-    output: &OutputArgs,
+    (scoring, output, from_flash): (&ScoringArgs, &OutputArgs, bool),
     load: &dyn Fn(&std::path::Path) -> Result<crate::calibrate::Calibration>,
     emit: &mut dyn FnMut(&[u8]) -> Result<()>,
 ) -> Result<Vec<String>> {
     let (j1, j2) = (scan.geometry.j1(), scan.geometry.j2());
-    let run = resolve_with(scoring, output, load, (j1, j2), (scan.rows, scan.cols))?;
+    let mut run = resolve_with(scoring, output, load, (j1, j2), (scan.rows, scan.cols))?;
+    if from_flash {
+        run.settings.sources = [cvm_core::settings::Source::Flash; cvm_core::settings::KEYS];
+        run.settings.store = cvm_core::settings::Store::Loaded;
+    }
     // Every sample is checked before the first line goes out.
     scan.validate(true)?;
     stream_mapped(&run.scorer, run.settings, scan, emit)?;
@@ -139,8 +150,7 @@ pub fn run(args: &StreamArgs) -> Result<()> {
     let scan = ScanFile::open(&args.scan)?;
     let warnings = stream_with(
         &scan,
-        &args.scoring,
-        &args.output,
+        (&args.scoring, &args.output, args.from_flash),
         &|path| crate::calibrate::Calibration::load(path),
         &mut |bytes| crate::out::stdout(bytes),
     )?;

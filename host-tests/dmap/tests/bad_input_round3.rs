@@ -110,7 +110,7 @@ fn elf_for(scan: &Path) -> PathBuf {
     let parsed = <Emulate as clap::Parser>::try_parse_from(["emulate", s(scan)]).unwrap();
     let (file, _) = dmap::emulate::scan_file_and_warnings(&parsed.args).unwrap();
     let header = cvm_fw_app::emufile::ScanHeader::parse(&file).unwrap();
-    dmap::twin::build_elf(&dmap::twin::h743_config(&header).unwrap()).unwrap()
+    dmap::twin::build_elf(&dmap::twin::h743_build_config(&header).unwrap()).unwrap()
 }
 
 fn twin(args: &[&str]) -> Output {
@@ -286,16 +286,16 @@ fn no_build_outlives_dmap_on_sigterm_sigint_or_sighup() {
     let dir = tempfile::tempdir().unwrap();
     let scan = scan(dir.path());
     for sig in [libc::SIGTERM, libc::SIGINT, libc::SIGHUP] {
-        // A threshold no other run uses: a configuration not built yet, so
-        // that cargo is building when the signal comes.
+        // A full scale no other run uses: a compile-time configuration not
+        // built yet, so that cargo is building when the signal comes.
         let nanos = std::time::SystemTime::now()
             .duration_since(std::time::UNIX_EPOCH)
             .unwrap()
             .subsec_nanos();
-        let thr = format!("0.4{nanos:09}");
+        let fs = (60_000 + nanos % 5_000).to_string();
         let mark = format!("DMAP_ORPHAN_MARK={}-{sig}-{nanos}", std::process::id());
         let (key, value) = mark.split_once('=').unwrap();
-        let child = dmap_cmd(&["twin", s(&scan), "--threshold", &thr])
+        let child = dmap_cmd(&["twin", s(&scan), "--full-scale", &fs])
             .env(key, value)
             .stdout(Stdio::null())
             .stderr(Stdio::null())

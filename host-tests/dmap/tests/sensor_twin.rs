@@ -72,7 +72,7 @@ fn a_set_during_a_scan_shows_in_the_next_header() {
     let (first, second) = (&headers[0], &headers[1]);
     let o1 = first.origin.unwrap();
     let o2 = second.origin.unwrap();
-    assert_eq!(o1.sources, [Source::Default; Key::ALL.len()]);
+    assert_eq!(o1.sources, [Source::Flash; Key::ALL.len()]);
     assert_eq!((o1.rows, o2.rows), (2, 2));
     assert_ne!(first.threshold, 100);
     assert_ne!(first.power_threshold, 5000);
@@ -81,7 +81,7 @@ fn a_set_during_a_scan_shows_in_the_next_header() {
         let want = if matches!(k, Key::Threshold | Key::PowerThreshold) {
             Source::Changed
         } else {
-            Source::Default
+            Source::Flash
         };
         assert_eq!(o2.sources[k.index()], want, "{}: {stdout}", k.name());
     }
@@ -122,7 +122,7 @@ fn a_set_during_a_scan_shows_in_the_next_header() {
     assert_eq!(
         thr,
         [
-            (first_thr, Source::Default),
+            (first_thr, Source::Flash),
             (100, Source::Changed),
             (100, Source::Changed)
         ]

@@ -200,3 +200,36 @@ fn the_emulated_board_carries_the_scan_file_keys_and_refuses_the_others() {
         "the verdict's and the outputs' settings",
     );
 }
+
+/// The chip model's board takes every key through its settings record:
+/// the verdict's and the outputs' settings too, and its bytes are `dmap
+/// stream --from-flash`'s with the same `--set`.
+#[test]
+fn the_h743_takes_every_key_through_its_settings_record() {
+    let p = scan();
+    let sets = [
+        "--threshold",
+        "0.05",
+        "--set",
+        "dcap=65535",
+        "--set",
+        "dcap=5",
+        "--set",
+        "area=4",
+        "--set",
+        "pulse=300",
+        "--set",
+        "mode=row",
+    ];
+    let host = dmap_ok(&[&["stream", s(&p), "--from-flash"][..], &sets].concat()).stdout;
+    let board = dmap_ok(&[&["twin", s(&p)][..], &sets].concat()).stdout;
+    assert_eq!(
+        String::from_utf8_lossy(&board),
+        String::from_utf8_lossy(&host)
+    );
+    let text = String::from_utf8_lossy(&host).to_string();
+    assert!(
+        text.contains(",dcap=5,") && text.contains(",src=ffff"),
+        "{text}"
+    );
+}

@@ -90,6 +90,9 @@ fn threshold_zero_defects_have_full_strength_and_decode_cleanly() {
         // The chip model for the distance channel (one more build; the
         // power channel's strength is the same function).
         if channel[0] == "--threshold" {
+            // Its firmware boots with the run's settings saved in flash,
+            // and its header says so.
+            let host = dmap(&[&["stream", "--from-flash"], &args[..]].concat());
             let chip = dmap(&[&["twin"], &args[..]].concat());
             assert!(
                 host == chip,

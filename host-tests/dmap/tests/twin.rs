@@ -97,7 +97,7 @@ fn compare_twin(j1: usize, j2: usize, opts: &[&str], twin_opts: &[&str]) {
     let scan = dir.path().join("scan.npy");
     write_scan(&scan, j1, j2, (j1 * 100 + j2) as u64);
     let scan = scan.to_str().unwrap();
-    let stream_args = [&["stream", scan], opts].concat();
+    let stream_args = [&["stream", scan, "--from-flash"], opts].concat();
     let host = dmap(&stream_args);
     ok(&stream_args, &host);
     let twin_args = [&["twin", scan], opts, twin_opts].concat();
@@ -567,7 +567,14 @@ fn twin_firmware_with_a_compiled_in_calibration_file() {
     );
     let args = ["calibrate", refs, "-o", cal];
     ok(&args, &dmap(&args));
-    let args = ["stream", scan, "--scores", "--calibration", cal];
+    let args = [
+        "stream",
+        scan,
+        "--from-flash",
+        "--scores",
+        "--calibration",
+        cal,
+    ];
     let host = dmap(&args);
     ok(&args, &host);
 

@@ -12,7 +12,7 @@ use crate::common;
 use common::dmap_ok as dmap;
 use common::{counters, crc16_bitwise, framed};
 use cvm_core::command::{Key, Refusal, Reply, Source, parse_reply};
-use dmap::twin_requests::write_requests;
+use dmap::twin::requests::write_requests;
 use std::path::Path;
 
 /// A scan of noise with one bright blob (an object) in row 1.
@@ -49,7 +49,7 @@ type Burst = (u64, Vec<u8>, Option<&'static str>);
 fn run(scan: &Path, opts: &[&str], beam_us: &str, bursts: &[Burst], want: &[Want]) {
     let dir = scan.parent().unwrap();
     let scan_s = scan.to_str().unwrap();
-    let host = dmap(&[&["stream", scan_s][..], opts].concat());
+    let host = dmap(&[&["stream", scan_s, "--from-flash"][..], opts].concat());
     let req = dir.join("requests.txt");
     let refs: Vec<(u64, &[u8])> = bursts.iter().map(|(b, v, _)| (*b, &v[..])).collect();
     write_requests(&req, &refs).unwrap();
@@ -115,7 +115,7 @@ fn run(scan: &Path, opts: &[&str], beam_us: &str, bursts: &[Burst], want: &[Want
                     let Reply::Value { key, source, .. } = r else {
                         panic!("{r:?}")
                     };
-                    assert_eq!((key, source), (k, Source::Default));
+                    assert_eq!((key, source), (k, Source::Flash));
                 }
             }
             Want::Refused(rid, why) => {
@@ -150,7 +150,7 @@ fn flood(n: u32, every: u64, thr: u32) -> (Vec<Burst>, Vec<Want>) {
         // Keys whose value does not depend on the scan's size.
         let k = [Key::Threshold, Key::Scores, Key::DefectCap, Key::RejectMode][id as usize % 4];
         bursts.push((beam, framed(&format!("C,{id},get,{}", k.name())), None));
-        want.push(Want::Value(k, defaults(k), Source::Default));
+        want.push(Want::Value(k, defaults(k), Source::Flash));
     }
     (bursts, want)
 }
@@ -353,7 +353,7 @@ fn requests_beyond_the_links_capacity_are_refused_as_overruns_and_cost_no_beam()
     common::blob_scan(&scan, 50, 40, 15, 11);
     let opts = ["--threshold", "0.05"];
     let scan_s = scan.to_str().unwrap();
-    let host = dmap(&[&["stream", scan_s][..], &opts].concat());
+    let host = dmap(&[&["stream", scan_s, "--from-flash"][..], &opts].concat());
     let burst: Vec<u8> = (1..=300u32)
         .flat_map(|id| framed(&format!("C,{id},status")))
         .collect();

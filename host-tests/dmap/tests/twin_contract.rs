@@ -9,7 +9,7 @@ use crate::common;
 use common::dmap_ok as dmap;
 use common::{counters, framed};
 use cvm_core::command::{Key, Refusal, Reply, Source, parse_reply};
-use dmap::twin_requests::write_requests;
+use dmap::twin::requests::write_requests;
 
 /// Every line of the twin's output: replies decoded, result lines checked.
 fn lines(out: &[u8]) -> Vec<Result<(Option<u32>, Reply<'_>), String>> {
@@ -27,7 +27,7 @@ fn leading_zeros_an_empty_crlf_line_and_a_request_after_an_overrun_are_answered(
     common::blob_scan(&scan, 30, 12, 9, 5);
     let scan_s = scan.to_str().unwrap();
     let opts = ["--threshold", "0.05"];
-    let host = dmap(&[&["stream", scan_s][..], &opts].concat());
+    let host = dmap(&[&["stream", scan_s, "--from-flash"][..], &opts].concat());
     let thr: u32 = String::from_utf8_lossy(&host.stdout)
         .split(',')
         .find_map(|f| f.strip_prefix("thr="))
@@ -71,7 +71,7 @@ fn leading_zeros_an_empty_crlf_line_and_a_request_after_an_overrun_are_answered(
     assert_eq!(
         got,
         vec![
-            (Some(1), value(Key::Threshold, thr, Source::Default)),
+            (Some(1), value(Key::Threshold, thr, Source::Flash)),
             (Some(2), value(Key::DefectCap, 2, Source::Changed)),
             (None, Reply::Refused(Refusal::Overrun)),
             (Some(4), value(Key::DefectCap, 2, Source::Changed)),

@@ -681,7 +681,7 @@ fn an_overrun_costs_the_line_after_the_fifos_bytes_not_the_fifos() {
     let mut both = first.clone();
     both.extend(framed(2, &Request::Get(Key::Threshold)));
     let req = dir.path().join("requests.txt");
-    dmap::twin_requests::write_requests(&req, &[(5, &both)]).unwrap();
+    dmap::twin::requests::write_requests(&req, &[(5, &both)]).unwrap();
     let p = |x: &Path| x.to_str().unwrap().to_string();
     let twin = common::dmap_ok(&[
         "twin",

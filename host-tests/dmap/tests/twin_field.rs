@@ -16,7 +16,7 @@ use cvm_core::command::{Key, Reply, parse_reply};
 use cvm_core::protocol::{self, Line};
 use cvm_core::settings::Source;
 use dmap::npy::{read_scan, write_scan_u16};
-use dmap::twin_requests::write_requests;
+use dmap::twin::requests::write_requests;
 use std::path::{Path, PathBuf};
 
 /// Rows and columns of one part: a window of the prototype preset.
@@ -89,7 +89,14 @@ fn scans(out: &[u8]) -> (Vec<String>, Vec<Vec<String>>) {
 
 /// `dmap stream` of one part with extra options, as lines.
 fn stream(part: &Path, extra: &[&str]) -> Vec<String> {
-    let out = dmap(&[&["stream", part.to_str().unwrap()][..], &OPTS, extra].concat());
+    let out = dmap(
+        &[
+            &["stream", part.to_str().unwrap(), "--from-flash"][..],
+            &OPTS,
+            extra,
+        ]
+        .concat(),
+    );
     String::from_utf8_lossy(&out.stdout)
         .lines()
         .map(String::from)
@@ -147,7 +154,7 @@ fn a_changed_setting_takes_effect_when_the_next_scan_starts() {
     // The first scan went on with the settings it began with.
     assert_eq!(got[0], first, "the change reached the scan under way");
     // The second scan: the new values, sourced `c`, everything else
-    // the compiled default, and otherwise `dmap stream`'s lines at that
+    // as loaded from flash at start-up (`f`), and otherwise `dmap stream`'s lines at that
     // threshold (a threshold in units that converts back to `half`).
     let units = format!("{:e}", f64::from(half) * 2f64.powi(-q));
     let want = stream(
@@ -162,7 +169,7 @@ fn a_changed_setting_takes_effect_when_the_next_scan_starts() {
         let want_src = if changed {
             Source::Changed
         } else {
-            Source::Default
+            Source::Flash
         };
         assert_eq!(origin.sources[k.index()], want_src, "{}", k.name());
     }
@@ -271,7 +278,7 @@ fn calibrate_5_for_a_target_rate_on_the_board_equals_dmap_calibrate_and_scores_t
         let want_src = if calibrated {
             Source::Changed
         } else {
-            Source::Default
+            Source::Flash
         };
         assert_eq!(origin.sources[k.index()], want_src, "{}", k.name());
     }

@@ -53,7 +53,7 @@ fn elf_9x9(dir: &Path) -> PathBuf {
         <Emulate as clap::Parser>::try_parse_from(["emulate"].into_iter().chain(cli)).unwrap();
     let (file, _) = dmap::emulate::scan_file_and_warnings(&parsed.args).unwrap();
     let header = cvm_fw_app::emufile::ScanHeader::parse(&file).unwrap();
-    dmap::twin::build_elf(&dmap::twin::h743_config(&header).unwrap()).unwrap()
+    dmap::twin::build_elf(&dmap::twin::h743_build_config(&header).unwrap()).unwrap()
 }
 
 #[test]
@@ -68,22 +68,6 @@ fn an_elf_built_for_another_run_is_refused_naming_the_field() {
         &twin(&scan7, &["--elf", e]),
         "built for j1=9, this run has j1=7",
     );
-    one_line_error(
-        "threshold",
-        &Command::new(env!("CARGO_BIN_EXE_dmap"))
-            .args([
-                "twin",
-                scan9.to_str().unwrap(),
-                "--scores",
-                "--threshold",
-                "0.5",
-                "--elf",
-                e,
-            ])
-            .output()
-            .unwrap(),
-        "thr=838861, this run has thr=8388608",
-    );
     let wider = dir.path().join("wider.npy");
     common::spot_scan(&wider, 6, 13, 9, 909);
     one_line_error(
@@ -91,19 +75,29 @@ fn an_elf_built_for_another_run_is_refused_naming_the_field() {
         &twin(&wider, &["--elf", e]),
         "cols=12, this run has cols=13",
     );
-    // Without --scores the build's score lines would appear unasked.
-    let out = Command::new(env!("CARGO_BIN_EXE_dmap"))
-        .args([
-            "twin",
-            scan9.to_str().unwrap(),
-            "--threshold",
-            "0.05",
-            "--elf",
-            e,
-        ])
-        .output()
-        .unwrap();
-    one_line_error("scores", &out, "scores=1, this run has scores=0");
+    // The run's settings come from its settings record: another
+    // threshold and no score lines run on the same ELF, as on a board,
+    // and print `dmap stream --from-flash`'s bytes.
+    let scan9 = scan9.to_str().unwrap();
+    let out = common::dmap_ok(&["twin", scan9, "--elf", e, "--threshold", "0.5"]);
+    let host = common::dmap_ok(&["stream", scan9, "--from-flash", "--threshold", "0.5"]);
+    assert!(
+        out.stdout == host.stdout,
+        "--- stream\n{}\n--- twin\n{}",
+        String::from_utf8_lossy(&host.stdout),
+        String::from_utf8_lossy(&out.stdout)
+    );
+    // With --flash the settings are compiled in, so every field counts:
+    // this ELF has the build's default rows.
+    let flash = dir.path().join("bank2.bin");
+    one_line_error(
+        "rows",
+        &twin(
+            Path::new(scan9),
+            &["--elf", e, "--flash", flash.to_str().unwrap()],
+        ),
+        "built for rows=200, this run has rows=6",
+    );
 }
 
 #[test]

@@ -27,11 +27,11 @@ fn counters(stderr: &[u8]) -> serde_json::Value {
 /// asserted (lit) high, REJECT low (docs/firmware.md, "Fail-safe").
 fn asserted(pin: &str, level: &serde_json::Value) -> bool {
     let high = matches!(
-        dmap::twin_pins::Level::from_json(level),
-        Some(dmap::twin_pins::Level::High)
+        dmap::twin::pins::Level::from_json(level),
+        Some(dmap::twin::pins::Level::High)
     );
     assert!(
-        dmap::twin_pins::Level::from_json(level).is_some(),
+        dmap::twin::pins::Level::from_json(level).is_some(),
         "level {level}"
     );
     if pin == "REJECT" { !high } else { high }
@@ -89,7 +89,7 @@ fn csv_changes(csv: &str, pin: &str) -> Vec<Vec<String>> {
 
 /// The verdicts of the end lines, in order.
 fn verdicts(stdout: &[u8]) -> Vec<String> {
-    dmap::twin_pins::verdicts(stdout)
+    dmap::twin::pins::verdicts(stdout)
 }
 
 const J: usize = 3;
@@ -294,7 +294,14 @@ fn s(p: &Path) -> String {
 fn demo_part_is_rejected_at_the_scans_end() {
     let dir = tempfile::tempdir().unwrap();
     let scan = common::demo_scan(dir.path());
-    let host = dmap(&["stream", &s(&scan), "--scores", "--threshold", "0.5"]);
+    let host = dmap(&[
+        "stream",
+        &s(&scan),
+        "--from-flash",
+        "--scores",
+        "--threshold",
+        "0.5",
+    ]);
     let pins = dir.path().join("pins.csv");
     let twin = dmap(&[
         "twin",

@@ -380,7 +380,7 @@ fn save_requests(tag: &str, sets: &[String]) -> std::path::PathBuf {
     }
     bytes.extend(framed(&format!("C,{},save", sets.len() + 1)));
     let path = tmp_in(tag, "requests.txt");
-    dmap::twin_requests::write_requests(&path, &[(5, &bytes)]).unwrap();
+    dmap::twin::requests::write_requests(&path, &[(5, &bytes)]).unwrap();
     path
 }
 

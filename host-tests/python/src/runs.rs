@@ -139,11 +139,15 @@ pub fn stream<'py>(
         .detach(|| {
             let scan = view.open()?;
             let mut lines = Vec::new();
-            let w =
-                dmap::stream::stream_with(&scan, &args.scoring, &args.output, &load, &mut |b| {
+            let w = dmap::stream::stream_with(
+                &scan,
+                (&args.scoring, &args.output, args.from_flash),
+                &load,
+                &mut |b| {
                     lines.extend_from_slice(b);
                     Ok(())
-                })?;
+                },
+            )?;
             anyhow::Ok((lines, w))
         })
         .map_err(value_error)?;

@@ -306,7 +306,7 @@ fn twin(args: &ConsoleArgs, note: Arc<dyn Fn(String) + Send + Sync>) -> Result<O
                 r
             });
             let mut a = base.clone();
-            a.link.live = crate::twin_requests::LiveRequests::new(rx);
+            a.link.live = crate::twin::requests::LiveRequests::new(rx);
             let sent = crate::twin::run_to(&a, &mut |b| {
                 tx.send(b.to_vec())
                     .map_err(|_| anyhow::anyhow!("the console stopped"))

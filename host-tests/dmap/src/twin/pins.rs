@@ -17,36 +17,67 @@ pub struct PinArgs {
     /// first)
     #[arg(long = "pins", value_name = "FILE")]
     pub pins: Option<PathBuf>,
-    /// REJECT's mode in the firmware built: part (at the scan's end) or
-    /// row (a pulse per object, after the row that closes it)
-    #[arg(long, value_name = "MODE", default_value = "part", value_parser = ["part", "row"])]
-    pub reject: String,
-    /// REJECT's pulse width in µs (0: held until the next scan; row mode needs one)
-    #[arg(long, value_name = "US", default_value_t = 0)]
-    pub pulse_us: u32,
-    /// Row mode: rows between the row that closes an object and its pulse
-    #[arg(long, value_name = "ROWS", default_value_t = 0)]
-    pub row_delay: u32,
+    /// REJECT's mode, the setting `mode` (`--set mode=` the same): part (at the scan's end)
+    /// or row (a pulse per object, after the row that closes it)
+    #[arg(long, value_name = "MODE", value_parser = ["part", "row"])]
+    pub reject: Option<String>,
+    /// REJECT's pulse width in µs, the setting `pulse` (0: held until the next scan; row mode
+    /// needs one)
+    #[arg(long, value_name = "US")]
+    pub pulse_us: Option<u32>,
+    /// Row mode: rows between the row that closes an object and its pulse, the setting `delay`
+    #[arg(long, value_name = "ROWS")]
+    pub row_delay: Option<u32>,
 }
 
 impl PinArgs {
-    /// The `CVM_H743_SCAN` keys of the outputs (none for the defaults, so
-    /// that the default build stays the one cached).
-    pub fn build_keys(&self) -> anyhow::Result<String> {
-        if self.reject == "row" && self.pulse_us == 0 {
-            anyhow::bail!("--reject row needs --pulse-us");
+    /// Puts the outputs' options that were given into `s` (after `--set`),
+    /// checked as the H743 board checks them: a pulse fits TIM14's 16 bits
+    /// of µs, and row mode needs a pulse.
+    pub fn apply(&self, s: &mut cvm_core::Settings) -> Result<()> {
+        use cvm_core::settings::RejectMode;
+        if let Some(mode) = &self.reject {
+            s.outputs.reject_mode = if mode == "row" {
+                RejectMode::Row
+            } else {
+                RejectMode::Part
+            };
         }
-        if self.pulse_us > 65_536 {
+        if let Some(us) = self.pulse_us {
+            s.outputs.pulse_us = us;
+        }
+        if let Some(rows) = self.row_delay {
+            s.outputs.row_delay = rows;
+        }
+        if s.outputs.pulse_us > 65_536 {
             anyhow::bail!("--pulse-us: at most 65536 (TIM14 counts 16 bits of µs)");
         }
-        if self.reject == "part" && self.pulse_us == 0 && self.row_delay == 0 {
-            return Ok(String::new());
+        if cvm_core::command::conflict(s) {
+            anyhow::bail!("--reject row needs --pulse-us");
         }
-        Ok(format!(
-            " mode={} pulse={} delay={}",
-            self.reject, self.pulse_us, self.row_delay
-        ))
+        Ok(())
     }
+}
+
+/// The `CVM_H743_SCAN` keys of the verdict's and the outputs' settings in
+/// `s` that differ from their defaults (none for the defaults, so that the
+/// default build stays the one cached), by their names on the wire.
+pub fn build_keys(s: &cvm_core::Settings) -> String {
+    use cvm_core::command::{Key, Kind};
+    let mut default = *s;
+    default.outputs = cvm_core::Outputs::DEFAULT;
+    let mut keys = String::new();
+    for key in Key::ALL {
+        let v = key.get(s);
+        if v != key.get(&default) {
+            let value = match key.kind() {
+                Kind::Choice(words) => words[(v != 0) as usize].to_string(),
+                _ => v.to_string(),
+            };
+            keys += &format!(" {}={value}", key.name());
+        }
+    }
+    keys
 }
 
 /// A pin's level as the chip model records it: driven low, driven high,

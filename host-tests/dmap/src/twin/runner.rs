@@ -14,7 +14,7 @@
 //!   is reused while it is newer than every firmware source. `--elf` skips
 //!   the build; the ELF's `.cvm_config` section (written by build.rs) must
 //!   then agree with the run's configuration field by field
-//!   ([`crate::twin_checks::check_built_for`]), and a damaged ELF is refused
+//!   ([`crate::twin::checks::check_built_for`]), and a damaged ELF is refused
 //!   before the model starts ([`crate::elf::read`]).
 //! * The model (`python3 -m h743twin`) reads the scan in its own format,
 //!   written to a temporary file; its standard output (the bytes the
@@ -34,15 +34,14 @@ use crate::fmt::fmt_num;
 use crate::npy::read_scan;
 use crate::options::{OutputArgs, ScoringArgs};
 use crate::settings::resolve;
-use crate::twin_checks::{check_built_for, check_fault, check_model_time};
+use crate::twin::checks::{check_built_for, check_fault, check_model_time};
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use cvm_core::{Kernels, Weights};
 use cvm_fw_app::emufile::{HEADER_LEN, ScanHeader};
 use std::io::{BufRead, BufReader, Read, Write};
 use std::path::{Path, PathBuf};
-use std::process::{Child, ChildStderr, ChildStdout, Command, ExitStatus, Stdio};
-use std::sync::{Arc, Mutex};
+use std::process::{ChildStderr, Command, Stdio};
 use std::time::SystemTime;
 
 const FAULTS_HELP: &str = "\
@@ -108,16 +107,21 @@ pub struct TwinArgs {
           value_parser = clap::value_parser!(u32).range(1..=1000))]
     pub parts: u32,
     #[command(flatten)]
-    pub link: crate::twin_requests::TwinRequestArgs,
+    pub link: crate::twin::requests::TwinRequestArgs,
     #[command(flatten)]
-    pub pins: crate::twin_pins::PinArgs,
+    pub pins: crate::twin::pins::PinArgs,
     #[command(flatten)]
     pub repo: crate::repo::RepoArgs,
 }
 
-/// The `CVM_H743_SCAN` value that builds the H743 firmware for the
-/// configuration of an emulated-board scan header (see the root `build.rs`).
-pub fn h743_config(h: &ScanHeader) -> Result<String> {
+/// The compile-time part of the `CVM_H743_SCAN` value that builds the
+/// H743 firmware for an emulated-board scan header (see the root
+/// `build.rs`): what the firmware's tables and buffers are built for
+/// (geometry, columns, kernels, weights, normalisation, full scale) and
+/// the version it announces. One ELF serves every run of such a scan;
+/// the rest reaches the firmware as a settings record
+/// ([`crate::twin::record`]).
+pub fn h743_build_config(h: &ScanHeader) -> Result<String> {
     let g = h.config.geometry;
     let (kernels, b) = match h.config.kernels {
         Kernels::Paper { bmax } => ("paper", bmax),
@@ -139,19 +143,25 @@ pub fn h743_config(h: &ScanHeader) -> Result<String> {
         })
         .context("the firmware version of the scan header is not a plain ASCII word")?;
     // The version the host announces, so that the header compares byte for
-    // byte with `dmap stream`'s. The thresholds as the settings `thr`,
-    // `pthr` and `sthr`: integers, converted as the firmware converts the
-    // scan file's units.
+    // byte with `dmap stream`'s.
+    Ok(format!(
+        "j1={} j2={} cols={} kernels={kernels} b={b} weights={weights} normalise={} fs={} fw={fw}",
+        g.j1, g.j2, h.cols, h.config.normalise, h.config.full_scale,
+    ))
+}
+
+/// The whole `CVM_H743_SCAN` value for an emulated-board scan header:
+/// [`h743_build_config`] and the scan's settings compiled in (rows, and the
+/// settings `thr`, `pthr`, `sthr`, `scores`, `dcap` as integers, converted
+/// as the firmware converts the scan file's units), for a run whose bank 2
+/// is the user's (`--flash`).
+pub fn h743_config(h: &ScanHeader) -> Result<String> {
     let scorer = cvm_core::Scorer::new(&h.config)
         .map_err(|e| anyhow::anyhow!("the scan's configuration: {e:?}"))?;
     Ok(format!(
-        "j1={} j2={} cols={} rows={} kernels={kernels} b={b} weights={weights} normalise={} fs={} fw={fw} thr={} pthr={} sthr={} scores={} dcap={}",
-        g.j1,
-        g.j2,
-        h.cols,
+        "{} rows={} thr={} pthr={} sthr={} scores={} dcap={}",
+        h743_build_config(h)?,
         h.rows,
-        h.config.normalise,
-        h.config.full_scale,
         scorer.threshold_from_units(h.threshold_units),
         cvm_core::power::threshold_from_units(h.power_threshold_units),
         cvm_core::spread::threshold_from_units(h.spread_threshold_units),
@@ -285,107 +295,6 @@ pub fn build_elf_in(root: &Path, config: &str) -> Result<PathBuf> {
     Ok(elf)
 }
 
-/// The model's process and the directory of its scan file. Dropping it
-/// kills the model if it still runs, reaps it, and only then removes the
-/// directory (fields drop after `drop`).
-struct Running {
-    child: Child,
-    _dir: tempfile::TempDir,
-}
-
-impl Drop for Running {
-    fn drop(&mut self) {
-        if let Ok(None) = self.child.try_wait() {
-            let _ = self.child.kill();
-        }
-        let _ = self.child.wait();
-    }
-}
-
-type Shared = Arc<Mutex<Option<Running>>>;
-
-fn lock(shared: &Shared) -> std::sync::MutexGuard<'_, Option<Running>> {
-    shared.lock().unwrap_or_else(|e| e.into_inner())
-}
-
-/// The model under supervision: whoever takes the child out of `shared`
-/// (this on drop, or the signal thread on SIGINT, SIGTERM or SIGHUP) ends
-/// it.
-struct Supervised {
-    shared: Shared,
-    signals: signal_hook::iterator::Handle,
-}
-
-impl Supervised {
-    /// Installs the signal thread, then starts `cmd` with piped standard
-    /// output and error.
-    fn spawn(
-        cmd: &mut Command,
-        dir: tempfile::TempDir,
-        live: &crate::twin_requests::LiveRequests,
-    ) -> Result<(Supervised, ChildStdout, ChildStderr)> {
-        use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
-        let shared: Shared = Arc::new(Mutex::new(None));
-        let mut signals = signal_hook::iterator::Signals::new([SIGINT, SIGTERM, SIGHUP])
-            .context("installing signal handlers")?;
-        let me = Supervised {
-            shared: shared.clone(),
-            signals: signals.handle(),
-        };
-        std::thread::spawn(move || {
-            if let Some(sig) = signals.forever().next() {
-                drop(lock(&shared).take());
-                let _ = signal_hook::low_level::emulate_default_handler(sig);
-                std::process::exit(128 + sig);
-            }
-        });
-        // Held from before the spawn until the child is in it, so that a
-        // signal in between finds the child to end.
-        let mut slot = lock(&me.shared);
-        let child = crate::child::dies_with_parent(cmd)
-            .stdin(if live.is_live() {
-                Stdio::piped()
-            } else {
-                Stdio::null()
-            })
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .context("starting python3 (the chip model needs python3 with unicorn and pyelftools: scripts/setup.sh)")?;
-        let running = slot.insert(Running { child, _dir: dir });
-        if let Some(stdin) = running.child.stdin.take() {
-            live.forward(stdin);
-        }
-        let pipes = (running.child.stdout.take(), running.child.stderr.take());
-        drop(slot);
-        let (Some(stdout), Some(stderr)) = pipes else {
-            bail!("the chip model's output pipes are missing");
-        };
-        Ok((me, stdout, stderr))
-    }
-
-    /// Waits for the model's exit status without holding the child away
-    /// from the signal thread.
-    fn wait(&self) -> Result<ExitStatus> {
-        loop {
-            if let Some(r) = lock(&self.shared).as_mut()
-                && let Some(status) = r.child.try_wait().context("waiting for the chip model")?
-            {
-                return Ok(status);
-            }
-            // Gone: taken by the signal thread, which ends the process.
-            std::thread::sleep(std::time::Duration::from_millis(5));
-        }
-    }
-}
-
-impl Drop for Supervised {
-    fn drop(&mut self) {
-        drop(lock(&self.shared).take());
-        self.signals.close();
-    }
-}
-
 /// Passes the model's standard error through as it comes, except its last
 /// non-empty line (the JSON counters), which it returns unprinted so that
 /// `dmap` can put its own messages before it.
@@ -450,7 +359,27 @@ pub fn run_model(
         cmd.arg("--debugger");
     }
     args.link.apply(&mut cmd);
-    let (model, mut stdout, stderr) = Supervised::spawn(&mut cmd, dir, &args.link.live)?;
+    // Killed and reaped on every way out, before its scan file is removed.
+    let live = &args.link.live;
+    cmd.stdin(if live.is_live() {
+        Stdio::piped()
+    } else {
+        Stdio::null()
+    })
+    .stdout(Stdio::piped())
+    .stderr(Stdio::piped());
+    let model = crate::child::Supervised::spawn(&mut cmd, dir).context(
+        "starting python3 (the chip model needs python3 with unicorn and pyelftools: scripts/setup.sh)",
+    )?;
+    let pipes = model
+        .with_child(|c| (c.stdin.take(), c.stdout.take(), c.stderr.take()))
+        .unwrap_or_default();
+    if let Some(stdin) = pipes.0 {
+        live.forward(stdin);
+    }
+    let (Some(mut stdout), Some(stderr)) = (pipes.1, pipes.2) else {
+        bail!("the chip model's output pipes are missing");
+    };
     let errors = pass_stderr(stderr);
     let mut buf = [0u8; 8192];
     loop {
@@ -462,7 +391,7 @@ pub fn run_model(
         };
         out(&buf[..n])?;
     }
-    let status = model.wait()?;
+    let status = model.wait().context("waiting for the chip model")?;
     drop(model);
     let last = errors.join().unwrap_or_default();
     let json: Option<serde_json::Value> = serde_json::from_str(&last)
@@ -582,7 +511,20 @@ pub fn run_to(args: &TwinArgs, out: &mut dyn FnMut(&[u8]) -> Result<()>) -> Resu
         rows: header.rows / args.parts,
         ..header
     };
-    let config = h743_config(&part)? + &args.pins.build_keys()?;
+    let mut settings = run.settings;
+    args.pins.apply(&mut settings)?;
+    // The settings reach the firmware as a user's board holds them: in a
+    // settings record in bank 2, for one ELF per compile-time
+    // configuration. When bank 2 is the user's (`--flash`), they are
+    // compiled in instead.
+    let record = match &args.link.flash {
+        Some(_) => None,
+        None => Some(crate::twin::record::settings_record(&settings, &part)?),
+    };
+    let config = match &record {
+        Some(_) => h743_build_config(&part)?,
+        None => h743_config(&part)? + &crate::twin::pins::build_keys(&settings),
+    };
     let file = twin_file(&header, &emufile)?;
     drop(emufile);
     for w in &warnings {
@@ -603,10 +545,16 @@ pub fn run_to(args: &TwinArgs, out: &mut dyn FnMut(&[u8]) -> Result<()>) -> Resu
     std::fs::write(&scan_path, &file)
         .with_context(|| format!("writing {}", scan_path.display()))?;
     let planned = args.link.planned(beams)?;
+    let mut link =
+        args.link
+            .for_model(&planned, requests.as_deref(), dir.path(), flash.as_ref())?;
+    if let Some(image) = &record {
+        let bank = dir.path().join("bank2.bin");
+        std::fs::write(&bank, image).with_context(|| format!("writing {}", bank.display()))?;
+        link.flash = Some(bank);
+    }
     let for_model = TwinArgs {
-        link: args
-            .link
-            .for_model(&planned, requests.as_deref(), dir.path(), flash.as_ref())?,
+        link,
         ..args.clone()
     };
     let mut uart = Vec::new();
@@ -619,7 +567,7 @@ pub fn run_to(args: &TwinArgs, out: &mut dyn FnMut(&[u8]) -> Result<()>) -> Resu
     let saved = flash.as_ref().map_or(Ok(()), |f| f.write_back());
     let (stats, line) = ran?;
     saved?;
-    crate::twin_pins::report(&args.pins, &stats, &uart)?;
+    crate::twin::pins::report(&args.pins, &stats, &uart)?;
     for l in crate::sensor::twin::summary(&planned, &uart) {
         let _ = writeln!(std::io::stderr(), "dmap: {l}");
     }
