@@ -244,10 +244,12 @@ async fn scan_task(syst: cortex_m::peripheral::SYST) {
         }
         log.lock(|a| a.borrow_mut().read_done(buf, true));
         beam += 1;
+        // The beam just read is the log's one record: steps until it is
+        // scored.
         loop {
             drain().await;
-            let stepped = stopwatch.time(|| runtime.step(&mut beams, &mut sink, &mut replies));
-            if stepped.is_none() {
+            stopwatch.time(|| runtime.step(&mut beams, &mut sink, &mut replies));
+            if !runtime.driver().busy() {
                 break;
             }
         }
