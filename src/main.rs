@@ -2,8 +2,9 @@
 //!
 //! One application, two boards. The board is a cargo feature: `h743`
 //! (NUCLEO-H743ZI2, default) or `emulated` (QEMU `mps2-an386`). Both feed
-//! the same `cvm_fw_app` sequencing and queueing logic and the same
-//! `cvm_core::Pipeline`; only the code that touches hardware differs.
+//! the same `cvm_fw_app` runtime (sequencing, queueing, the outputs'
+//! logic) and the same `cvm_core::Pipeline`; only the code that touches
+//! hardware differs.
 #![no_std]
 #![no_main]
 
@@ -17,8 +18,6 @@ compile_error!(
 );
 
 mod config;
-mod frames;
-mod sink;
 
 #[cfg(feature = "emulated")]
 mod emulated;

@@ -2,7 +2,7 @@
 //! board-independent: what each request does to the settings the next
 //! scan will use, what it answers, and what it asks the board to do
 //! (write flash, calibrate, restart). The board feeds it request lines
-//! and link errors and performs the effects; the scan driver picks up the
+//! and link errors and performs the effects; the runtime takes the
 //! settings between scans. Nothing here waits or touches hardware, so the
 //! whole protocol logic is tested on the host.
 //!
@@ -66,7 +66,8 @@ pub struct Control {
     geometry: (u8, u8),
     /// Flash holds a record of this firmware (loaded at start-up or saved).
     record: bool,
-    /// `next` differs from what the scan driver was last given.
+    /// `next` differs from what the runtime last took: the one flag
+    /// between the command channel and the scans.
     pending: bool,
     saving: bool,
     calibration: Option<CalibrationRun>,
@@ -143,8 +144,8 @@ impl Control {
         &self.counts
     }
 
-    /// The settings, when they changed since the last call: the scan
-    /// driver takes them and applies them when the next scan starts.
+    /// The settings, when they changed since the last call: the runtime
+    /// takes them when no scan is open and applies them at once.
     pub fn take_changed(&mut self) -> Option<Settings> {
         core::mem::take(&mut self.pending).then_some(self.next)
     }

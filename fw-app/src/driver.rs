@@ -49,10 +49,6 @@ pub struct ScanDriver<'a, const MAX_COLS: usize> {
     last: Option<(Totals, u32)>,
     /// Scans begun and finished since start-up (the outputs' clock).
     scans: (u32, u32),
-    /// Settings for the next scan, applied when no scan is open.
-    next: Option<Settings>,
-    /// Settings were applied since [`ScanDriver::take_applied`] was called.
-    applied: bool,
 }
 
 impl<'a, const MAX_COLS: usize> ScanDriver<'a, MAX_COLS> {
@@ -65,20 +61,7 @@ impl<'a, const MAX_COLS: usize> ScanDriver<'a, MAX_COLS> {
             dropped_at_begin: 0,
             last: None,
             scans: (0, 0),
-            next: None,
-            applied: false,
         }
-    }
-
-    /// The next scan (not the one open, if any) uses `s`.
-    pub fn request(&mut self, s: Settings) {
-        self.next = Some(s);
-    }
-
-    /// True once after requested settings were applied: the board's
-    /// outputs follow [`ScanDriver::settings`] from then on.
-    pub fn take_applied(&mut self) -> bool {
-        core::mem::take(&mut self.applied)
     }
 
     /// Lends `calibrator` to the pipeline (see
@@ -102,23 +85,26 @@ impl<'a, const MAX_COLS: usize> ScanDriver<'a, MAX_COLS> {
         self.pipeline.settings()
     }
 
-    /// Applies the requested settings if no scan is open and no record is
-    /// being expanded. Settings the pipeline
+    /// True when new settings can take effect: no scan is open, no beam
+    /// is held and no record is being expanded.
+    pub fn between_scans(&self) -> bool {
+        self.pending.is_none() && self.seq.between()
+    }
+
+    /// Scans from the next one on use `s`; only [`Self::between_scans`]
+    /// (false, and nothing changed, otherwise). Settings the pipeline
     /// refuses (columns beyond its buffers: the command channel's ranges
-    /// prevent it) are dropped, and the old ones stay.
-    fn apply_next(&mut self) {
-        let Some(s) = self.next else {
-            return;
-        };
+    /// prevent it) are dropped, and the old ones stay: true either way,
+    /// and [`Self::settings`] says which are in effect.
+    pub fn apply(&mut self, s: Settings) -> bool {
         if self.pending.is_some() || !self.seq.set_geometry(s.cols, s.rows) {
-            return;
+            return false;
         }
-        self.next = None;
         if self.pipeline.configure(s).is_err() {
             let old = self.pipeline.settings();
             self.seq.set_geometry(old.cols, old.rows);
         }
-        self.applied = true;
+        true
     }
 
     /// Where the scans stand, for the READY and REJECT outputs.
@@ -164,7 +150,6 @@ impl<'a, const MAX_COLS: usize> ScanDriver<'a, MAX_COLS> {
         sink: &mut S,
     ) -> bool {
         if self.pending.is_none() {
-            self.apply_next();
             self.pending = rec.map(|rec| Pending {
                 rec,
                 left: match rec {

@@ -28,7 +28,13 @@
 //! Dropped lines of both kinds add up in [`LineQueue::dropped`], which the
 //! end-of-scan line reports.
 
+use core::cell::RefCell;
+
 use cvm_core::protocol::{LineSink, Priority};
+use embassy_sync::blocking_mutex::Mutex;
+use embassy_sync::blocking_mutex::raw::RawMutex;
+
+use crate::driver::CountingSink;
 
 const LEN_BYTES: usize = 2;
 
@@ -182,5 +188,29 @@ fn copy(dst: &mut [u8], src: &[u8]) {
 impl<const CAP: usize> LineSink for LineQueue<CAP> {
     fn line(&mut self, line: &[u8], priority: Priority) {
         self.push(line, priority);
+    }
+}
+
+/// A queue as the board shares it between the task that fills it and the
+/// one that sends it.
+pub type SharedQueue<M, const N: usize> = Mutex<M, RefCell<LineQueue<N>>>;
+
+/// The line sink over a [`SharedQueue`]: each line goes into the queue.
+pub struct QueueSink<'q, M: RawMutex, const N: usize>(pub &'q SharedQueue<M, N>);
+
+impl<M: RawMutex, const N: usize> LineSink for QueueSink<'_, M, N> {
+    fn line(&mut self, line: &[u8], priority: Priority) {
+        // (Borrowed only inside the lock: cannot fail, no panic path.)
+        self.0.lock(|q| {
+            if let Ok(mut q) = q.try_borrow_mut() {
+                q.push(line, priority);
+            }
+        });
+    }
+}
+
+impl<M: RawMutex, const N: usize> CountingSink for QueueSink<'_, M, N> {
+    fn dropped(&self) -> u32 {
+        self.0.lock(|q| q.try_borrow().map_or(0, |q| q.dropped()))
     }
 }

@@ -177,6 +177,12 @@ impl<H: Copy> Sequencer<H> {
         true
     }
 
+    /// True when no scan is open and no beam awaits its verdict: the
+    /// geometry may change ([`Sequencer::set_geometry`]).
+    pub fn between(&self) -> bool {
+        matches!(self.state, State::Between)
+    }
+
     /// True while a frame is held back (rule 2): the caller must not reuse
     /// its buffer yet.
     pub fn holding(&self) -> bool {

@@ -5,9 +5,11 @@
 //! `Pipeline::push` (normalise → embed → window → gradient → decision →
 //! encode) or `mark_missing`, `begin` and `finish`, for paper and square
 //! kernels, normalised or raw, with a calibrator attached or not (armed,
-//! taking rows, and its result); and around it the scoring side's own
-//! bookkeeping: DRDY/buffer accounting, LINE_SYNC sequencing, the output
-//! queue. The panic handler calls `cvm_panic_path_reachable`, which no
+//! taking rows, and its result); and around it the scoring side's loop,
+//! `cvm_fw_app::runtime`: DRDY/buffer accounting, LINE_SYNC sequencing,
+//! the output queue, settings taken from the command channel's control
+//! between scans, READY and REJECT's logic and a scan's report to the
+//! control (a calibration's end and reply). The panic handler calls `cvm_panic_path_reachable`, which no
 //! object defines: after LTO and dead-code removal the link succeeds only
 //! if no panic call is left anywhere in the image.
 #![no_std]
@@ -16,6 +18,7 @@
 use core::hint::black_box;
 use core::panic::PanicInfo;
 
+use core::cell::RefCell;
 use cvm_core::Scorer;
 use cvm_core::calibration::{Calibrator, Rule};
 use cvm_core::config::{Config, Geometry, Kernels, MAX_J, Weights};
@@ -23,9 +26,18 @@ use cvm_core::pipeline::{Pipeline, Settings};
 use cvm_core::protocol::{LineSink, MAX_LINE, Priority};
 use cvm_core::scorer::MAX_FACTOR_WORDS;
 use cvm_core::stream::{Position, row_words};
-use cvm_fw_app::acquire::{Acquisition, BeamRecord};
-use cvm_fw_app::driver::{CountingSink, FrameStore, ScanDriver};
+
+use cvm_core::command::Capacity;
+use cvm_core::settings::{KEYS, Outputs, Store};
+use cvm_fw_app::acquire::Acquisition;
+use cvm_fw_app::control::Control;
+use cvm_fw_app::driver::{CountingSink, ScanDriver};
+use cvm_fw_app::frames::{Beams, SampleBuffers, SharedLog};
+use cvm_fw_app::outputs::{Asserted, Change};
 use cvm_fw_app::queue::LineQueue;
+use cvm_fw_app::runtime::Runtime;
+use embassy_sync::blocking_mutex::Mutex;
+use embassy_sync::blocking_mutex::raw::NoopRawMutex;
 
 unsafe extern "C" {
     /// Defined nowhere: a reference to it is a link error naming it.
@@ -78,6 +90,29 @@ static mut FACTORS: [i32; MAX_FACTOR_WORDS] = [0; MAX_FACTOR_WORDS];
 static mut QUEUE: LineQueue<8192> = LineQueue::new(4096);
 static mut BUS: [[u16; CELLS]; 2] = [[0; CELLS]; 2];
 static mut CALIBRATOR: Calibrator = Calibrator::new();
+static mut REPLIES: LineQueue<8192> = LineQueue::new(1024);
+/// The frame buffers the runtime reads through `frames::Beams`.
+static SAMPLES: SampleBuffers<2, CELLS> = SampleBuffers::new();
+
+const CAPACITY: Capacity = Capacity {
+    max_cols: MAX_COLS as u16,
+    max_rows: u16::MAX,
+    max_dcap: 16,
+    max_pulse_us: 1 << 16,
+};
+
+/// READY and REJECT, as the H743 writes them: opaque here.
+struct Pins;
+
+impl cvm_fw_app::runtime::Pins for Pins {
+    fn change(&mut self, change: Change) {
+        black_box(change);
+    }
+
+    fn configure(&mut self, settings: &Outputs, now: Asserted) {
+        black_box((settings, now));
+    }
+}
 
 /// The output queue as the line sink, as on the boards.
 struct Sink<'q>(&'q mut LineQueue<8192>);
@@ -91,22 +126,6 @@ impl LineSink for Sink<'_> {
 impl CountingSink for Sink<'_> {
     fn dropped(&self) -> u32 {
         self.0.dropped()
-    }
-}
-
-/// Frame buffers of samples, as both boards' acquisition fills them.
-struct Frames<'b> {
-    bus: &'b [[u16; CELLS]; 2],
-    cells: usize,
-}
-
-impl FrameStore for Frames<'_> {
-    fn frame(&mut self, buf: usize) -> Option<&[u16]> {
-        self.bus.get(buf)?.get(..self.cells)
-    }
-
-    fn release(&mut self, buf: usize) {
-        black_box(buf);
     }
 }
 
@@ -138,7 +157,7 @@ pub extern "C" fn _start() -> ! {
         store: cvm_core::settings::Store::Empty,
     };
     // SAFETY: `_start` runs once and is the only user of these statics.
-    let (row_a, row_b, near, queue, bus, calibrator) = unsafe {
+    let (row_a, row_b, near, queue, bus, calibrator, replies) = unsafe {
         (
             &mut *core::ptr::addr_of_mut!(ROW_A),
             &mut *core::ptr::addr_of_mut!(ROW_B),
@@ -146,6 +165,7 @@ pub extern "C" fn _start() -> ! {
             &mut *core::ptr::addr_of_mut!(QUEUE),
             &mut *core::ptr::addr_of_mut!(BUS),
             &mut *core::ptr::addr_of_mut!(CALIBRATOR),
+            &mut *core::ptr::addr_of_mut!(REPLIES),
         )
     };
     let near = near.get_mut(..black_box(0)).unwrap_or_default();
@@ -210,38 +230,54 @@ pub extern "C" fn _start() -> ! {
         }
     }
 
-    // The scoring side's loop as the boards run it.
-    let mut acq = Acquisition::<2, 64>::new();
+    // The scoring side's loop as the boards run it: the runtime's steps
+    // over the shared log, frame buffers and queue, with the command
+    // channel's control and the outputs' logic and pins.
+    let log: SharedLog<NoopRawMutex, 2, 64> = Mutex::new(RefCell::new(Acquisition::new()));
+    let mut beams = Beams {
+        log: &log,
+        bufs: &SAMPLES,
+        cells: black_box(CELLS),
+    };
+    let control = RefCell::new(Control::new(
+        settings,
+        black_box(CAPACITY),
+        (15, 15),
+        black_box(Store::Loaded),
+        black_box(Some([0; KEYS])),
+    ));
     let mut driver = ScanDriver::new(pipeline, black_box(300), black_box(300));
-    // The READY and REJECT logic runs after every step on the H743.
-    let mut plc = cvm_fw_app::outputs::OutputLogic::start(
+    let outputs = cvm_fw_app::outputs::OutputLogic::start(
         black_box(cvm_core::Outputs::DEFAULT),
         black_box(cvm_core::protocol::ResetCause::PowerOn),
     );
-    let mut frames = Frames {
-        bus: black_box(&*bus),
-        cells: black_box(CELLS),
-    };
+    let mut runtime = Runtime::new(&mut driver, outputs, Pins, Some(&control));
+    let mut replies = Sink(replies);
     loop {
         match black_box(0u8) {
             0 => {
-                black_box(acq.drdy(black_box(false)));
+                black_box(log.lock(|a| {
+                    a.try_borrow_mut()
+                        .ok()
+                        .and_then(|mut a| a.drdy(black_box(false)))
+                }));
             }
-            1 => acq.read_done(black_box(0), black_box(true)),
+            1 => log.lock(|a| {
+                if let Ok(mut a) = a.try_borrow_mut() {
+                    a.read_done(black_box(0), black_box(true));
+                }
+            }),
             2 => {
                 if sink.0.keep_room() {
-                    let rec: Option<BeamRecord> =
-                        if driver.busy() { None } else { acq.take_next() };
-                    black_box(driver.step(rec, &mut frames, &mut sink));
-                    black_box(plc.step(driver.progress(), driver.take_closed()));
+                    black_box(runtime.step(&mut beams, &mut sink, &mut replies));
                 }
             }
             3 => {
-                black_box(driver.end_of_data(&mut frames, &mut sink));
+                black_box(runtime.end_of_data(&mut beams, &mut sink, &mut replies));
             }
-            4 => acq.release(black_box(1)),
             _ => {
                 black_box(sink.0.pop_into(&mut line));
+                black_box(replies.0.pop_into(&mut line));
             }
         }
     }

@@ -5,8 +5,10 @@
 //! `cvm_fw_app::emufile`), LINE_SYNC is synthesised on every `cols`-th beam,
 //! result lines leave through CMSDK UART0, and the run ends with a
 //! semihosting exit whose status says whether it succeeded. Between those,
-//! the path is the H743's: `Acquisition` bookkeeping, `ScanDriver`,
-//! `cvm_core::Pipeline`, the prioritised `LineQueue` drained by a UART task.
+//! the path is the H743's: `Acquisition` bookkeeping, the `cvm_fw_app`
+//! runtime over its `ScanDriver` and `cvm_core::Pipeline` (with no pins
+//! and no command channel), the prioritised `LineQueue` drained by a UART
+//! task.
 //!
 //! The file has no deadline, so the board waits for the UART before each
 //! beam and never drops a line: its bytes are the host's, exactly.
@@ -28,17 +30,18 @@ use cvm_core::{MAX_J, Scorer};
 use cvm_fw_app::acquire::Acquisition;
 use cvm_fw_app::driver::ScanDriver;
 use cvm_fw_app::emufile::{HEADER_LEN, ScanHeader};
-use cvm_fw_app::queue::LineQueue;
+use cvm_fw_app::frames::{Beams, SampleBuffers, SharedLog};
+use cvm_fw_app::outputs::OutputLogic;
+use cvm_fw_app::queue::{LineQueue, QueueSink, SharedQueue};
+use cvm_fw_app::runtime::{NoPins, NoReplies, Runtime};
 use embassy_executor::{Executor, Spawner};
 use embassy_sync::blocking_mutex::Mutex;
-use embassy_sync::blocking_mutex::raw::ThreadModeRawMutex;
+use embassy_sync::blocking_mutex::raw::{NoopRawMutex, ThreadModeRawMutex};
 use embassy_sync::signal::Signal;
 use static_cell::{ConstStaticCell, StaticCell};
 
 use crate::config::emulated::{FRAME_BUFFERS, KEEP_RESERVE, MAX_COLS, QUEUE_BYTES};
 use crate::config::{BEAM_LOG, FIRMWARE_VERSION};
-use crate::frames::{SampleBuffers, Samples};
-use crate::sink::{QueueSink, SharedQueue};
 use cycles::Stopwatch;
 use host::{eprint, exit};
 use semihosting::fs::File;
@@ -54,7 +57,8 @@ const EXIT_INTERNAL: u32 = 3;
 type Queue = LineQueue<QUEUE_BYTES>;
 
 static EXECUTOR: StaticCell<Executor> = StaticCell::new();
-static QUEUE: SharedQueue<QUEUE_BYTES> = Mutex::new(RefCell::new(Queue::new(KEEP_RESERVE)));
+static QUEUE: SharedQueue<ThreadModeRawMutex, QUEUE_BYTES> =
+    Mutex::new(RefCell::new(Queue::new(KEEP_RESERVE)));
 /// Lines were queued (scoring -> UART task).
 static KICK: Signal<ThreadModeRawMutex, ()> = Signal::new();
 /// The queue ran empty (UART task -> scoring).
@@ -200,20 +204,20 @@ async fn scan_task(syst: cortex_m::peripheral::SYST) {
 
     let cells = header.config.geometry.cells();
     let n = 2 * cells;
-    let mut acq: Acquisition<FRAME_BUFFERS, BEAM_LOG> = Acquisition::new();
-    let released: [core::cell::Cell<bool>; FRAME_BUFFERS] = Default::default();
-    let mut frames = Samples {
+    // The board's only task fills the log and scores it.
+    let log: SharedLog<NoopRawMutex, FRAME_BUFFERS, BEAM_LOG> =
+        Mutex::new(core::cell::RefCell::new(Acquisition::new()));
+    let mut beams = Beams {
+        log: &log,
         bufs: &FRAMES,
         cells,
-        release: |b: usize| {
-            if let Some(r) = released.get(b) {
-                r.set(true);
-            }
-        },
     };
+    let outputs = OutputLogic::start(driver.settings().outputs, ResetCause::PowerOn);
+    let mut runtime = Runtime::new(&mut driver, outputs, NoPins, None);
     let mut stopwatch = Stopwatch::new(syst);
     let mut beam: u64 = 0;
     let mut sink = QueueSink(&QUEUE);
+    let mut replies = NoReplies;
 
     let Ok(file_len) = file.metadata().map(|m| m.len() as usize) else {
         fail(EXIT_INPUT, "cannot size the scan file")
@@ -222,12 +226,12 @@ async fn scan_task(syst: cortex_m::peripheral::SYST) {
     if data % n != 0 {
         fail(EXIT_INPUT, "scan file ends inside a frame");
     }
-    let beams = (data / n) as u64;
+    let beams_in_file = (data / n) as u64;
 
-    while beam < beams {
+    while beam < beams_in_file {
         // The "DRDY" of the next beam: LINE_SYNC on each row's first beam.
         let sync = beam.is_multiple_of(u64::from(header.cols));
-        let Some(buf) = acq.drdy(sync) else {
+        let Some(buf) = log.lock(|a| a.borrow_mut().drdy(sync)) else {
             fail(
                 EXIT_INTERNAL,
                 "no free frame buffer although scoring keeps up",
@@ -238,36 +242,30 @@ async fn scan_task(syst: cortex_m::peripheral::SYST) {
         if file.read_exact(bytes).is_err() {
             fail(EXIT_INPUT, "reading the scan file failed");
         }
-        acq.read_done(buf, true);
+        log.lock(|a| a.borrow_mut().read_done(buf, true));
         beam += 1;
-        while let Some(rec) = acq.take_next() {
+        // The beam just read is the log's one record: steps until it is
+        // scored.
+        loop {
             drain().await;
-            let mut step = Some(rec);
-            loop {
-                stopwatch.time(|| driver.step(step.take(), &mut frames, &mut sink));
-                if !driver.busy() {
-                    break;
-                }
-                drain().await;
-            }
-            for (b, r) in released.iter().enumerate() {
-                if r.take() {
-                    acq.release(b);
-                }
+            stopwatch.time(|| runtime.step(&mut beams, &mut sink, &mut replies));
+            if !runtime.driver().busy() {
+                break;
             }
         }
     }
 
     loop {
         drain().await;
-        let (more, _) = stopwatch.time(|| driver.end_of_data(&mut frames, &mut sink));
+        let (more, _) = stopwatch.time(|| runtime.end_of_data(&mut beams, &mut sink, &mut replies));
         if !more {
             break;
         }
     }
     drain().await;
 
-    finish(&driver, &stopwatch, beam, acq.counts().spi_errors)
+    let spi_errors = log.lock(|a| a.borrow().counts().spi_errors);
+    finish(&driver, &stopwatch, beam, spi_errors)
 }
 
 /// Reports the run on the host's stderr and exits: successfully when no

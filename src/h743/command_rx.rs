@@ -19,7 +19,8 @@ use embassy_stm32::peripherals::PD9;
 use embassy_stm32::{Peri, interrupt};
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
-use embassy_sync::signal::Signal;
+
+use super::resources::RX_READY;
 
 /// Received bytes the ring holds: dozens of request lines, so that a
 /// burst of requests waits here while the replies to earlier ones are
@@ -123,8 +124,6 @@ impl Ring {
 }
 
 static RX: Mutex<CriticalSectionRawMutex, RefCell<Ring>> = Mutex::new(RefCell::new(Ring::new()));
-/// Receiver -> command task: a line end, an error, or a ring half full.
-pub static RX_READY: Signal<CriticalSectionRawMutex, ()> = Signal::new();
 
 /// The next received item, if any.
 pub fn take() -> Option<Rx> {

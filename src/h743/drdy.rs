@@ -14,7 +14,7 @@ use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 
 use super::frame_reader;
-use super::shared::ACQ;
+use super::resources::ACQ;
 
 /// The DRDY line's EXTI mask and the LINE_SYNC input, for the interrupt.
 struct DrdyIo {

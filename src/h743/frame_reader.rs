@@ -41,7 +41,7 @@ use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 
 use super::clocks::enable_clock;
 use super::read_deadline::{self, ReadDeadline};
-use super::shared::{ACQ, BEAMS, CELLS, FRAMES};
+use super::resources::{ACQ, BEAMS, CELLS, FRAMES};
 use crate::config::h743::{READ_TIMEOUT_US, SPI_DIV, SPI_HZ};
 
 /// DMA1 stream 1 (and DMAMUX1 channel 1), in LISR/LIFCR.

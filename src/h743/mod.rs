@@ -11,15 +11,18 @@
 //!   - End of the read (DMA1 stream 1: complete or error; TIM13: the
 //!     deadline): CS high, the result (or overrun, DMA error, timeout, mode
 //!     fault) into the log, the scoring task woken.
-//! - **Thread mode** (`tasks`): the scoring task (sequencing,
-//!   `cvm_core::Pipeline`, lines into the bounded queue, watchdog feeding,
-//!   idle end of scan) and the UART task (USART3 TX with DMA from the
-//!   queue). The scoring task yields every few beams, so the UART task and
+//! - **Thread mode** (`tasks`, `commands`): the scoring task (steps of
+//!   `cvm_fw_app::runtime`: sequencing, `cvm_core::Pipeline`, lines into
+//!   the bounded queue, READY and REJECT, settings between scans; around
+//!   them watchdog feeding and the idle end of a scan), the UART task
+//!   (USART3 TX with DMA from the queues), the command task and the store
+//!   task. The scoring task yields every few beams, so the UART task and
 //!   the watchdog feed never wait for a backlog to be scored.
 //!
-//! What they share is in `shared`; where the scoring side's memory lives,
-//! and why, in `scoring`. The scoring task also sets the READY and REJECT
-//! outputs after every step (`outputs`; TIM14 times REJECT's pulses).
+//! What they share is in `resources`, which `main` hands to the tasks;
+//! where the scoring side's memory lives, and why, in `scoring`. The
+//! runtime drives READY and REJECT through `outputs` (TIM14 times
+//! REJECT's pulses).
 //!
 //! D-cache: left disabled (only the I-cache is enabled), so DMA buffers in
 //! AXI SRAM need no cache maintenance. DMA only touches statics in AXI SRAM
@@ -37,17 +40,17 @@ mod outputs;
 mod pins;
 mod read_deadline;
 mod resets;
+mod resources;
 mod scoring;
 mod settings_store;
-mod shared;
 mod tasks;
-
-use core::cell::RefCell;
 
 use cortex_m_rt::entry;
 use cvm_core::command::Capacity;
 use cvm_core::protocol::ResetCause;
 use cvm_fw_app::control::Control;
+use cvm_fw_app::outputs::OutputLogic;
+use cvm_fw_app::runtime::Runtime;
 use defmt::info;
 use defmt_rtt as _;
 use embassy_executor::Executor;
@@ -61,11 +64,10 @@ use static_cell::StaticCell;
 
 use crate::config::MAX_DEFECT_LINES_PER_ROW;
 use crate::config::h743::{
-    BAUD, COLS, CORE, FIRMWARE_VERSION, J1, J2, KEEP_RESERVE, MAX_COLS, ROWS, SCORES, SPI_HZ,
-    SYSCLK_HZ, THRESHOLD_UNITS, WATCHDOG_US,
+    BAUD, COLS, CORE, FIRMWARE_VERSION, J1, J2, MAX_COLS, ROWS, SCORES, SPI_HZ, SYSCLK_HZ,
+    THRESHOLD_UNITS, WATCHDOG_US,
 };
 use commands::{command_task, store_task};
-use shared::QUEUE;
 use tasks::{score_task, uart_task};
 
 /// What the command channel may set (docs/commands.md, "Settings"):
@@ -78,8 +80,6 @@ const CAPACITY: Capacity = Capacity {
     max_pulse_us: 1 << 16,
 };
 const _: () = assert!(MAX_COLS <= u16::MAX as usize);
-
-static CONTROL: StaticCell<RefCell<Control>> = StaticCell::new();
 
 bind_interrupts!(struct Irqs {
     DMA1_STREAM2 => dma::InterruptHandler<DMA1_CH2>;
@@ -122,7 +122,7 @@ fn main() -> ! {
     let control = Control::new(compiled, CAPACITY, (J1, J2), store, record);
     let settings = *control.settings();
     info!("settings record: {}", store);
-    let control: &'static RefCell<Control> = CONTROL.init(RefCell::new(control));
+    let r = resources::take(control);
     let driver = scoring::scan_driver(settings);
     // A power-on is a clean start only when the flash shows nothing cut
     // short; otherwise the outputs start as after any other reset: not
@@ -132,19 +132,19 @@ fn main() -> ! {
     } else {
         cause
     };
-    let plc = outputs::PlcOutputs::new(pins.outputs, start, &settings.outputs);
+    let outputs = OutputLogic::start(settings.outputs, start);
+    let plc = outputs::PlcOutputs::new(pins.outputs, outputs.asserted(), &settings.outputs);
+    let runtime = Runtime::new(driver, outputs, plc, Some(r.control));
     wdg.pet();
-    QUEUE.lock(|q| q.borrow_mut().set_reserve(KEEP_RESERVE));
-    commands::REPLIES.lock(|q| q.borrow_mut().set_reserve(commands::REPLY_ROOM));
     drdy::enable(pins.drdy, pins.drdy_exti, pins.line_sync);
 
     let executor = EXECUTOR.init(Executor::new());
     executor.run(|spawner| {
         match (
-            uart_task(uart),
-            score_task(driver, wdg, plc, control),
-            command_task(control),
-            store_task(control),
+            uart_task(uart, r),
+            score_task(runtime, wdg, r),
+            command_task(r),
+            store_task(r),
         ) {
             (Ok(u), Ok(s), Ok(c), Ok(f)) => {
                 spawner.spawn(u);

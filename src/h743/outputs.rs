@@ -2,18 +2,17 @@
 //! REJECT outputs"): two header pins, mirrored on the green and red user
 //! LEDs, driven with single BSRR writes (atomic, so the DRDY input on the
 //! same port is never disturbed). Which level each should have comes from
-//! `cvm_fw_app::outputs` after every scoring step. REJECT's pulses are
+//! `cvm_fw_app::outputs`, which the runtime steps after every scoring step
+//! and hands to these pins (`cvm_fw_app::runtime::Pins`). REJECT's pulses are
 //! timed by TIM14 in one-pulse mode, its interrupt releasing the pin: the
 //! scoring task only starts them and never waits for one.
 
-use super::shared::RESTARTING;
 use core::cell::Cell;
 use core::sync::atomic::{AtomicU32, Ordering};
 
-use cvm_core::protocol::ResetCause;
 use cvm_core::settings::{Outputs, RejectMode};
-use cvm_core::verdict::Ahead;
-use cvm_fw_app::outputs::{Asserted, Change, OutputLogic, level};
+use cvm_fw_app::outputs::{Asserted, Change, level};
+use cvm_fw_app::runtime::Pins;
 use embassy_stm32::gpio::{Level, Output, Speed};
 use embassy_stm32::interrupt;
 use embassy_stm32::interrupt::InterruptExt;
@@ -27,6 +26,7 @@ use super::failsafe::{
     READY_ACTIVE_HIGH, READY_LED, READY_PIN, REJECT_ACTIVE_HIGH, REJECT_LED, REJECT_PIN,
 };
 use super::pins::OutputPins;
+use super::resources::RESTARTING;
 use crate::config::h743::OUTPUTS;
 
 /// One TIM14 count per microsecond.
@@ -134,18 +134,15 @@ fn TIM8_TRG_COM_TIM14() {
     });
 }
 
-/// The outputs of the board, owned by the scoring task.
-pub struct PlcOutputs {
-    logic: OutputLogic,
-}
+/// The outputs of the board, which the scoring task's runtime drives.
+pub struct PlcOutputs(());
 
 impl PlcOutputs {
-    /// Configures the pins at their start-up levels (READY dropped after
-    /// any start but power-on) and TIM14.
-    pub fn new(pins: OutputPins, cause: ResetCause, o: &Outputs) -> Self {
+    /// Configures the pins at their start-up levels `a` (the outputs'
+    /// logic at its start: READY dropped after any start but power-on)
+    /// and TIM14.
+    pub fn new(pins: OutputPins, a: Asserted, o: &Outputs) -> Self {
         PULSE_US.store(o.pulse_us, Ordering::Relaxed);
-        let logic = OutputLogic::start(*o, cause);
-        let a = logic.asserted();
         let lv = |b: bool| if b { Level::High } else { Level::Low };
         // Configured once and never dropped: a dropped `Output` would
         // return its pin to an input.
@@ -177,28 +174,13 @@ impl PlcOutputs {
         irq.set_priority(interrupt::Priority::P6);
         // SAFETY: the handler touches only TIM14, GPIOB/E's BSRR and PULSES.
         unsafe { irq.enable() };
-        PlcOutputs { logic }
+        PlcOutputs(())
     }
+}
 
-    /// After a scoring step: the pins follow the driver's progress. (The
-    /// closures come ahead of the lines: [`PlcOutputs::ahead`].)
-    pub fn step(&mut self, p: cvm_fw_app::outputs::Progress) {
-        let change = self.logic.step(p, 0);
-        self.apply(change);
-    }
-
-    /// The pipeline's news ahead of a row's or the scan's lines: the
-    /// pins move before those lines are encoded (docs/firmware.md,
-    /// "Latency").
-    pub fn ahead(&mut self, news: Ahead) {
-        let change = self.logic.ahead(news);
-        self.apply(change);
-    }
-
-    fn apply(&mut self, change: Option<Change>) {
-        let Some(Change { now, pulses }) = change else {
-            return;
-        };
+impl Pins for PlcOutputs {
+    fn change(&mut self, change: Change) {
+        let Change { now, pulses } = change;
         self.write(now);
         if pulses > 0 {
             PULSES.lock(|c| {
@@ -218,16 +200,16 @@ impl PlcOutputs {
 
     /// The outputs' settings from the scan starting now on (levels, pulse
     /// width, mode): the pins are written again at their new levels.
-    pub fn configure(&mut self, o: &Outputs) {
-        self.logic.configure(*o);
+    fn configure(&mut self, o: &Outputs, now: Asserted) {
         PULSE_US.store(o.pulse_us, Ordering::Relaxed);
-        let now = self.logic.asserted();
         write_ready(now.ready);
         if !PULSES.lock(|p| p.get().on) {
             write_reject(now.reject && o.pulse_us == 0);
         }
     }
+}
 
+impl PlcOutputs {
     fn write(&self, now: Asserted) {
         write_ready(now.ready);
         // With pulses, REJECT belongs to the timer.

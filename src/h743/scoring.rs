@@ -21,7 +21,7 @@ use crate::config::h743::{
     OUTPUTS, POWER_THRESHOLD_UNITS, QUEUE_BYTES, ROWS, SCORES, SPREAD_THRESHOLD_UNITS,
     THRESHOLD_UNITS,
 };
-use crate::frames::SampleBuffers;
+use cvm_fw_app::frames::SampleBuffers;
 
 const ROW_WORDS: usize = row_words_for(MAX_COLS, &CORE);
 
@@ -114,7 +114,10 @@ pub fn compiled_settings(cause: ResetCause, boots: u32) -> Settings {
 /// Builds the scoring side in its memory: the square kernels' factors
 /// (an f64 factorisation: before the watchdog starts), the scorer's tables
 /// in DTCM, the row buffers, the pipeline and the scan driver, which
-/// starts with `settings`.
+/// starts with `settings`. Out of line: inlined into `main`, the
+/// factors' build is no longer folded away for the paper kernels, and
+/// the square kernels' f64 factorisation (about 13 KB) is linked.
+#[inline(never)]
 pub fn scan_driver(settings: Settings) -> &'static mut ScanDriver<'static, MAX_COLS> {
     if TAKEN.swap(true, Ordering::Relaxed) {
         defmt::panic!("the scoring side is built once");

@@ -5,5 +5,6 @@ mod control;
 mod logic;
 mod outputs;
 mod queue_model;
+mod runtime;
 mod sequencer_edges;
 mod settings_store;
