@@ -1,11 +1,9 @@
-//! Picks the memory map and linker arguments for the selected board.
-//!
-//! cortex-m-rt's `link.x` does `INCLUDE memory.x`; each board's map is
-//! `boards/<board>/memory.x` and only that folder goes on the linker's
-//! search path. (There is deliberately no `memory.x` at the package root:
-//! the linker looks in its working directory, the root, before the search
-//! path, so a root file would shadow the other board's map.)
-//! `defmt.x` is only passed when defmt is linked (the H743 board).
+//! The H743 firmware's build: its scan configuration from `CVM_H743_SCAN`
+//! as Rust constants, and the linker arguments. cortex-m-rt's `link.x`
+//! does `INCLUDE memory.x`, which the linker finds in its working
+//! directory, the package's root (the emulated board is a package of its
+//! own, `boards/mps2-an386`, with its map beside it). `defmt.x` places
+//! the defmt log strings.
 
 use cvm_core::command::{Capacity, Key, Kind};
 use cvm_core::{Config, Geometry, Kernels, RejectMode, Scorer, Settings, Weights, power, spread};
@@ -14,51 +12,31 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 
 fn main() {
-    let h743 = env::var_os("CARGO_FEATURE_H743").is_some();
-    let emulated = env::var_os("CARGO_FEATURE_EMULATED").is_some();
-    let board = match (h743, emulated) {
-        (true, false) => "h743",
-        (false, true) => "mps2-an386",
-        // main.rs turns these into a clear compile_error!; keep the build
-        // script quiet so that message is the one the user sees.
-        _ => return,
-    };
-
-    let root =
-        PathBuf::from(env::var_os("CARGO_MANIFEST_DIR").expect("cargo sets CARGO_MANIFEST_DIR"));
-    let dir = root.join("boards").join(board);
-    println!("cargo:rustc-link-search={}", dir.display());
-    println!("cargo:rerun-if-changed=boards");
+    println!("cargo:rerun-if-changed=memory.x");
     println!("cargo:rerun-if-changed=build.rs");
-
-    if h743 {
-        let out = PathBuf::from(env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
-        let spec = env::var("CVM_H743_SCAN").unwrap_or_default();
-        let consts = match h743_scan(&spec) {
-            Ok(c) => c,
-            Err(e) => {
-                println!("cargo:warning=CVM_H743_SCAN: {e}");
-                std::process::exit(1);
-            }
-        };
-        std::fs::write(out.join("h743_scan.rs"), consts).expect("writing OUT_DIR/h743_scan.rs");
-        println!("cargo:rerun-if-env-changed=CVM_H743_SCAN");
-        // Named so that a build that still sets it fails instead of
-        // silently compiling other thresholds than the file's.
-        println!("cargo:rerun-if-env-changed=CVM_H743_CALIBRATION");
-        if env::var_os("CVM_H743_CALIBRATION").is_some() {
-            println!(
-                "cargo:warning=CVM_H743_CALIBRATION is no longer read: give the calibration's thr, pthr and sthr in CVM_H743_SCAN (`dmap calibrate` prints them), or set them on the board (`dmap sensor set`, `save`)"
-            );
+    let out = PathBuf::from(env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
+    let spec = env::var("CVM_H743_SCAN").unwrap_or_default();
+    let consts = match h743_scan(&spec) {
+        Ok(c) => c,
+        Err(e) => {
+            println!("cargo:warning=CVM_H743_SCAN: {e}");
             std::process::exit(1);
         }
+    };
+    std::fs::write(out.join("h743_scan.rs"), consts).expect("writing OUT_DIR/h743_scan.rs");
+    println!("cargo:rerun-if-env-changed=CVM_H743_SCAN");
+    // Named so that a build that still sets it fails instead of
+    // silently compiling other thresholds than the file's.
+    println!("cargo:rerun-if-env-changed=CVM_H743_CALIBRATION");
+    if env::var_os("CVM_H743_CALIBRATION").is_some() {
+        println!(
+            "cargo:warning=CVM_H743_CALIBRATION is no longer read: give the calibration's thr, pthr and sthr in CVM_H743_SCAN (`dmap calibrate` prints them), or set them on the board (`dmap sensor set`, `save`)"
+        );
+        std::process::exit(1);
     }
-
     println!("cargo:rustc-link-arg-bins=--nmagic");
     println!("cargo:rustc-link-arg-bins=-Tlink.x");
-    if h743 {
-        println!("cargo:rustc-link-arg-bins=-Tdefmt.x");
-    }
+    println!("cargo:rustc-link-arg-bins=-Tdefmt.x");
 }
 
 /// The H743 board's scan configuration as Rust constants (included by

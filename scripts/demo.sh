@@ -17,7 +17,7 @@ bash scripts/setup.sh
 
 echo "== building the host tools and the emulated firmware" >&2
 (cd host-tests && cargo build --release -q -p dmap)
-cargo build --release -q --no-default-features --features emulated --target-dir target/emulated
+(cd boards/mps2-an386 && cargo build --release -q --target-dir ../../target/emulated)
 elf=$root/target/emulated/thumbv7em-none-eabihf/release/cvm-fw
 dmap=$root/host-tests/target/x86_64-unknown-linux-gnu/release/dmap
 [ -x "$dmap" ] || dmap=$(find "$root/host-tests/target" -path '*/release/dmap' -type f | head -n 1)

@@ -4,62 +4,14 @@
 //! scoring tables are built by the compiler (a configuration the core
 //! refuses fails the build), and its buffers are sized from it, so a
 //! configuration whose buffers do not fit the RAM banks fails the link
-//! ("region ... overflowed"). The emulated board reads its scan
-//! configuration from the scan file's header instead (see
-//! `cvm_fw_app::emufile`) and only uses the board-independent part here.
+//! ("region ... overflowed"). The sizes both boards share are
+//! `cvm_fw_app::sizing`'s.
 
-use cvm_core::protocol::{MAX_LINE, MAX_ROW_LINE, SCORES_PER_LINE};
-use cvm_fw_app::queue::LineQueue;
+pub use cvm_fw_app::sizing::{BEAM_LOG, MAX_DEFECT_LINES_PER_ROW, keep_reserve, queue_fits};
 
 /// Announced in the header line (printable ASCII without `,` or `*`).
 pub const FIRMWARE_VERSION: &str = concat!("cvm-fw-", env!("CARGO_PKG_VERSION"));
 
-/// Defect (`D`) lines listed per row at most; the row line carries the
-/// full count.
-pub const MAX_DEFECT_LINES_PER_ROW: u16 = 16;
-
-/// Beam records between acquisition and scoring (see
-/// `cvm_fw_app::acquire`): at least two more than the frame buffers.
-pub const BEAM_LOG: usize = 128;
-
-/// Queue bytes kept free for keep lines, for scans of up to `max_cols`
-/// columns: the most one scoring step can produce is a scan's end (two
-/// rows, their score lines promoted to keep lines, and the end line), the
-/// next scan's header, and two more rows (a held beam placed with its
-/// successor); a row is one `R` line and at most
-/// [`MAX_DEFECT_LINES_PER_ROW`] `D` lines, and every open object can close
-/// in that burst (one `O` line each).
-pub const fn keep_reserve(max_cols: usize) -> usize {
-    let row = 1 + MAX_DEFECT_LINES_PER_ROW as usize;
-    let score_lines = max_cols.div_ceil(SCORES_PER_LINE);
-    // Each object closes once: at most every open one in such a burst.
-    let objects = cvm_core::objects::MAX_OBJECTS;
-    // The header and the end line are the only lines longer than a row's.
-    (4 * row + 2 * score_lines + objects) * LineQueue::<1>::cost(MAX_ROW_LINE)
-        + 2 * LineQueue::<1>::cost(MAX_LINE)
-}
-
-/// A queue must leave room for score lines besides the keep reserve.
-const fn queue_fits(bytes: usize, max_cols: usize) -> bool {
-    bytes > 2 * keep_reserve(max_cols)
-}
-
-#[cfg(feature = "emulated")]
-pub mod emulated {
-    /// Columns the emulated board's row buffers hold (16x16 maps).
-    pub const MAX_COLS: usize = 1024;
-    /// Output queue of the emulated board: a whole row of score lines of
-    /// the widest scan fits besides the keep reserve, so with the board's
-    /// back-pressure nothing is ever dropped.
-    pub const QUEUE_BYTES: usize = 128 * 1024;
-    pub const KEEP_RESERVE: usize = super::keep_reserve(MAX_COLS);
-    const _: () = assert!(super::queue_fits(QUEUE_BYTES, MAX_COLS));
-    /// Frame buffers: the scan file is read one beam at a time, so one is
-    /// filled while the other is scored.
-    pub const FRAME_BUFFERS: usize = 2;
-}
-
-#[cfg(feature = "h743")]
 pub mod h743 {
     use cvm_core::{Config, Geometry, Kernels, Outputs, RejectMode, Weights};
 

@@ -20,3 +20,4 @@ pub mod queue;
 pub mod runtime;
 pub mod sequence;
 pub mod settings_store;
+pub mod sizing;

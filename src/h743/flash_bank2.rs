@@ -1,5 +1,5 @@
 //! Bank 2 of the embedded flash, where the settings are kept
-//! (`boards/h743/memory.x`, `SETTINGS`), at register level (RM0433 §4;
+//! (`memory.x`, `SETTINGS`), at register level (RM0433 §4;
 //! the register ledger: docs/registers.md, "FLASH bank 2").
 //!
 //! The code runs from bank 1, which stays readable while bank 2 erases or

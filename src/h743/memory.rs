@@ -1,4 +1,4 @@
-//! What the linker script (boards/h743/memory.x) places outside `.data`
+//! What the linker script (memory.x) places outside `.data`
 //! and `.bss`, and what `main` must do before that memory can be used.
 //!
 //! `.dtcm`, `.sram123` and `.dma_buffers` are NOLOAD: the reset handler

@@ -1,6 +1,6 @@
 //! The runtime settings kept in flash on this board: the store
 //! (`cvm_fw_app::settings_store`) on the range of bank 2 that
-//! `boards/h743/memory.x` reserves (`SETTINGS`), through the bank-2 driver
+//! `memory.x` reserves (`SETTINGS`), through the bank-2 driver
 //! (`flash_bank2`). [`open`] takes the flash interface and DMA1 stream 7
 //! in `main`; [`load`] reads the record at start-up, [`save`] writes one
 //! (the store task's). Any failure is a state or an error, never a stop:
@@ -32,7 +32,7 @@ const TAG: Tag = Tag::new(&CORE);
 /// it: `main` at start-up, then the store task.
 static STORE: Mutex<CriticalSectionRawMutex, Option<BoardStore>> = Mutex::new(None);
 
-/// The range `boards/h743/memory.x` reserves, from its symbols.
+/// The range `memory.x` reserves, from its symbols.
 fn range() -> (u32, u32) {
     unsafe extern "C" {
         static __settings_start: u8;

@@ -47,16 +47,10 @@ pub fn build_elf() -> Result<PathBuf> {
 pub fn build_elf_in(root: &Path) -> Result<PathBuf> {
     let target_dir = root.join("target/emulated");
     let mut cargo = Command::new(std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into()));
+    // Its own package (`boards/mps2-an386`), built where its memory map is.
     cargo
-        .current_dir(root)
-        .args([
-            "build",
-            "--release",
-            "--no-default-features",
-            "--features",
-            "emulated",
-            "--target-dir",
-        ])
+        .current_dir(root.join("boards/mps2-an386"))
+        .args(["build", "--release", "--target-dir"])
         .arg(&target_dir)
         .env_remove("CARGO_TARGET_DIR")
         .env_remove("CARGO_BUILD_TARGET")

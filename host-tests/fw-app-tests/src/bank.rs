@@ -31,7 +31,7 @@ pub const BANK: usize = 1 << 20;
 /// The chip's erase sector.
 pub const SECTOR: usize = 128 << 10;
 /// The range of bank 2 the H743 firmware keeps its settings in (its first
-/// two sectors; `boards/h743/memory.x`, `SETTINGS`), as offsets in the bank.
+/// two sectors; `memory.x`, `SETTINGS`), as offsets in the bank.
 pub const H743_STORE: Range<u32> = 0..2 * SECTOR as u32;
 
 /// What a power cut during a sector erase leaves.

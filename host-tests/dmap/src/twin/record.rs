@@ -3,7 +3,7 @@
 //! firmware loads at start-up. The record is written on the host with the
 //! product's own code (`cvm_core::record` for the record and its tag,
 //! `cvm_fw_app::settings_store` for `sequential-storage`'s layout) over a
-//! bank held in memory, into the range `boards/h743/memory.x` reserves
+//! bank held in memory, into the range `memory.x` reserves
 //! (`SETTINGS`: bank 2's first two sectors), and saved in the chip model's
 //! `--flash` format (`host-tests/twin/h743twin/flash.py`): the bank's
 //! cells, then one byte per flash word (bit 0: programmed since its
@@ -22,7 +22,7 @@ use std::ops::Range;
 const BANK: usize = 1 << 20;
 /// The chip's erase sector.
 const SECTOR: usize = 128 << 10;
-/// The settings range in bank 2 (`boards/h743/memory.x`, `SETTINGS`).
+/// The settings range in bank 2 (`memory.x`, `SETTINGS`).
 const STORE: Range<u32> = 0..2 * SECTOR as u32;
 
 /// What an H743 build for scans of `cols` columns may be set to

@@ -222,7 +222,7 @@ fn newest_source(root: &Path) -> Option<SystemTime> {
         "cvm-core/Cargo.toml",
         "fw-app/src",
         "fw-app/Cargo.toml",
-        "boards",
+        "memory.x",
         "build.rs",
         "Cargo.toml",
         "Cargo.lock",

@@ -15,6 +15,9 @@
 //! Instructions spent scoring are counted with SysTick and reported on the
 //! host's stderr, off the UART stream.
 
+#![no_std]
+#![no_main]
+
 mod cycles;
 mod host;
 mod uart;
@@ -40,8 +43,7 @@ use embassy_sync::blocking_mutex::raw::{NoopRawMutex, ThreadModeRawMutex};
 use embassy_sync::signal::Signal;
 use static_cell::{ConstStaticCell, StaticCell};
 
-use crate::config::emulated::{FRAME_BUFFERS, KEEP_RESERVE, MAX_COLS, QUEUE_BYTES};
-use crate::config::{BEAM_LOG, FIRMWARE_VERSION};
+use config::{BEAM_LOG, FIRMWARE_VERSION, FRAME_BUFFERS, KEEP_RESERVE, MAX_COLS, QUEUE_BYTES};
 use cycles::Stopwatch;
 use host::{eprint, exit};
 use semihosting::fs::File;
@@ -302,4 +304,25 @@ fn finish(
 fn panic(info: &core::panic::PanicInfo) -> ! {
     eprint(format_args!("cvm-fw (emulated): panic: {info}\n"));
     exit(101)
+}
+
+/// The board's sizes; the ones both boards share are
+/// `cvm_fw_app::sizing`'s.
+mod config {
+    pub use cvm_fw_app::sizing::{BEAM_LOG, keep_reserve, queue_fits};
+
+    /// Announced in the header line when the scan file names no version.
+    pub const FIRMWARE_VERSION: &str = concat!("cvm-fw-", env!("CARGO_PKG_VERSION"));
+
+    /// Columns the emulated board's row buffers hold (16x16 maps).
+    pub const MAX_COLS: usize = 1024;
+    /// Output queue of the emulated board: a whole row of score lines of
+    /// the widest scan fits besides the keep reserve, so with the board's
+    /// back-pressure nothing is ever dropped.
+    pub const QUEUE_BYTES: usize = 128 * 1024;
+    pub const KEEP_RESERVE: usize = keep_reserve(MAX_COLS);
+    const _: () = assert!(queue_fits(QUEUE_BYTES, MAX_COLS));
+    /// Frame buffers: the scan file is read one beam at a time, so one is
+    /// filled while the other is scored.
+    pub const FRAME_BUFFERS: usize = 2;
 }
