@@ -17,16 +17,14 @@ pub struct PinArgs {
     /// first)
     #[arg(long = "pins", value_name = "FILE")]
     pub pins: Option<PathBuf>,
-    /// REJECT's mode, the setting `mode` (`--set mode=` the same): part (at the scan's end)
-    /// or row (a pulse per object, after the row that closes it)
-    #[arg(long, value_name = "MODE", value_parser = ["part", "row"])]
+    // The settings `mode`, `pulse` and `delay` by their former names, kept
+    // hidden so that no script breaks: `--set mode=row --set pulse=US
+    // --set delay=ROWS` is the one spelling.
+    #[arg(long, value_name = "MODE", value_parser = ["part", "row"], hide = true)]
     pub reject: Option<String>,
-    /// REJECT's pulse width in µs, the setting `pulse` (0: held until the next scan; row mode
-    /// needs one)
-    #[arg(long, value_name = "US")]
+    #[arg(long, value_name = "US", hide = true)]
     pub pulse_us: Option<u32>,
-    /// Row mode: rows between the row that closes an object and its pulse, the setting `delay`
-    #[arg(long, value_name = "ROWS")]
+    #[arg(long, value_name = "ROWS", hide = true)]
     pub row_delay: Option<u32>,
 }
 
@@ -50,10 +48,10 @@ impl PinArgs {
             s.outputs.row_delay = rows;
         }
         if s.outputs.pulse_us > 65_536 {
-            anyhow::bail!("--pulse-us: at most 65536 (TIM14 counts 16 bits of µs)");
+            anyhow::bail!("pulse: at most 65536 µs (TIM14 counts 16 bits of µs)");
         }
         if cvm_core::command::conflict(s) {
-            anyhow::bail!("--reject row needs --pulse-us");
+            anyhow::bail!("mode=row needs a pulse width: --set pulse=US");
         }
         Ok(())
     }
