@@ -237,6 +237,39 @@ pub fn report(args: &PinArgs, counters: &serde_json::Value, uart: &[u8]) -> Resu
 #[cfg(test)]
 mod tests {
     use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Options {
+        #[command(flatten)]
+        pins: PinArgs,
+    }
+
+    fn applied(args: &[&str]) -> Result<cvm_core::Settings> {
+        let o = Options::try_parse_from([&["twin"][..], args].concat())?;
+        let mut s = cvm_core::Settings::new(12, 6, 0, 0, "x");
+        o.pins.apply(&mut s)?;
+        Ok(s)
+    }
+
+    /// The former spellings still reach the settings, as the keys `mode`,
+    /// `pulse` and `delay` set them, and are refused as the board refuses.
+    #[test]
+    fn former_output_options_are_the_settings_mode_pulse_and_delay() {
+        use cvm_core::command::Key;
+        let s = applied(&["--reject", "row", "--pulse-us", "500", "--row-delay", "2"]).unwrap();
+        let mut want = cvm_core::Settings::new(12, 6, 0, 0, "x");
+        for (key, v) in [(Key::Pulse, 500), (Key::RejectMode, 1), (Key::RowDelay, 2)] {
+            assert!(key.set(&mut want, v));
+        }
+        assert_eq!(s.outputs, want.outputs);
+        assert_eq!(applied(&[]).unwrap().outputs, cvm_core::Outputs::DEFAULT);
+        let e = applied(&["--reject", "row"]).unwrap_err().to_string();
+        assert!(e.contains("needs a pulse width"), "{e}");
+        let e = applied(&["--pulse-us", "65537"]).unwrap_err().to_string();
+        assert!(e.contains("at most 65536"), "{e}");
+        assert!(applied(&["--pulse-us", "65536"]).is_ok());
+    }
 
     #[test]
     fn hi_z_is_a_level_of_its_own() {
