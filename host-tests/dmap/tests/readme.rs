@@ -230,3 +230,13 @@ fn host_readme_names_every_crate_of_the_workspace() {
         );
     }
 }
+
+/// README is a short introduction; details belong in docs/.
+#[test]
+fn readme_stays_under_6_kb() {
+    let n = read("README.md").len();
+    assert!(
+        n < 6 * 1024,
+        "README.md is {n} bytes; move details to docs/"
+    );
+}
