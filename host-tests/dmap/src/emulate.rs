@@ -80,22 +80,29 @@ pub fn scan_file(args: &EmulateArgs) -> Result<Vec<u8>> {
 /// [`scan_file`], with the warnings returned instead of printed, for the
 /// caller to print once the run has succeeded.
 pub fn scan_file_and_warnings(args: &EmulateArgs) -> Result<(Vec<u8>, Vec<String>)> {
-    let scan = read_scan(&args.scan)?;
-    let (j1, j2) = (scan.geometry.j1(), scan.geometry.j2());
-    // Same validation, settings and warnings as `dmap stream`.
-    let run = resolve(
-        &args.scoring,
-        &args.output,
-        (j1, j2),
-        (scan.rows, scan.cols),
-    )?;
+    let (run, file) = resolved_board_file(&args.scan, &args.scoring, &args.output)?;
     if run.settings.outputs != cvm_core::settings::Outputs::DEFAULT {
         bail!(
             "the emulated board's scan file carries thr, pthr, sthr, scores and dcap; the verdict's and the outputs' settings (area, peak, miss, misp, mode, pulse, delay) are not in it"
         );
     }
-    let file = board_file(&args.scan, &scan, &run)?;
     Ok((file, run.warnings))
+}
+
+/// The scan at `path` read, its settings resolved with the same
+/// validation, settings and warnings as `dmap stream`, and the emulated
+/// board's scan file of it (`dmap emulate`'s input, and `dmap twin`'s
+/// before it becomes the chip model's).
+pub fn resolved_board_file(
+    path: &Path,
+    scoring: &crate::options::ScoringArgs,
+    output: &crate::options::OutputArgs,
+) -> Result<(RunSettings, Vec<u8>)> {
+    let scan = read_scan(path)?;
+    let (j1, j2) = (scan.geometry.j1(), scan.geometry.j2());
+    let run = resolve(scoring, output, (j1, j2), (scan.rows, scan.cols))?;
+    let file = board_file(path, &scan, &run)?;
+    Ok((run, file))
 }
 
 /// The emulated board's scan file of `scan` (read from `path`) under the

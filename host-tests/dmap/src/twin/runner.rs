@@ -29,11 +29,8 @@
 //! * A run whose end line never came (the firmware wedged, or the settle
 //!   time ran out) fails, after the model's counters.
 
-use crate::emulate::board_file;
 use crate::fmt::fmt_num;
-use crate::npy::read_scan;
 use crate::options::{OutputArgs, ScoringArgs};
-use crate::settings::resolve;
 use crate::twin::checks::{check_built_for, check_fault, check_model_time};
 use anyhow::{Context, Result, bail};
 use clap::Args;
@@ -475,16 +472,8 @@ pub fn run_to(args: &TwinArgs, out: &mut dyn FnMut(&[u8]) -> Result<()>) -> Resu
     let flash = args.link.prepare_flash()?;
     // The emulated board's scan file: the same reading, validation,
     // settings and warnings as `dmap emulate` and `dmap stream`.
-    let scan = read_scan(&args.scan)?;
-    let (j1, j2) = (scan.geometry.j1(), scan.geometry.j2());
-    let run = resolve(
-        &args.scoring,
-        &args.output,
-        (j1, j2),
-        (scan.rows, scan.cols),
-    )?;
-    let emufile = board_file(&args.scan, &scan, &run)?;
-    drop(scan);
+    let (run, emufile) =
+        crate::emulate::resolved_board_file(&args.scan, &args.scoring, &args.output)?;
     let warnings = run.warnings;
     let header = ScanHeader::parse(&emufile).map_err(|e| anyhow::anyhow!(e.message()))?;
     let beams = u64::from(header.rows) * u64::from(header.cols);
