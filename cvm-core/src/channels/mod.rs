@@ -5,5 +5,6 @@
 
 pub mod flags;
 pub mod magnitude;
+pub mod pooled;
 pub mod power;
 pub mod spread;

@@ -33,13 +33,19 @@ pub const POWER_OFF: u32 = u32::MAX;
 /// `floor(2^15 |a - b| / (a + b))`, 0 when `a + b = 0`; exact for powers
 /// below `2^24`.
 pub fn contrast(a: u32, b: u32) -> u16 {
-    let s = a.saturating_add(b);
+    ratio_q15(a.abs_diff(b), a.saturating_add(b))
+}
+
+/// `floor(2^15 d / s)` for `d <= s < 2^25`, exact; 0 when `s = 0`, at most
+/// `2^15`. The contrast's quotient, and the pooled loss's
+/// ([`crate::channels::pooled`]).
+pub(crate) fn ratio_q15(d: u32, s: u32) -> u16 {
     if s == 0 {
         return 0;
     }
     // d <= s < 2^25: each step shifts the remainder (below s) by at most
     // 7 bits, so it stays below 2^32; 7 + 7 + 1 = 15 quotient bits.
-    let mut r = a.abs_diff(b);
+    let mut r = d;
     let mut q: u32 = 0;
     for bits in [7u32, 7, 1] {
         r <<= bits;

@@ -15,6 +15,7 @@ mod objects;
 mod overflow_proof;
 mod passes_asm;
 mod pipeline;
+mod pooled;
 mod power;
 mod protocol;
 mod protocol_layout;
