@@ -219,16 +219,13 @@ impl Scan {
             if v < lo || v > hi || !key.set(&mut s, v) {
                 return Err(format!("{}={v}: out of range {lo}..={hi}", key.name()));
             }
-            let off = match key {
-                Key::PowerThreshold => Some(power::POWER_MAX),
-                Key::SpreadThreshold => Some(spread::SPREAD_MAX),
-                _ => None,
-            };
-            if off.is_some_and(|max| v > max && v != u32::MAX) {
+            if let Some(max) = key.off_above()
+                && v > max
+                && v != u32::MAX
+            {
                 return Err(format!(
-                    "{}={v}: above {} the channel is off; write {}=4294967295",
+                    "{}={v}: above {max} the channel is off; write {}=4294967295",
                     key.name(),
-                    off.unwrap_or(0),
                     key.name()
                 ));
             }

@@ -336,6 +336,20 @@ impl Key {
     pub const fn index(self) -> usize {
         self as usize
     }
+
+    /// For a channel's threshold, the largest value that can still decide
+    /// a position: above it the channel is off. The board keeps any value
+    /// it is set to (its header shows it); the host's tools, whose scan
+    /// files carry thresholds in units, write every such value as the
+    /// channel's off value, `u32::MAX`, and so refuse the others rather
+    /// than show another header than the board.
+    pub const fn off_above(self) -> Option<u32> {
+        match self {
+            Key::PowerThreshold => Some(crate::power::POWER_MAX),
+            Key::SpreadThreshold => Some(crate::spread::SPREAD_MAX),
+            _ => None,
+        }
+    }
 }
 
 // `Key::index` is the discriminant: the table's rows are in the enum's

@@ -171,12 +171,7 @@ fn apply_set(settings: &mut Settings, pairs: &[String]) -> Result<()> {
         let v = key
             .parse_value(value.as_bytes(), &HOST_CAPACITY)
             .map_err(|e| anyhow::anyhow!("--set {pair}: {e}"))?;
-        let max = match key {
-            Key::PowerThreshold => Some(cvm_core::power::POWER_MAX),
-            Key::SpreadThreshold => Some(cvm_core::spread::SPREAD_MAX),
-            _ => None,
-        };
-        if let Some(max) = max
+        if let Some(max) = key.off_above()
             && v > max
             && v != u32::MAX
         {

@@ -658,5 +658,14 @@ fn twin_firmware_with_a_compiled_in_calibration_file() {
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("threshold=0.3: write thr"), "{err}");
+    // A threshold above the channel's largest value is written as off,
+    // by the same rule as `--set` (`Key::off_above`).
+    let out = build("j1=9 j2=9 pthr=46341");
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("pthr=46341: above 46340 the channel is off; write pthr=4294967295"),
+        "{err}"
+    );
     drop(lock);
 }
