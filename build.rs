@@ -205,7 +205,6 @@ impl Scan {
             self.rows,
             scorer.threshold_from_units(0.5),
             power::threshold_from_units(0.1),
-            "",
         );
         s.scores = true;
         let cap = Capacity {

@@ -4,6 +4,7 @@
 /// Version of the scoring code, carried in every header line (`fw=`).
 pub const VERSION: &str = env!("CARGO_PKG_VERSION");
 
+pub mod boot;
 pub mod calibration;
 pub mod channels;
 pub mod command;
@@ -18,6 +19,7 @@ pub mod stream;
 pub mod tables;
 pub mod verdict;
 
+pub use boot::Boot;
 pub use calibration::Calibrator;
 pub use channels::{flags, power, spread};
 pub use config::{Config, ConfigError, Geometry, Kernels, MAX_CELLS, MAX_J, Weights};

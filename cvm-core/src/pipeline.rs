@@ -8,7 +8,7 @@ use crate::channels::spread::{SPREAD_MAX, SPREAD_OFF};
 use crate::objects::{MAX_OBJECTS, Object, Objects};
 use crate::protocol::{HeaderInfo, LineSink, encode_end, encode_header, encode_object, encode_row};
 use crate::scorer::Scorer;
-pub use crate::settings::{Outputs, Settings};
+pub use crate::settings::{Boot, Outputs, Settings};
 use crate::stream::{Engine, EngineError, Position, PushOutcome, RowView, Totals};
 use crate::verdict::{self, Ahead, Verdict};
 
@@ -74,6 +74,7 @@ pub struct Pipeline<'a, const MAX_COLS: usize> {
     engine: Engine<'a, MAX_COLS>,
     objects: Objects,
     settings: Settings,
+    boot: Boot,
     closures: Closures,
     closed: Closed,
     verdict: Option<Verdict>,
@@ -128,6 +129,7 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
             engine,
             objects: Objects::new(),
             settings,
+            boot: Boot::power_on(crate::VERSION),
             closures: Closures::default(),
             closed: Closed::new(),
             verdict: None,
@@ -172,6 +174,17 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
         &self.settings
     }
 
+    /// The board's start as every header states it (a power-on start of
+    /// this crate's version until told).
+    pub fn boot(&self) -> &Boot {
+        &self.boot
+    }
+
+    /// Tells the pipeline how the board started, once, at start-up.
+    pub fn set_boot(&mut self, boot: Boot) {
+        self.boot = boot;
+    }
+
     /// Scans from the next [`Pipeline::begin`] on with `settings`: meant
     /// for between scans (a scan in progress is forgotten). Refused, and
     /// nothing changed, when the engine cannot hold its columns.
@@ -210,7 +223,7 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
         }
         self.engine
             .set_spread_threshold(engine_spread(self.settings.spread_threshold, taking));
-        let h = HeaderInfo::new(self.engine.scorer(), &self.settings);
+        let h = HeaderInfo::new(self.engine.scorer(), &self.settings, &self.boot);
         encode_header(&h, sink);
     }
 
@@ -274,6 +287,7 @@ impl<'a, const MAX_COLS: usize> Pipeline<'a, MAX_COLS> {
             closed,
             verdict,
             calibrator,
+            ..
         } = self;
         engine.close();
         let mut lines = Emit {

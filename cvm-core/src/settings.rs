@@ -1,5 +1,6 @@
 //! The settings value of a scan: what the pipeline needs besides the
-//! scorer, and what the header line reports about the board's start.
+//! scorer. The facts of the board's start, which the header reports too,
+//! are apart in [`crate::boot`].
 //!
 //! It is its own module so that the pipeline (which acts on it) and the
 //! line protocol (whose header carries it) both read it without reading
@@ -7,55 +8,13 @@
 //! it at start-up, and a command channel may later get and set the same
 //! value between scans.
 
-/// Why the board last started, as the header's `rst` carries it.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum ResetCause {
-    /// Power-on (`por`); also `dmap stream` and the emulated board.
-    PowerOn,
-    /// A watchdog (`wdg`).
-    Watchdog,
-    /// A software reset: after a panic, or a debugger's request (`sw`).
-    Software,
-    /// The reset pin (`pin`).
-    Pin,
-    /// Anything else (`other`): a brown-out among them.
-    Other,
-}
-
-impl ResetCause {
-    /// Every cause, in the order of the protocol document.
-    pub const ALL: [ResetCause; 5] = [
-        ResetCause::PowerOn,
-        ResetCause::Watchdog,
-        ResetCause::Software,
-        ResetCause::Pin,
-        ResetCause::Other,
-    ];
-
-    /// The value of `rst=`.
-    pub const fn as_str(self) -> &'static str {
-        match self {
-            ResetCause::PowerOn => "por",
-            ResetCause::Watchdog => "wdg",
-            ResetCause::Software => "sw",
-            ResetCause::Pin => "pin",
-            ResetCause::Other => "other",
-        }
-    }
-
-    /// The cause whose `rst=` value is `s`.
-    pub(crate) fn parse(s: &[u8]) -> Option<Self> {
-        ResetCause::ALL
-            .into_iter()
-            .find(|c| c.as_str().as_bytes() == s)
-    }
-}
+pub use crate::boot::{Boot, ResetCause, Store};
 
 /// The settings of a scan: the runtime values a board scans with (the
-/// thresholds, which lines it emits, the scan's width) and the facts about
-/// its start that the header reports. The scoring itself (geometry,
-/// kernels, formats) is the [`crate::Scorer`]'s, fixed when it is built.
+/// thresholds, which lines it emits, the scan's width) and where each came
+/// from. The scoring itself (geometry, kernels, formats) is the
+/// [`crate::Scorer`]'s, fixed when it is built; the start's facts are a
+/// [`Boot`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Settings {
     /// Columns (beams per row) of the scan.
@@ -76,11 +35,6 @@ pub struct Settings {
     /// header the cap (`dcap`). 0 (no per-position lines; the objects
     /// describe the defects) is the boards' default.
     pub max_defect_lines_per_row: u16,
-    pub firmware_version: &'static str,
-    /// Why the board last started (`rst`; [`ResetCause::PowerOn`] on the host).
-    pub reset_cause: ResetCause,
-    /// Starts since power-on, this one included (`boots`; 1 on the host).
-    pub boots: u32,
     /// Rows of a scan (`rows`): the boards end a scan after this many;
     /// the host writes its scan's.
     pub rows: u32,
@@ -89,21 +43,13 @@ pub struct Settings {
     /// Where each runtime setting's value came from, in the order of
     /// `command::Key::ALL` (`src`).
     pub sources: [Source; KEYS],
-    /// What became of the settings record in flash at start-up (`store`).
-    pub store: Store,
 }
 
 impl Settings {
     /// Settings of `cols` x `rows` scans with these thresholds, everything
     /// else at its default: the spread channel off, no score or defect lines, [`Outputs::DEFAULT`],
-    /// every value compiled in, no settings record, a power-on start.
-    pub const fn new(
-        cols: u32,
-        rows: u32,
-        threshold: u32,
-        power_threshold: u32,
-        firmware_version: &'static str,
-    ) -> Self {
+    /// every value compiled in.
+    pub const fn new(cols: u32, rows: u32, threshold: u32, power_threshold: u32) -> Self {
         Settings {
             cols,
             threshold,
@@ -111,13 +57,9 @@ impl Settings {
             spread_threshold: crate::channels::spread::SPREAD_OFF,
             scores: false,
             max_defect_lines_per_row: 0,
-            firmware_version,
-            reset_cause: ResetCause::PowerOn,
-            boots: 1,
             rows,
             outputs: Outputs::DEFAULT,
             sources: [Source::Default; KEYS],
-            store: Store::Empty,
         }
     }
 }
@@ -361,44 +303,6 @@ const _: () = {
         i += 1;
     }
 };
-
-/// What became of the settings record in flash at start-up.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum Store {
-    /// No record: the compiled values are in use (`none`; the host and
-    /// the emulated board, which keep none, always say this).
-    Empty,
-    /// A record for this firmware was read (`ok`).
-    Loaded,
-    /// A record made for another build (settings layout, geometry, kernels
-    /// or full scale) was ignored (`foreign`).
-    Foreign,
-    /// The storage could not be read (`bad`).
-    Unreadable,
-}
-
-impl Store {
-    pub const ALL: [Store; 4] = [
-        Store::Empty,
-        Store::Loaded,
-        Store::Foreign,
-        Store::Unreadable,
-    ];
-
-    pub const fn word(self) -> &'static str {
-        match self {
-            Store::Empty => "none",
-            Store::Loaded => "ok",
-            Store::Foreign => "foreign",
-            Store::Unreadable => "bad",
-        }
-    }
-
-    pub fn parse(s: &[u8]) -> Option<Store> {
-        Store::ALL.into_iter().find(|v| v.word().as_bytes() == s)
-    }
-}
 
 /// Where a runtime setting's value came from, as the command channel's
 /// `status`, `get` and `set` replies report it (docs/commands.md,

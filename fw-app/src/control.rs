@@ -19,7 +19,7 @@ use cvm_core::command::{
     encode_reply, parse_request,
 };
 use cvm_core::protocol::LineSink;
-use cvm_core::settings::{KEYS, Settings, Source, Store};
+use cvm_core::settings::{Boot, KEYS, Settings, Source, Store};
 use cvm_core::stream::Totals;
 use cvm_core::verdict::Verdict;
 
@@ -61,6 +61,8 @@ pub struct CommandCounts {
 pub struct Control {
     compiled: Settings,
     next: Settings,
+    /// The start: fixed, reported by `status` and every header.
+    boot: Boot,
     cap: Capacity,
     /// The detector's map size, `status` reports it.
     geometry: (u8, u8),
@@ -76,22 +78,22 @@ pub struct Control {
 }
 
 impl Control {
-    /// At start-up: the compiled settings (with the start's reset cause and
-    /// boot count) and what the settings store gave. A record whose values
-    /// do not fit this firmware (out of range, or in conflict) is ignored
-    /// like an unreadable one: the compiled values are used, `bad`.
+    /// At start-up: the compiled settings, the start (with what the
+    /// settings store gave, `boot.store`) and the store's record. A record
+    /// whose values do not fit this firmware (out of range, or in
+    /// conflict) is ignored like an unreadable one: the compiled values
+    /// are used, `bad`.
     pub fn new(
         compiled: Settings,
+        mut boot: Boot,
         cap: Capacity,
         geometry: (u8, u8),
-        store: Store,
         record: Option<[u32; KEYS]>,
     ) -> Self {
         let mut next = compiled;
         next.sources = [Source::Default; KEYS];
-        next.store = store;
         let mut loaded = false;
-        if let (Store::Loaded, Some(values)) = (store, record) {
+        if let (Store::Loaded, Some(values)) = (boot.store, record) {
             let mut s = next;
             let mut sources = [Source::Flash; KEYS];
             let fits = Key::ALL.into_iter().zip(values).all(|(k, v)| {
@@ -113,12 +115,13 @@ impl Control {
                 next = s;
                 loaded = true;
             } else {
-                next.store = Store::Unreadable;
+                boot.store = Store::Unreadable;
             }
         }
         Control {
             compiled,
             next,
+            boot,
             cap,
             geometry,
             record: loaded,
@@ -138,6 +141,11 @@ impl Control {
     /// The settings the next scan starts with.
     pub fn settings(&self) -> &Settings {
         &self.next
+    }
+
+    /// The start every header and `status` report.
+    pub fn boot(&self) -> Boot {
+        self.boot
     }
 
     pub fn counts(&self) -> &CommandCounts {
@@ -284,11 +292,7 @@ impl Control {
         Effect::None
     }
 
-    fn change(&mut self, mut s: Settings) {
-        s.store = self.next.store;
-        // The start's facts are not settings.
-        s.reset_cause = self.compiled.reset_cause;
-        s.boots = self.compiled.boots;
+    fn change(&mut self, s: Settings) {
         self.next = s;
         self.pending = true;
     }
@@ -343,14 +347,14 @@ impl Control {
 
     fn status(&self) -> Status {
         Status {
-            firmware: self.compiled.firmware_version,
+            firmware: self.boot.firmware,
             j1: self.geometry.0,
             j2: self.geometry.1,
             max_cols: self.cap.max_cols,
             max_rows: self.cap.max_rows,
-            store: self.next.store,
-            reset_cause: self.compiled.reset_cause,
-            boots: self.compiled.boots,
+            store: self.boot.store,
+            reset_cause: self.boot.reset_cause,
+            boots: self.boot.boots,
             last: self.last,
         }
     }

@@ -80,6 +80,11 @@ impl<'a, const MAX_COLS: usize> ScanDriver<'a, MAX_COLS> {
         self.pipeline.calibrator_mut()
     }
 
+    /// How the board started, which every header states.
+    pub fn set_boot(&mut self, boot: cvm_core::Boot) {
+        self.pipeline.set_boot(boot);
+    }
+
     /// The settings the last (or open) scan uses.
     pub fn settings(&self) -> &Settings {
         self.pipeline.settings()

@@ -64,13 +64,18 @@ pub struct Runtime<'r, 'a, const MAX_COLS: usize, P: Pins> {
 }
 
 impl<'r, 'a, const MAX_COLS: usize, P: Pins> Runtime<'r, 'a, MAX_COLS, P> {
-    /// `outputs` started at the levels `pins` were set up with.
+    /// `outputs` started at the levels `pins` were set up with. With a
+    /// command channel, its start (what the settings store gave included)
+    /// is the one the headers state.
     pub fn new(
         driver: &'r mut ScanDriver<'a, MAX_COLS>,
         outputs: OutputLogic,
         pins: P,
         control: Option<&'r RefCell<Control>>,
     ) -> Self {
+        if let Some(c) = control.and_then(|c| c.try_borrow().ok()) {
+            driver.set_boot(c.boot());
+        }
         Runtime {
             driver,
             outputs,

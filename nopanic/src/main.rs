@@ -148,12 +148,14 @@ pub extern "C" fn _start() -> ! {
         spread_threshold: black_box(6554),
         scores: black_box(true),
         max_defect_lines_per_row: black_box(8),
-        firmware_version: "nopanic",
-        reset_cause: cvm_core::protocol::ResetCause::Watchdog,
-        boots: black_box(2),
         rows: black_box(100),
         outputs: cvm_core::settings::Outputs::DEFAULT,
         sources: [cvm_core::settings::Source::Default; cvm_core::settings::KEYS],
+    };
+    let boot = cvm_core::Boot {
+        firmware: "nopanic",
+        reset_cause: cvm_core::protocol::ResetCause::Watchdog,
+        boots: black_box(2),
         store: cvm_core::settings::Store::Empty,
     };
     // SAFETY: `_start` runs once and is the only user of these statics.
@@ -175,6 +177,7 @@ pub extern "C" fn _start() -> ! {
             black_box(());
         }
     };
+    pipeline.set_boot(boot);
     if black_box(true) {
         pipeline.attach_calibrator(calibrator);
     }
@@ -241,9 +244,12 @@ pub extern "C" fn _start() -> ! {
     };
     let control = RefCell::new(Control::new(
         settings,
+        cvm_core::Boot {
+            store: black_box(Store::Loaded),
+            ..boot
+        },
         black_box(CAPACITY),
         (15, 15),
-        black_box(Store::Loaded),
         black_box(Some([0; KEYS])),
     ));
     let mut driver = ScanDriver::new(pipeline, black_box(300), black_box(300));

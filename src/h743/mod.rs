@@ -118,8 +118,14 @@ fn main() -> ! {
     // outputs start with the settings in effect.
     settings_store::open(pins.flash, pins.flash_dma);
     let (store, record, cut) = block_on_fed(settings_store::load(), &mut wdg);
-    let compiled = scoring::compiled_settings(cause, boots);
-    let control = Control::new(compiled, CAPACITY, (J1, J2), store, record);
+    let boot = scoring::boot(cause, boots, store);
+    let control = Control::new(
+        scoring::compiled_settings(),
+        boot,
+        CAPACITY,
+        (J1, J2),
+        record,
+    );
     let settings = *control.settings();
     info!("settings record: {}", store);
     let r = resources::take(control);

@@ -8,7 +8,7 @@ use core::sync::atomic::{AtomicBool, Ordering};
 
 use cvm_core::Scorer;
 use cvm_core::calibration::Calibrator;
-use cvm_core::pipeline::{Pipeline, Settings};
+use cvm_core::pipeline::{Boot, Pipeline, Settings};
 use cvm_core::protocol::ResetCause;
 use cvm_core::settings::{KEYS, Source, Store};
 use cvm_core::stream::{near_words, row_words_for};
@@ -91,9 +91,8 @@ static CALIBRATOR: ConstStaticCell<Calibrator> = ConstStaticCell::new(Calibrator
 /// The statics above are handed out by [`scan_driver`] only, once.
 static TAKEN: AtomicBool = AtomicBool::new(false);
 
-/// The compiled settings (docs/firmware.md, "Build-time configuration"),
-/// with the start's reset cause and boot count.
-pub fn compiled_settings(cause: ResetCause, boots: u32) -> Settings {
+/// The compiled settings (docs/firmware.md, "Build-time configuration").
+pub fn compiled_settings() -> Settings {
     Settings {
         cols: COLS as u32,
         threshold: TABLES.threshold_from_units(THRESHOLD_UNITS),
@@ -101,13 +100,20 @@ pub fn compiled_settings(cause: ResetCause, boots: u32) -> Settings {
         spread_threshold: cvm_core::spread::threshold_from_units(SPREAD_THRESHOLD_UNITS),
         scores: SCORES,
         max_defect_lines_per_row: MAX_DEFECT_LINES_PER_ROW,
-        firmware_version: FIRMWARE_VERSION,
-        reset_cause: cause,
-        boots,
         rows: ROWS,
         outputs: OUTPUTS,
         sources: [Source::Default; KEYS],
-        store: Store::Empty,
+    }
+}
+
+/// This start: the firmware, the reset's cause, the boot count and what
+/// the settings store gave.
+pub fn boot(cause: ResetCause, boots: u32, store: Store) -> Boot {
+    Boot {
+        firmware: FIRMWARE_VERSION,
+        reset_cause: cause,
+        boots,
+        store,
     }
 }
 

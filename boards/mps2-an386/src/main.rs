@@ -25,7 +25,7 @@ mod uart;
 use core::cell::RefCell;
 
 use cortex_m_rt::entry;
-use cvm_core::pipeline::{Pipeline, Settings};
+use cvm_core::pipeline::{Boot, Pipeline, Settings};
 use cvm_core::protocol::{MAX_LINE, ResetCause};
 use cvm_core::scorer::MAX_FACTOR_WORDS;
 use cvm_core::stream::{row_words, row_words_for};
@@ -175,14 +175,9 @@ fn scan_driver(header: &ScanHeader) -> ScanDriver<'static, MAX_COLS> {
         spread_threshold: cvm_core::spread::threshold_from_units(header.spread_threshold_units),
         scores: header.scores,
         max_defect_lines_per_row: header.max_defect_lines_per_row,
-        firmware_version,
-        // QEMU starts the board from power-on, once per run.
-        reset_cause: ResetCause::PowerOn,
-        boots: 1,
         rows: header.rows,
         outputs: cvm_core::settings::Outputs::DEFAULT,
         sources: [cvm_core::settings::Source::Default; cvm_core::settings::KEYS],
-        store: cvm_core::settings::Store::Empty,
     };
     let words = row_words_for(header.cols as usize, scorer.config());
     let (Some(row_a), Some(row_b)) = (ROW_A.take().get_mut(..words), ROW_B.take().get_mut(..words))
@@ -192,10 +187,12 @@ fn scan_driver(header: &ScanHeader) -> ScanDriver<'static, MAX_COLS> {
             "scan too wide for the board's row buffers with these kernels",
         )
     };
-    let pipeline = match Pipeline::<MAX_COLS>::new(scorer, settings, row_a, row_b) {
+    let mut pipeline = match Pipeline::<MAX_COLS>::new(scorer, settings, row_a, row_b) {
         Ok(p) => p,
         Err(_) => fail(EXIT_INTERNAL, "pipeline refused its buffers"),
     };
+    // QEMU starts the board from power-on, once per run; no settings record.
+    pipeline.set_boot(Boot::power_on(firmware_version));
     ScanDriver::new(pipeline, header.cols, header.rows)
 }
 

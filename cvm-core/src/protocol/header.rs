@@ -5,7 +5,7 @@ use super::fields::{Fields, ParseError, parse_i32, parse_u32};
 use super::frame::{LineBuf, LineSink, Priority};
 use crate::config::{Config, Kernels, Weights};
 use crate::scorer::Scorer;
-use crate::settings::{KEYS, ResetCause, Settings, Source, Store};
+use crate::settings::{Boot, KEYS, ResetCause, Settings, Source, Store};
 
 /// Protocol version written in the header.
 pub const VERSION: u32 = 7;
@@ -59,8 +59,9 @@ pub struct Origin {
 }
 
 impl HeaderInfo<'static> {
-    /// The header of a pipeline with these settings.
-    pub fn new(scorer: &Scorer, settings: &Settings) -> Self {
+    /// The header of a pipeline with these settings, on a board that
+    /// started so.
+    pub fn new(scorer: &Scorer, settings: &Settings, boot: &Boot) -> Self {
         let cfg: &Config = scorer.config();
         let (kernels, kernel_size) = match cfg.kernels {
             Kernels::Paper { bmax } => (b'P', bmax),
@@ -73,7 +74,7 @@ impl HeaderInfo<'static> {
         };
         HeaderInfo {
             version: VERSION,
-            firmware: settings.firmware_version,
+            firmware: boot.firmware,
             j1: cfg.geometry.j1,
             j2: cfg.geometry.j2,
             cols: settings.cols,
@@ -88,12 +89,12 @@ impl HeaderInfo<'static> {
             q: scorer.score_frac_bits(),
             scores: settings.scores,
             max_defect_lines: settings.max_defect_lines_per_row,
-            reset_cause: settings.reset_cause,
-            boots: settings.boots,
+            reset_cause: boot.reset_cause,
+            boots: boot.boots,
             origin: Some(Origin {
                 rows: settings.rows,
                 sources: settings.sources,
-                store: settings.store,
+                store: boot.store,
             }),
         }
     }

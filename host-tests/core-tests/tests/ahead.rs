@@ -9,7 +9,7 @@
 
 use cvm_core::Position;
 use cvm_core::pipeline::{Pipeline, Settings};
-use cvm_core::protocol::{Line, LineSink, Priority, ResetCause, parse};
+use cvm_core::protocol::{Line, LineSink, Priority, parse};
 use cvm_core::settings::Outputs;
 use cvm_core::verdict::{Ahead, counts};
 use cvm_core_tests::{random_scan, rng};
@@ -39,13 +39,9 @@ fn settings(rows: usize, cols: usize, thresholds: (u32, u32), outputs: Outputs) 
         spread_threshold: cvm_core::spread::SPREAD_OFF,
         scores: true,
         max_defect_lines_per_row: 4,
-        firmware_version: "ahead-test",
-        reset_cause: ResetCause::PowerOn,
-        boots: 1,
         rows: rows as u32,
         outputs,
         sources: [cvm_core::settings::Source::Default; cvm_core::settings::KEYS],
-        store: cvm_core::settings::Store::Empty,
     }
 }
 

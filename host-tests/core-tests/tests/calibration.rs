@@ -13,7 +13,7 @@ use cvm_core::calibration::{
 };
 use cvm_core::pipeline::{Pipeline, Settings};
 use cvm_core::power::{POWER_MAX, POWER_OFF};
-use cvm_core::protocol::{LineSink, Priority, ResetCause};
+use cvm_core::protocol::{LineSink, Priority};
 use cvm_core::spread::{SPREAD_MAX, SPREAD_OFF};
 use cvm_core_tests::{random_scan, rng, run_engine_thresholds};
 use proptest::prelude::*;
@@ -349,13 +349,9 @@ fn the_pipeline_hook_takes_the_armed_scans_positions() {
         spread_threshold: cvm_core::spread::SPREAD_OFF,
         scores: false,
         max_defect_lines_per_row: 3,
-        firmware_version: "calibration-test",
-        reset_cause: ResetCause::PowerOn,
-        boots: 1,
         rows: rows as u32,
         outputs: cvm_core::settings::Outputs::DEFAULT,
         sources: [cvm_core::settings::Source::Default; cvm_core::settings::KEYS],
-        store: cvm_core::settings::Store::Empty,
     };
     // Four scans: one before arming, two calibrated (the second with two
     // lost beams), one after.
@@ -488,13 +484,9 @@ fn a_calibration_with_the_spread_channel_off_still_sets_its_threshold() {
         spread_threshold,
         scores: false,
         max_defect_lines_per_row: 0,
-        firmware_version: "calibration-test",
-        reset_cause: ResetCause::PowerOn,
-        boots: 1,
         rows: rows as u32,
         outputs: cvm_core::settings::Outputs::DEFAULT,
         sources: [cvm_core::settings::Source::Default; cvm_core::settings::KEYS],
-        store: cvm_core::settings::Store::Empty,
     };
     let data: Vec<Vec<u16>> = (0..3)
         .map(|_| random_scan(&mut r, rows, cols, j, j))

@@ -422,7 +422,7 @@ fn protocol_document_example() {
 
 #[test]
 fn keys_read_and_write_the_settings_value() {
-    let mut s = Settings::new(300, 200, 4194304, 3277, "t");
+    let mut s = Settings::new(300, 200, 4194304, 3277);
     // Each key reads its own field: a distinct value in each, checked
     // against the field, not against the key's own code.
     let values: [u32; KEYS] = [9, 8, 7, 6, 12, 1, 16, 5, 4, 3, 2, 1, 1000, 11, 1, 0];
@@ -479,7 +479,7 @@ fn keys_read_and_write_the_settings_value() {
         Ok(cvm_core::spread::SPREAD_OFF)
     );
     assert_eq!(
-        Key::SpreadThreshold.get(&Settings::new(1, 1, 0, 0, "t")),
+        Key::SpreadThreshold.get(&Settings::new(1, 1, 0, 0)),
         cvm_core::spread::SPREAD_OFF
     );
     for (i, k) in Key::ALL.into_iter().enumerate() {
@@ -499,7 +499,7 @@ fn keys_read_and_write_the_settings_value() {
 
 #[test]
 fn row_mode_without_a_pulse_is_a_conflict() {
-    let mut s = Settings::new(300, 200, 1, 1, "t");
+    let mut s = Settings::new(300, 200, 1, 1);
     assert!(!conflict(&s));
     assert!(Key::RejectMode.set(&mut s, 1));
     assert!(conflict(&s), "row mode with the default pulse of 0");

@@ -40,13 +40,9 @@ fn header_rows_and_end_match_the_engine() {
             spread_threshold: cvm_core::spread::SPREAD_OFF,
             scores,
             max_defect_lines_per_row: 3,
-            firmware_version: "pipeline-test",
-            reset_cause: ResetCause::Watchdog,
-            boots: 7,
             rows: rows as u32,
             outputs: cvm_core::settings::Outputs::DEFAULT,
             sources: [cvm_core::settings::Source::Default; cvm_core::settings::KEYS],
-            store: cvm_core::settings::Store::Empty,
         };
         let data = random_scan(&mut r, rows, cols, j, j);
         let n = j * j;
@@ -69,6 +65,13 @@ fn header_rows_and_end_match_the_engine() {
         let words = cvm_core::stream::row_words_for(cols, scorer.config());
         let (mut a, mut b) = (vec![0i32; words], vec![0i32; words]);
         let mut p = Box::new(Pipeline::<64>::new(&scorer, settings, &mut a, &mut b).unwrap());
+        let boot = cvm_core::Boot {
+            firmware: "pipeline-test",
+            reset_cause: ResetCause::Watchdog,
+            boots: 7,
+            store: cvm_core::settings::Store::Empty,
+        };
+        p.set_boot(boot);
         let mut sink = Lines::default();
         p.begin(&mut sink);
         for (pos, f) in &frames {
@@ -99,7 +102,10 @@ fn header_rows_and_end_match_the_engine() {
         let Some(Line::Header(h)) = lines.first() else {
             panic!("case {case}: no header first: {:?}", lines.first());
         };
-        assert_eq!(h, &cvm_core::protocol::HeaderInfo::new(&scorer, &settings));
+        assert_eq!(
+            h,
+            &cvm_core::protocol::HeaderInfo::new(&scorer, &settings, &boot)
+        );
         assert_eq!(
             (
                 h.cols,

@@ -119,7 +119,8 @@ pub fn board_file(path: &Path, scan: &Scan, run: &RunSettings) -> Result<Vec<u8>
         bail!("scan has {} rows", scan.rows);
     }
     let settings = &run.settings;
-    let version = settings.firmware_version.as_bytes();
+    // The version a host run announces (the board's own start).
+    let version = cvm_core::VERSION.as_bytes();
     let mut v = [0u8; cvm_core::protocol::MAX_FW];
     if version.len() > v.len() {
         bail!("firmware version string longer than {} bytes", v.len());

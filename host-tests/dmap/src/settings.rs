@@ -307,13 +307,9 @@ fn pipeline_settings(
         spread_threshold: cvm_core::spread::threshold_from_units(spread_threshold_units),
         scores: output.scores,
         max_defect_lines_per_row: output.max_defect_lines,
-        firmware_version: cvm_core::VERSION,
-        reset_cause: cvm_core::protocol::ResetCause::PowerOn,
-        boots: 1,
         rows: rows as u32,
         outputs: cvm_core::settings::Outputs::DEFAULT,
         sources: [cvm_core::settings::Source::Default; cvm_core::settings::KEYS],
-        store: cvm_core::settings::Store::Empty,
     }
 }
 

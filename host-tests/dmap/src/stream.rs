@@ -80,7 +80,7 @@ pub fn stream_scan(
 /// with the scan.
 pub fn stream_mapped(
     scorer: &Scorer,
-    settings: Settings,
+    (settings, boot): (Settings, cvm_core::Boot),
     scan: &ScanFile,
     emit: &mut dyn FnMut(&[u8]) -> Result<()>,
 ) -> Result<()> {
@@ -101,6 +101,7 @@ pub fn stream_mapped(
         Pipeline::<MAX_COLS>::new(scorer, settings, &mut a, &mut b)
             .map_err(|e| anyhow::anyhow!("pipeline refused the scan: {e}"))?,
     );
+    pipeline.set_boot(boot);
     let mut sink = VecSink::default();
     pipeline.begin(&mut sink);
     let (mut counts, mut scratch) = (vec![0u16; cols * n], Vec::new());
@@ -136,13 +137,16 @@ pub fn stream_with(
 ) -> Result<Vec<String>> {
     let (j1, j2) = (scan.geometry.j1(), scan.geometry.j2());
     let mut run = resolve_with(scoring, output, load, (j1, j2), (scan.rows, scan.cols))?;
+    // The host's start: power-on, no record; `--from-flash` says the
+    // settings came from one.
+    let mut boot = cvm_core::Boot::power_on(cvm_core::VERSION);
     if from_flash {
         run.settings.sources = [cvm_core::settings::Source::Flash; cvm_core::settings::KEYS];
-        run.settings.store = cvm_core::settings::Store::Loaded;
+        boot.store = cvm_core::settings::Store::Loaded;
     }
     // Every sample is checked before the first line goes out.
     scan.validate(true)?;
-    stream_mapped(&run.scorer, run.settings, scan, emit)?;
+    stream_mapped(&run.scorer, (run.settings, boot), scan, emit)?;
     Ok(run.warnings)
 }
 

@@ -10,7 +10,7 @@ use std::path::PathBuf;
 use cvm_core::calibration::{Calibrator, Progress, Rule};
 use cvm_core::command::Calibration;
 use cvm_core::pipeline::{Pipeline, Settings};
-use cvm_core::protocol::{LineSink, Priority, ResetCause};
+use cvm_core::protocol::{LineSink, Priority};
 use cvm_core::{Position, Scorer};
 
 use crate::common;
@@ -55,13 +55,9 @@ fn on_the_board(
         spread_threshold,
         scores: true,
         max_defect_lines_per_row: 4,
-        firmware_version: "calibrate-device-test",
-        reset_cause: ResetCause::PowerOn,
-        boots: 1,
         rows: rows as u32,
         outputs: cvm_core::settings::Outputs::DEFAULT,
         sources: [cvm_core::settings::Source::Default; cvm_core::settings::KEYS],
-        store: cvm_core::settings::Store::Empty,
     };
     let words = cvm_core::stream::row_words_for(cols, scorer.config());
     let (mut a, mut b) = (vec![0i32; words], vec![0i32; words]);

@@ -53,8 +53,12 @@ fn board(master: OwnedFd, part: Vec<Vec<u8>>, stop: Arc<AtomicBool>) {
         } else {
             Store::Empty
         };
-        let compiled = Settings::new(300, 200, 4_194_304, 3277, "fw-fake");
-        Control::new(compiled, CAP, (9, 9), store, record)
+        let compiled = Settings::new(300, 200, 4_194_304, 3277);
+        let boot = cvm_core::Boot {
+            store,
+            ..cvm_core::Boot::power_on("fw-fake")
+        };
+        Control::new(compiled, boot, CAP, (9, 9), record)
     };
     let mut flash = None;
     let mut control = start(flash);

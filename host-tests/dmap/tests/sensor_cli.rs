@@ -42,7 +42,7 @@ const CAL: Calibration = Calibration {
 };
 
 fn compiled() -> Settings {
-    Settings::new(300, 200, THR, PTHR, "fw-fake")
+    Settings::new(300, 200, THR, PTHR)
 }
 
 #[derive(Clone, Copy, PartialEq)]
@@ -186,7 +186,11 @@ fn board(
         } else {
             Store::Empty
         };
-        Control::new(compiled(), CAP, (15, 15), store, record)
+        let boot = cvm_core::Boot {
+            store,
+            ..cvm_core::Boot::power_on("fw-fake")
+        };
+        Control::new(compiled(), boot, CAP, (15, 15), record)
     };
     let mut flash: Option<[u32; KEYS]> = None;
     let mut control = start(flash);

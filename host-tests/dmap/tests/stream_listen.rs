@@ -713,15 +713,12 @@ fn absurd_claimed_size_is_refused() {
         spread_threshold: cvm_core::spread::SPREAD_OFF,
         scores: true,
         max_defect_lines_per_row: 16,
-        firmware_version: "0.1.0",
-        reset_cause: cvm_core::protocol::ResetCause::PowerOn,
-        boots: 1,
         rows: 1,
         outputs: cvm_core::settings::Outputs::DEFAULT,
         sources: [cvm_core::settings::Source::Default; cvm_core::settings::KEYS],
-        store: cvm_core::settings::Store::Empty,
     };
-    let h = cvm_core::protocol::HeaderInfo::new(&scorer, &settings);
+    let h =
+        cvm_core::protocol::HeaderInfo::new(&scorer, &settings, &cvm_core::Boot::power_on("0.1.0"));
     cvm_core::protocol::encode_header(&h, &mut sink);
     let t = cvm_core::Totals {
         rows: 4_000_000,

@@ -542,25 +542,32 @@ fn run(u: &mut Unstructured) -> Result<()> {
         1 => u.int_in_range(0..=64)?,
         _ => u.int_in_range(0..=cvm_core::spread::SPREAD_MAX + 1)?,
     };
+    // Drawn in the order the corpus was made with.
+    let scores = u.ratio(7, 8)?;
+    let max_defect_lines_per_row = u.int_in_range(0..=4)?;
+    let boot = cvm_core::Boot {
+        firmware: "fuzz",
+        reset_cause: cvm_core::protocol::ResetCause::ALL[u.int_in_range(0..=4)?],
+        boots: u.int_in_range(1..=u32::MAX)?,
+        store: cvm_core::settings::Store::Empty,
+    };
     let settings = Settings {
         cols,
         threshold,
         power_threshold,
         spread_threshold,
-        scores: u.ratio(7, 8)?,
-        max_defect_lines_per_row: u.int_in_range(0..=4)?,
-        firmware_version: "fuzz",
-        reset_cause: cvm_core::protocol::ResetCause::ALL[u.int_in_range(0..=4)?],
-        boots: u.int_in_range(1..=u32::MAX)?,
+        scores,
+        max_defect_lines_per_row,
         rows: 1,
         outputs: cvm_core::settings::Outputs::DEFAULT,
         sources: [cvm_core::settings::Source::Default; cvm_core::settings::KEYS],
-        store: cvm_core::settings::Store::Empty,
     };
     let cells = scorer.cells();
     let words = row_words_for(cols as usize, scorer.config());
     let (mut a, mut b) = (vec![0; words], vec![0; words]);
-    let pipeline = Pipeline::<MAX_COLS>::new(&scorer, settings, &mut a, &mut b).expect("pipeline");
+    let mut pipeline =
+        Pipeline::<MAX_COLS>::new(&scorer, settings, &mut a, &mut b).expect("pipeline");
+    pipeline.set_boot(boot);
     let mut run = Run {
         cols,
         threshold,

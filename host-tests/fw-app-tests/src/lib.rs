@@ -86,13 +86,9 @@ impl Scan {
             spread_threshold: cvm_core::spread::SPREAD_OFF,
             scores,
             max_defect_lines_per_row: 4,
-            firmware_version: "test",
-            reset_cause: cvm_core::protocol::ResetCause::PowerOn,
-            boots: 1,
             rows: self.rows,
             outputs: cvm_core::settings::Outputs::DEFAULT,
             sources: [cvm_core::settings::Source::Default; cvm_core::settings::KEYS],
-            store: cvm_core::settings::Store::Empty,
         }
     }
 

@@ -28,14 +28,17 @@ const CAP: Capacity = Capacity {
 };
 
 fn compiled() -> Settings {
-    let mut s = Settings::new(300, 200, 4_194_304, 3277, "fw-test");
-    s.reset_cause = ResetCause::Watchdog;
-    s.boots = 4;
-    s
+    Settings::new(300, 200, 4_194_304, 3277)
 }
 
 fn control(store: Store, record: Option<[u32; KEYS]>) -> Control {
-    Control::new(compiled(), CAP, (15, 15), store, record)
+    let boot = cvm_core::Boot {
+        firmware: "fw-test",
+        reset_cause: ResetCause::Watchdog,
+        boots: 4,
+        store,
+    };
+    Control::new(compiled(), boot, CAP, (15, 15), record)
 }
 
 /// Sends request `r` with id `id`; returns the replies, decoded, and the effect.
@@ -120,7 +123,12 @@ fn set_changes_the_next_scan_only_and_refusals_change_nothing() {
     assert_eq!(s.threshold, 99);
     assert_eq!(s.sources[Key::Threshold.index()], Source::Changed);
     assert_eq!(s.sources[Key::Cols.index()], Source::Default);
-    assert_eq!((s.reset_cause, s.boots), (ResetCause::Watchdog, 4));
+    // The start's facts are not settings: a change leaves them.
+    let b = c.boot();
+    assert_eq!(
+        (b.firmware, b.reset_cause, b.boots),
+        ("fw-test", ResetCause::Watchdog, 4)
+    );
 
     let before = *c.settings();
     let bad: [&[u8]; 6] = [
@@ -206,7 +214,7 @@ fn a_loaded_record_is_used_unless_it_does_not_fit() {
     );
     assert!(s.scores);
     assert!(s.sources.iter().all(|&x| x == Source::Flash));
-    assert_eq!(s.store, Store::Loaded);
+    assert_eq!(c.boot().store, Store::Loaded);
     assert_eq!(s.outputs.pulse_us, 100);
     assert!(s.outputs.ready_high && !s.outputs.reject_high);
 
@@ -217,7 +225,7 @@ fn a_loaded_record_is_used_unless_it_does_not_fit() {
     old[Key::RejectLevel.index()] = 1;
     let c = control(Store::Loaded, Some(old));
     let s = c.settings();
-    assert_eq!(s.store, Store::Loaded);
+    assert_eq!(c.boot().store, Store::Loaded);
     assert_eq!((s.cols, s.threshold, s.outputs.pulse_us), (300, 7, 100));
     assert!(s.outputs.ready_high && !s.outputs.reject_high);
     for k in Key::ALL {
@@ -234,16 +242,16 @@ fn a_loaded_record_is_used_unless_it_does_not_fit() {
     let c = control(Store::Loaded, Some(values));
     assert_eq!(c.settings().cols, 300);
     assert_eq!(c.settings().threshold, 4_194_304);
-    assert_eq!(c.settings().store, Store::Unreadable);
+    assert_eq!(c.boot().store, Store::Unreadable);
     assert!(c.settings().sources.iter().all(|&x| x == Source::Default));
 
     values[Key::Cols.index()] = 300;
     values[Key::Pulse.index()] = 0; // row mode without pulse
     let c = control(Store::Loaded, Some(values));
-    assert_eq!(c.settings().store, Store::Unreadable);
+    assert_eq!(c.boot().store, Store::Unreadable);
 
     let c = control(Store::Foreign, None);
-    assert_eq!(c.settings().store, Store::Foreign);
+    assert_eq!(c.boot().store, Store::Foreign);
     assert_eq!(c.settings().threshold, 4_194_304);
 }
 

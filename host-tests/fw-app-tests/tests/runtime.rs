@@ -95,7 +95,11 @@ fn settings_changed_mid_scan_take_effect_with_the_next_scan_on_pipeline_and_pins
     let new_thr = old_thr + 12_345;
     let pipeline = Pipeline::<MAX_COLS>::new(&scorer, settings, &mut a, &mut b).unwrap();
     let mut driver = ScanDriver::new(pipeline, scan.cols, scan.rows);
-    let control = RefCell::new(Control::new(settings, CAP, (3, 3), Store::Empty, None));
+    let boot = cvm_core::Boot {
+        store: Store::Empty,
+        ..cvm_core::Boot::power_on(cvm_core::VERSION)
+    };
+    let control = RefCell::new(Control::new(settings, boot, CAP, (3, 3), None));
 
     let log: SharedLog<NoopRawMutex, 2, 16> = Mutex::new(RefCell::new(Acquisition::new()));
     let bufs = SampleBuffers::<2, 9>::new();

@@ -247,7 +247,7 @@ mod tests {
 
     fn applied(args: &[&str]) -> Result<cvm_core::Settings> {
         let o = Options::try_parse_from([&["twin"][..], args].concat())?;
-        let mut s = cvm_core::Settings::new(12, 6, 0, 0, "x");
+        let mut s = cvm_core::Settings::new(12, 6, 0, 0);
         o.pins.apply(&mut s)?;
         Ok(s)
     }
@@ -258,7 +258,7 @@ mod tests {
     fn former_output_options_are_the_settings_mode_pulse_and_delay() {
         use cvm_core::command::Key;
         let s = applied(&["--reject", "row", "--pulse-us", "500", "--row-delay", "2"]).unwrap();
-        let mut want = cvm_core::Settings::new(12, 6, 0, 0, "x");
+        let mut want = cvm_core::Settings::new(12, 6, 0, 0);
         for (key, v) in [(Key::Pulse, 500), (Key::RejectMode, 1), (Key::RowDelay, 2)] {
             assert!(key.set(&mut want, v));
         }

@@ -158,7 +158,7 @@ mod tests {
             full_scale: u16::MAX,
         };
         let tag = Tag::new(&config);
-        let mut settings = Settings::new(12, 6, 1234, 3277, "x");
+        let mut settings = Settings::new(12, 6, 1234, 3277);
         settings.scores = true;
         let v = values(&settings, &h743_capacity(12)).unwrap();
         assert_eq!(v[Key::Threshold.index()], 1234);

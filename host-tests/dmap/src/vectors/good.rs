@@ -248,9 +248,9 @@ pub fn all() -> Result<Vec<Vector>> {
     ));
     let default = stream(&Scene::default())?;
     let scores = stream(&scores_scene())?;
-    let second = stream_with(&scores_scene(), |s| {
-        s.reset_cause = ResetCause::Watchdog;
-        s.boots = 2;
+    let second = stream_with(&scores_scene(), |s, boot| {
+        boot.reset_cause = ResetCause::Watchdog;
+        boot.boots = 2;
         s.sources[0] = Source::Changed;
     })?;
     out.push(v(

@@ -9,7 +9,7 @@ use crate::stream::VecSink;
 use anyhow::{Result, anyhow};
 use cvm_core::protocol::{LineSink, Priority};
 use cvm_core::stream::Position;
-use cvm_core::{Config, Geometry, Pipeline, Scorer, Settings};
+use cvm_core::{Boot, Config, Geometry, Pipeline, Scorer, Settings};
 
 /// Detector size of every scene: 5x5 maps keep the vectors small.
 const J: usize = 5;
@@ -171,7 +171,6 @@ pub fn settings(scene: &Scene, scorer: &Scorer) -> Settings {
         scene.rows,
         scorer.threshold_from_units(scene.threshold),
         cvm_core::power::threshold_from_units(scene.power_threshold),
-        "0.1.0",
     );
     s.spread_threshold = cvm_core::spread::threshold_from_units(scene.spread_threshold);
     s.scores = scene.scores;
@@ -179,16 +178,18 @@ pub fn settings(scene: &Scene, scorer: &Scorer) -> Settings {
     s
 }
 
-/// The stream the pipeline writes for `scene`, its settings changed by
-/// `edit` first.
-pub fn stream_with(scene: &Scene, edit: impl FnOnce(&mut Settings)) -> Result<Vec<u8>> {
+/// The stream the pipeline writes for `scene`, its settings and the
+/// board's start (a power-on of version 0.1.0) changed by `edit` first.
+pub fn stream_with(scene: &Scene, edit: impl FnOnce(&mut Settings, &mut Boot)) -> Result<Vec<u8>> {
     let scorer = scorer(scene.full_scale)?;
     let mut settings = settings(scene, &scorer);
-    edit(&mut settings);
+    let mut boot = Boot::power_on("0.1.0");
+    edit(&mut settings, &mut boot);
     let words = cvm_core::stream::row_words_for(scene.cols as usize, scorer.config());
     let (mut a, mut b) = (vec![0i32; words], vec![0i32; words]);
     let mut pipeline = Pipeline::<MAX_COLS>::new(&scorer, settings, &mut a, &mut b)
         .map_err(|e| anyhow!("pipeline refused the scene: {e}"))?;
+    pipeline.set_boot(boot);
     let mut sink = Dropping {
         out: VecSink::default(),
         drop: scene.drop,
@@ -219,5 +220,5 @@ pub fn stream_with(scene: &Scene, edit: impl FnOnce(&mut Settings)) -> Result<Ve
 
 /// The stream of `scene` with its own settings.
 pub fn stream(scene: &Scene) -> Result<Vec<u8>> {
-    stream_with(scene, |_| {})
+    stream_with(scene, |_, _| {})
 }
