@@ -1,6 +1,7 @@
 //! `dmap listen --json` on the streams of the conformance vectors
 //! (docs/protocol/vectors): it finds in each exactly the kinds of damage
-//! the vectors' index names and exits 1 exactly when there are some; of a
+//! the vectors' index names and exits 1 exactly when there are some, and
+//! reports each line the decoder refuses at its number; of a
 //! whole stream it reports what the lines carry, as their decodes
 //! (`NAME.jsonl`, checked against the lines in `conformance.rs`) say: each
 //! scan's header, rows, defects, objects, totals and verdict, and the
@@ -45,6 +46,13 @@ fn records(name: &str) -> Vec<Value> {
         .collect()
 }
 
+/// `x` as the report's JSON carries it: written as the shortest text that
+/// reads back as `x`, then read as the report is (serde_json may read a
+/// float's text one unit in the last place off; the texts are compared).
+fn float(x: f64) -> Value {
+    serde_json::from_str(&serde_json::to_string(&x).unwrap()).unwrap()
+}
+
 fn channel_names(bits: u64) -> Value {
     let names: Vec<&str> = [(16, "cvm"), (32, "power"), (64, "spread")]
         .iter()
@@ -76,12 +84,65 @@ fn listen_finds_the_damage_each_vector_names() {
         assert_eq!(got, want, "{name}");
         assert_eq!(doc["damaged"], json!(!want.is_empty()), "{name}");
         assert_eq!(code, Some(i32::from(!want.is_empty())), "{name}");
+        check_line_errors(name, &doc);
+    }
+}
+
+/// The line errors `dmap listen` reports against the lines' decodes: a
+/// line the decoder refuses is reported at its number, as the decode's
+/// kind or `cut` (a whole line found inside it); a line reported with a
+/// decoder's kind is a line refused so.
+fn check_line_errors(name: &str, doc: &Value) {
+    let decoded: Vec<Value> = std::fs::read_to_string(dir().join(format!("{name}.jsonl")))
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let reported: Vec<(usize, &str)> = doc["line_errors"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| {
+            (
+                e["line"].as_u64().unwrap() as usize,
+                e["kind"].as_str().unwrap(),
+            )
+        })
+        .collect();
+    let decoder_kinds = [
+        "no-checksum",
+        "checksum",
+        "malformed",
+        "range",
+        "unknown-type",
+        "too-long",
+    ];
+    for (i, d) in decoded.iter().enumerate() {
+        let Some(kind) = d["error"].as_str() else {
+            continue;
+        };
+        let line = i + 1;
+        assert!(
+            reported
+                .iter()
+                .any(|&(l, k)| l == line && (k == kind || k == "cut")),
+            "{name}: line {line}, refused as {kind}, not reported: {reported:?}"
+        );
+    }
+    for &(line, kind) in &reported {
+        if decoder_kinds.contains(&kind) {
+            assert_eq!(
+                decoded[line - 1]["error"].as_str(),
+                Some(kind),
+                "{name}: line {line} reported {kind}"
+            );
+        }
     }
 }
 
 /// The report's header of a scan against its `H` record.
 fn check_header(at: &str, h: &Value, f: &Value) {
-    let q = f["q"].as_i64().unwrap() as i32;
+    let q = q_of(f);
     let pairs = [
         ("version", "v"),
         ("firmware", "fw"),
@@ -105,23 +166,26 @@ fn check_header(at: &str, h: &Value, f: &Value) {
         assert_eq!(h[report], f[field], "{at}: header {report}");
     }
     let thr = f["thr"].as_f64().unwrap();
-    assert_eq!(h["threshold"].as_f64(), Some(thr / 2f64.powi(q)), "{at}");
+    assert_eq!(h["threshold"], float(thr / 2f64.powi(q)), "{at}");
     let (pthr, sthr) = (f["pthr"].as_u64().unwrap(), f["sthr"].as_u64().unwrap());
-    let off = |v: u64, max: u64, one: f64| (v <= max).then(|| v as f64 / one);
-    assert_eq!(
-        h["power_threshold"].as_f64(),
-        off(pthr, 46340, 32768.0),
-        "{at}"
-    );
-    assert_eq!(
-        h["spread_threshold"].as_f64(),
-        off(sthr, 92680, 65536.0),
-        "{at}"
-    );
+    // A channel that is off (its threshold above every magnitude): null.
+    let off = |v: u64, max: u64, one: f64| {
+        if v <= max {
+            float(v as f64 / one)
+        } else {
+            Value::Null
+        }
+    };
+    assert_eq!(h["power_threshold"], off(pthr, 46340, 32768.0), "{at}");
+    assert_eq!(h["spread_threshold"], off(sthr, 92680, 65536.0), "{at}");
 }
 
-/// The report's object against its `O` record.
-fn check_object(at: &str, o: &Value, f: &Value) {
+fn q_of(header: &Value) -> i32 {
+    header["q"].as_i64().unwrap() as i32
+}
+
+/// The report's object against its `O` record (`units`: `2^q`).
+fn check_object(at: &str, o: &Value, f: &Value, units: f64) {
     let n = |k: &str| f[k].as_u64().unwrap();
     let want = json!({
         "id": n("id"),
@@ -134,12 +198,20 @@ fn check_object(at: &str, o: &Value, f: &Value) {
     for (k, v) in want.as_object().unwrap() {
         assert_eq!(&o[k], v, "{at}: object {k}");
     }
-    assert_eq!(o["peak"].as_f64(), Some(n("peak") as f64 / 65536.0), "{at}");
+    assert_eq!(o["peak"], float(n("peak") as f64 / 65536.0), "{at}");
     let centroid = [
-        n("centroid_row_q8") as f64 / 256.0,
-        n("centroid_col_q8") as f64 / 256.0,
+        float(n("centroid_row_q8") as f64 / 256.0),
+        float(n("centroid_col_q8") as f64 / 256.0),
     ];
     assert_eq!(o["centroid"], json!(centroid), "{at}: centroid");
+    for (report, field, one) in [
+        ("peak_magnitude", "peak_mag", units),
+        ("peak_power", "peak_power", 32768.0),
+        ("peak_spread", "peak_spread", 65536.0),
+    ] {
+        let want = float(n(field) as f64 / one);
+        assert_eq!(o[report], want, "{at}: object {report}");
+    }
 }
 
 #[test]
@@ -178,15 +250,21 @@ fn listen_reports_what_the_lines_of_a_whole_stream_carry() {
             let end = of("E")[0];
             assert_eq!(&scan["totals"], end, "{at}: totals");
             assert_eq!(scan["verdict"], end["verdict"], "{at}: verdict");
+            let units = 2f64.powi(q_of(of("H")[0]));
             let defects: Vec<Value> = of("D")
                 .iter()
                 .map(|f| {
                     let n = |k: &str| f[k].as_u64().unwrap();
+                    let x = |k: &str, one: f64| float(n(k) as f64 / one);
                     json!([
                         n("row"),
                         n("col"),
                         n("flags"),
-                        n("strength") as f64 / 65536.0
+                        x("strength", 65536.0),
+                        x("mag", units),
+                        x("pmag", 32768.0),
+                        x("smag", 65536.0),
+                        channel_names(n("flags")),
                     ])
                 })
                 .collect();
@@ -194,14 +272,25 @@ fn listen_reports_what_the_lines_of_a_whole_stream_carry() {
                 .as_array()
                 .unwrap()
                 .iter()
-                .map(|d| json!([d["row"], d["col"], d["flags"], d["strength"]]))
+                .map(|d| {
+                    json!([
+                        d["row"],
+                        d["col"],
+                        d["flags"],
+                        d["strength"],
+                        d["score"],
+                        d["power"],
+                        d["spread"],
+                        d["channels"],
+                    ])
+                })
                 .collect();
             assert_eq!(reported, defects, "{at}: defects");
             let objects = of("O");
             let reported = scan["objects"].as_array().unwrap();
             assert_eq!(reported.len(), objects.len(), "{at}: objects");
             for (o, f) in reported.iter().zip(objects) {
-                check_object(&at, o, f);
+                check_object(&at, o, f, units);
             }
             assert_eq!(scan["problems"], json!([]), "{at}");
             scans += 1;
