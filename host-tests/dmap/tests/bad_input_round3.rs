@@ -202,6 +202,29 @@ fn vectors_refuses_a_folder_it_did_not_make_and_keeps_its_files() {
     let empty = dir.path().join("empty");
     std::fs::create_dir(&empty).unwrap();
     assert!(run(&["vectors", s(&empty)]).status.success());
+
+    // An earlier version's output (each vector's report in NAME.json, its
+    // exit status in the index) is taken, and its NAME.json files go.
+    let old = dir.path().join("old");
+    std::fs::create_dir(&old).unwrap();
+    let files: [(&str, &[u8]); 5] = [
+        (
+            "index.json",
+            br#"[{"name": "good-clear", "about": "a", "exit": 0}]"#,
+        ),
+        ("good-clear.txt", b"H\n"),
+        ("good-clear.json", b"{}\n"),
+        ("commands.json", br#"{"requests": [], "replies": []}"#),
+        (".gitattributes", b"* -text\n"),
+    ];
+    for (n, b) in files {
+        std::fs::write(old.join(n), b).unwrap();
+    }
+    let out = run(&["vectors", s(&old)]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(!old.join("good-clear.json").exists());
+    assert!(old.join("good-clear.jsonl").exists());
+    assert!(run(&["vectors", "--check", s(&old)]).status.success());
 }
 
 // 4. --requests from a pipe

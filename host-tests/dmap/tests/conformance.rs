@@ -2,9 +2,11 @@
 //! described in docs/dmap.md, "Conformance vectors"): they are exactly
 //! what the encoder and decoder make now (a change to either that the
 //! vectors do not carry fails here: write them again with `dmap vectors`),
-//! `dmap listen --json` decodes every stream into its expected document
-//! and exit status, and together they cover every line type, every flag
-//! and every kind of damage the document names.
+//! each line's decode names the fields the line carries at their places
+//! in the layout, and together they cover every line type, every flag,
+//! every verdict, every line error and every kind of damage the document
+//! names. What `dmap listen` reports of the streams is tested in
+//! `listen_vectors.rs`.
 
 use crate::common;
 
@@ -20,19 +22,46 @@ fn dir() -> PathBuf {
     ))
 }
 
-/// (name, expected document) of every vector.
-fn vectors() -> Vec<(String, Value)> {
+/// The entries of `index.json`.
+fn index() -> Vec<Value> {
     let index: Value =
         serde_json::from_slice(&std::fs::read(dir().join("index.json")).unwrap()).unwrap();
-    index
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|e| {
-            let name = e["name"].as_str().unwrap().to_string();
-            let doc = std::fs::read(dir().join(format!("{name}.json"))).unwrap();
-            (name, serde_json::from_slice(&doc).unwrap())
+    index.as_array().unwrap().clone()
+}
+
+/// A vector's input, as lines without their line ends (as the decodes
+/// count them: a last line without its newline is one).
+fn input(name: &str) -> Vec<String> {
+    let bytes = std::fs::read(dir().join(format!("{name}.txt"))).unwrap();
+    bytes
+        .split_inclusive(|&b| b == b'\n')
+        .map(|l| {
+            let l = l.strip_suffix(b"\n").unwrap_or(l);
+            let l = l.strip_suffix(b"\r").unwrap_or(l);
+            String::from_utf8_lossy(l).into_owned()
         })
+        .collect()
+}
+
+/// A vector's decodes, one per input line, as written.
+fn decode_lines(name: &str) -> Vec<String> {
+    let text = std::fs::read_to_string(dir().join(format!("{name}.jsonl"))).unwrap();
+    assert!(text.is_empty() || text.ends_with('\n'), "{name}.jsonl");
+    text.lines().map(String::from).collect()
+}
+
+/// A vector's decodes, one per input line.
+fn decodes(name: &str) -> Vec<Value> {
+    decode_lines(name)
+        .iter()
+        .map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("{name}: {l}: {e}")))
+        .collect()
+}
+
+fn names() -> Vec<String> {
+    index()
+        .iter()
+        .map(|e| e["name"].as_str().unwrap().to_string())
         .collect()
 }
 
@@ -46,22 +75,84 @@ fn the_vectors_are_what_the_encoder_and_decoder_make() {
     );
 }
 
+/// Each line's decode against the line's text, read by the layout's
+/// names alone (`field_of`): one decode per input line; a record has
+/// every field of its type's layout, in order, each the value written at
+/// its place (numbers with any leading zeros, `-` for none, `1`/`0` for
+/// `true`/`false`, `J1xJ2` for `j`); an `S` line one entry per 12
+/// characters; an error only for a line that is no whole record.
 #[test]
-fn listen_decodes_every_vector_as_expected() {
-    let all = vectors();
-    assert!(all.len() > 80, "{}", all.len());
-    for (name, want) in all {
-        let input = dir().join(format!("{name}.txt"));
-        let out = dmap(&["listen", "--input", s(&input), "--json"]);
-        let got: Value = serde_json::from_slice(&out.stdout)
-            .unwrap_or_else(|e| panic!("{name}: no JSON document: {e}"));
-        assert_eq!(got, want["listen"], "{name}");
-        assert_eq!(
-            Some(want["exit"].as_i64().unwrap() as i32),
-            out.status.code(),
-            "{name}"
-        );
+fn each_decode_is_what_its_line_says() {
+    let mut records = 0;
+    for name in names() {
+        let (text, decoded, raw) = (input(&name), decodes(&name), decode_lines(&name));
+        assert_eq!(text.len(), decoded.len(), "{name}: a decode per line");
+        for (i, (line, d)) in text.iter().zip(&decoded).enumerate() {
+            let at = format!("{name} line {}", i + 1);
+            if line.is_empty() {
+                assert_eq!(d, &serde_json::json!({"empty": true}), "{at}");
+                continue;
+            }
+            let Some(fields) = d["fields"].as_object() else {
+                if d["type"] == "A" {
+                    assert!(line.starts_with("A,"), "{at}");
+                    assert_eq!(
+                        d["reply"].as_str().unwrap().split('*').next(),
+                        line.split('*').next(),
+                        "{at}: written again as it came"
+                    );
+                } else {
+                    assert!(d["error"].is_string(), "{at}: {d}");
+                }
+                continue;
+            };
+            let kind = d["type"].as_str().unwrap();
+            assert!(line.starts_with(&format!("{kind},")), "{at}");
+            let layout = cvm_core::protocol::layout::fields(kind.as_bytes()[0]).unwrap();
+            let keys: Vec<&str> = fields.keys().map(String::as_str).collect();
+            let mut want: Vec<&str> = layout.to_vec();
+            want.sort_unstable();
+            let mut got = keys.clone();
+            got.sort_unstable();
+            assert_eq!(got, want, "{at}: the layout's fields");
+            let places: Vec<usize> = layout
+                .iter()
+                .map(|f| raw[i].find(&format!("\"{f}\":")).unwrap())
+                .collect();
+            assert!(places.is_sorted(), "{at}: fields in the layout's order");
+            for name in layout {
+                let v = &fields[*name];
+                let t = field_of(line, name);
+                let same = match (v, t.as_deref()) {
+                    (Value::Null, None | Some("-")) => true,
+                    (Value::Number(n), Some(t)) => {
+                        let t = t.trim_start_matches('0');
+                        n.to_string() == if t.is_empty() { "0" } else { t }
+                    }
+                    (Value::Bool(b), Some(t)) => t == if *b { "1" } else { "0" },
+                    (Value::Array(a), Some(t)) if *name == "j" => t == format!("{}x{}", a[0], a[1]),
+                    (Value::Array(a), Some(t)) if *name == "chars" => {
+                        a.len() * cvm_core::protocol::SCORE_CHARS == t.len()
+                    }
+                    // A version 6 header's 15 `src` letters: `sthr`'s `d` added.
+                    (Value::String(v), Some(t)) if *name == "src" && t.len() == 15 => {
+                        let mut t = t.to_string();
+                        t.insert(cvm_core::protocol::SPREAD_KEY, 'd');
+                        *v == t
+                    }
+                    (Value::String(v), Some(t)) => v == t,
+                    // No `sthr` before version 7: the channel off.
+                    (Value::Number(n), None) if *name == "sthr" => {
+                        n.as_u64() == Some(u64::from(u32::MAX))
+                    }
+                    _ => false,
+                };
+                assert!(same, "{at}: {kind}.{name} decoded {v}, written {t:?}");
+            }
+            records += 1;
+        }
     }
+    assert!(records > 3000, "{records}");
 }
 
 /// The command channel's vectors: every request the board accepts is
@@ -106,26 +197,50 @@ fn the_command_vectors_decode_as_stated_and_cover_the_refusals() {
     }
 }
 
-/// Every line type occurs in a whole stream; every flag bit in a score
-/// line; every verdict; every kind of damage but the two that only
-/// `dmap listen`'s own limits raise (`--max-scans`, its memory).
+/// Every line type occurs in a whole stream (one in which a receiver
+/// finds no damage); every flag bit in a score line of one; every
+/// verdict in an end line; every line error in a decode; every kind of
+/// damage in the index but the two that only `dmap listen`'s own limits
+/// raise (`--max-scans`, its memory).
 #[test]
 fn the_vectors_cover_the_protocol() {
-    let all = vectors();
+    let index = index();
     let mut types = BTreeSet::new();
-    let mut flags = 0u8;
-    for (name, _) in all.iter().filter(|(n, _)| n.starts_with("good-")) {
-        let bytes = std::fs::read(dir().join(format!("{name}.txt"))).unwrap();
-        for l in bytes.split(|&b| b == b'\n').filter(|l| l.len() > 1) {
-            types.insert(l[0] as char);
-            if let Ok(cvm_core::protocol::Line::Scores { chars, .. }) = cvm_core::protocol::parse(l)
-            {
-                for c in chars.chunks(cvm_core::protocol::SCORE_CHARS) {
-                    flags |= cvm_core::protocol::decode_score(c).unwrap().flags;
+    let mut flags = 0u64;
+    let mut errors = BTreeSet::new();
+    let mut verdicts = BTreeSet::new();
+    let mut damage = BTreeSet::new();
+    let mut whole = 0;
+    for e in &index {
+        let name = e["name"].as_str().unwrap();
+        let kinds = e["damage"].as_array().unwrap();
+        damage.extend(kinds.iter().map(|k| k.as_str().unwrap().to_string()));
+        for d in decodes(name) {
+            if let Some(err) = d["error"].as_str() {
+                errors.insert(err.to_string());
+            }
+            if d["type"] == "E" {
+                verdicts.insert(d["fields"]["verdict"].as_str().unwrap().to_string());
+            }
+            if !kinds.is_empty() {
+                continue;
+            }
+            if let Some(t) = d["type"].as_str() {
+                types.insert(t.to_string());
+            }
+            match d["type"].as_str() {
+                Some("S") => {
+                    for p in d["fields"]["chars"].as_array().unwrap() {
+                        flags |= p[3].as_u64().unwrap();
+                    }
                 }
+                Some("D") => flags |= d["fields"]["flags"].as_u64().unwrap(),
+                _ => {}
             }
         }
+        whole += usize::from(kinds.is_empty());
     }
+    assert!(whole >= 20, "{whole} whole streams");
     assert_eq!(
         types.into_iter().collect::<String>(),
         "ADEHORS",
@@ -133,20 +248,19 @@ fn the_vectors_cover_the_protocol() {
     );
     // CLIPPED is never written (a score cannot reach the top of its
     // range); its rule is shown by the vector range-clipped.
-    let clipped = cvm_core::flags::CLIPPED;
+    let clipped = u64::from(cvm_core::flags::CLIPPED);
     assert_eq!(flags, 0x7F & !clipped, "flags {flags:#x}");
-    let kinds: BTreeSet<String> = all
-        .iter()
-        .flat_map(|(_, v)| v["listen"]["problems"].as_array().unwrap().clone())
-        .map(|p| p["kind"].as_str().unwrap().to_string())
-        .collect();
-    let every = [
+    let set = |v: &[&str]| v.iter().map(|k| k.to_string()).collect::<BTreeSet<_>>();
+    let line_errors = [
         "no-checksum",
         "checksum",
         "malformed",
         "range",
         "unknown-type",
         "too-long",
+    ];
+    assert_eq!(errors, set(&line_errors), "line errors in the decodes");
+    let every = [
         "cut",
         "outside-scan",
         "scan-cut",
@@ -161,25 +275,13 @@ fn the_vectors_cover_the_protocol() {
         "misplaced",
     ];
     assert_eq!(
-        kinds,
-        every.iter().map(|k| k.to_string()).collect::<BTreeSet<_>>()
+        damage,
+        set(&[&line_errors[..], &every[..]].concat()),
+        "kinds of damage in the index"
     );
-    let verdicts: BTreeSet<&str> = all
-        .iter()
-        .flat_map(|(_, v)| v["listen"]["scans"].as_array().unwrap().clone())
-        .filter_map(|s| s["verdict"].as_str().map(String::from))
-        .map(|v| match v.as_str() {
-            "good" => "good",
-            "obj" => "obj",
-            "fault-missing" => "fault-missing",
-            "fault-frames" => "fault-frames",
-            "fault-misplaced" => "fault-misplaced",
-            _ => "other",
-        })
-        .collect();
     assert_eq!(
         verdicts,
-        BTreeSet::from([
+        set(&[
             "fault-frames",
             "fault-misplaced",
             "fault-missing",
@@ -241,65 +343,61 @@ fn field_of(line: &str, name: &str) -> Option<String> {
 
 /// Every vector that says it changes one field (`range-`, `field-`,
 /// `cross-`, ...) changes that field, in lines of that type, and nothing
-/// else of its base stream; and `dmap listen` names that field in what it
-/// reports (a line refused for the field's range, a field or cross-check
-/// problem). A vector made with another field's place, as happens when the
-/// layout changes and the generator does not follow, fails here.
+/// else of its base stream; and the decodes of the lines it changed
+/// differ from the base's in that field alone, or refuse the line for
+/// that field's range. A vector made with another field's place, as
+/// happens when the layout changes and the generator does not follow,
+/// fails here. (`dmap listen` naming the field: `listen_vectors.rs`.)
 #[test]
 fn each_one_field_vector_changes_its_field_only_and_the_decoder_names_it() {
-    let index: Value =
-        serde_json::from_slice(&std::fs::read(dir().join("index.json")).unwrap()).unwrap();
     let mut checked = 0;
-    for e in index.as_array().unwrap() {
+    for e in index() {
         let Some(change) = e["changes"].as_str() else {
             continue;
         };
         let name = e["name"].as_str().unwrap();
         let base = e["base"].as_str().unwrap();
         let (kind, field) = change.split_once('.').unwrap();
-        let read = |n: &str| std::fs::read_to_string(dir().join(format!("{n}.txt"))).unwrap();
-        let (good, bad) = (read(base), read(name));
-        let (good, bad): (Vec<&str>, Vec<&str>) = (good.lines().collect(), bad.lines().collect());
+        let (good, bad) = (input(base), input(name));
         assert_eq!(good.len(), bad.len(), "{name}: lines added or removed");
         let differ: Vec<usize> = (0..good.len()).filter(|&i| good[i] != bad[i]).collect();
         assert!(!differ.is_empty(), "{name}: no line changed");
-        for &i in &differ {
+        let (was, now) = (decodes(base), decodes(name));
+        for i in 0..good.len() {
+            if !differ.contains(&i) {
+                assert_eq!(was[i], now[i], "{name}: line {i} unchanged, its decode not");
+                continue;
+            }
             assert!(
                 bad[i].starts_with(&format!("{kind},")),
                 "{name}: line {i} is not {kind}"
             );
             let fields = cvm_core::protocol::layout::fields(kind.as_bytes()[0]).unwrap();
             for f in fields {
-                let (a, b) = (field_of(good[i], f), field_of(bad[i], f));
+                let (a, b) = (field_of(&good[i], f), field_of(&bad[i], f));
                 if *f == field {
                     assert_ne!(a, b, "{name}: {change} unchanged in line {i}");
                 } else {
                     assert_eq!(a, b, "{name}: {kind}.{f} changed too, in line {i}");
                 }
             }
-        }
-        let doc: Value =
-            serde_json::from_slice(&std::fs::read(dir().join(format!("{name}.json"))).unwrap())
-                .unwrap();
-        let said: Vec<String> = ["line_errors", "problems"]
-            .iter()
-            .flat_map(|k| doc["listen"][k].as_array().cloned().unwrap_or_default())
-            .filter_map(|p| p["what"].as_str().map(String::from))
-            .collect();
-        // An S line's field is its positions: the decoder names the position.
-        let names = |w: &str| {
-            if field == "chars" {
-                w.contains("S line") && w.contains("position")
-            } else {
-                [" ", ":", "=", ","].iter().any(|end| {
-                    w.contains(&format!(" {field}{end}")) || w.starts_with(&format!("{field}{end}"))
-                })
+            if now[i]["error"].is_string() {
+                assert_eq!(
+                    now[i],
+                    serde_json::json!({"error": "range", "field": field}),
+                    "{name}: line {i}"
+                );
+                continue;
             }
-        };
-        assert!(
-            said.iter().any(|w| names(w)),
-            "{name}: the decoder does not name {change}: {said:?}"
-        );
+            let (a, b) = (&was[i]["fields"], &now[i]["fields"]);
+            for f in fields {
+                if *f == field {
+                    assert_ne!(a[f], b[f], "{name}: {change} decodes unchanged in line {i}");
+                } else {
+                    assert_eq!(a[f], b[f], "{name}: {kind}.{f} decodes changed in line {i}");
+                }
+            }
+        }
         checked += 1;
     }
     assert!(checked >= 30, "{checked}");

@@ -30,6 +30,7 @@ mod listen_crosscheck;
 mod listen_input;
 mod listen_interrupt;
 mod listen_objects;
+mod listen_vectors;
 mod listen_verdict;
 mod npy_io;
 mod objects_cli;

@@ -1,21 +1,22 @@
 //! `dmap vectors`: the line protocol's conformance vectors
 //! (docs/dmap.md, "Conformance vectors"). Each vector is a stream of
 //! result lines, whole or deliberately damaged, made from synthetic scans
-//! by the firmware's own pipeline (`scenes`, `good`, `damaged`), and the
-//! decode `dmap listen --json` makes of it; and the command channel's
-//! request and reply lines with their decodes (`commands`). `dmap vectors
-//! DIR` writes them (`NAME.txt`, `NAME.json`, `index.json`,
-//! `commands.json`); `dmap vectors --check DIR`
-//! makes them again and compares, byte for byte, so that a change of the
-//! encoder or the decoder that the vectors do not reflect fails.
+//! by the firmware's own pipeline (`scenes`, `good`, `damaged`), and what
+//! the protocol's decoder makes of each of its lines (`lines`); and the
+//! command channel's request and reply lines with their decodes
+//! (`commands`). `dmap vectors DIR` writes them (`NAME.txt`,
+//! `NAME.jsonl`, `index.json`, `commands.json`); `dmap vectors --check
+//! DIR` makes them again and compares, byte for byte, so that a change of
+//! the encoder or the decoder that the vectors do not reflect fails.
 
 mod commands;
 mod damaged;
 mod edit;
 mod good;
+mod lines;
 mod scenes;
 
-use crate::listen::{decode_with, summary_json};
+use crate::listen::decode_with;
 use anyhow::{Context, Result, bail};
 use clap::Args;
 pub use commands::CAP as COMMAND_CAPACITY;
@@ -60,12 +61,20 @@ pub fn all() -> Result<Vec<Vector>> {
     Ok(v)
 }
 
-/// What `dmap listen --json` prints for `bytes` (one document) and the
-/// status it exits with: 1 when the stream is damaged, else 0.
-pub fn decode(bytes: &[u8]) -> Result<(serde_json::Value, i32)> {
+/// The kinds of damage (docs/dmap.md, "Kinds of damage") a receiver
+/// finds in `bytes`, as `dmap listen` names them: each once, sorted; none
+/// for a whole stream.
+pub fn damage(bytes: &[u8]) -> Result<Vec<&'static str>> {
     let dec = decode_with(bytes, 0, crate::listen::DEFAULT_MAX_SCANS as usize)?;
-    let status = i32::from(!dec.damage().is_empty());
-    Ok((summary_json(&dec, None), status))
+    let mut kinds: Vec<&'static str> = dec
+        .errors
+        .iter()
+        .chain(dec.scans.iter().flat_map(|s| &s.problems))
+        .map(|e| e.kind.name())
+        .collect();
+    kinds.sort_unstable();
+    kinds.dedup();
+    Ok(kinds)
 }
 
 /// The files of the vectors: name and content.
@@ -73,20 +82,22 @@ pub fn files() -> Result<Vec<(String, Vec<u8>)>> {
     let mut out = Vec::new();
     let mut index = Vec::new();
     for v in all()? {
-        let (doc, status) = decode(&v.bytes)?;
-        let expected = serde_json::json!({
+        let mut entry = serde_json::json!({
+            "name": v.name,
             "about": v.about,
-            "exit": status,
-            "listen": doc,
+            "damage": damage(&v.bytes)?,
         });
-        let mut entry = serde_json::json!({"name": v.name, "about": v.about, "exit": status});
         if let Some(c) = &v.changes {
             entry["base"] = c.base.into();
             entry["changes"] = c.field.clone().into();
         }
         index.push(entry);
+        let decoded: String = lines::decode(&v.bytes)?
+            .iter()
+            .map(|l| format!("{l}\n"))
+            .collect();
         out.push((format!("{}.txt", v.name), v.bytes));
-        out.push((format!("{}.json", v.name), pretty(&expected)?));
+        out.push((format!("{}.jsonl", v.name), decoded.into_bytes()));
     }
     out.push((
         "index.json".to_string(),
@@ -132,10 +143,11 @@ pub fn compare(dir: &Path) -> Result<Vec<String>> {
 /// written over. A folder `dmap vectors` may write: one that does not
 /// exist, an empty one, or one that holds nothing but a previous output:
 /// `.gitattributes` as written here, an `index.json` listing vectors
-/// (`name`, `about`, `exit`), `commands.json` with its `requests` and
-/// `replies`, and each listed vector's `NAME.txt` and `NAME.json`. Any
-/// other folder is refused before anything in it is touched: its files
-/// are someone else's.
+/// (`name`, `about`, `damage`; or `exit`, as earlier versions wrote),
+/// `commands.json` with its `requests` and `replies`, and each listed
+/// vector's `NAME.txt` and `NAME.jsonl` (or `NAME.json`, as earlier
+/// versions wrote). Any other folder is refused before
+/// anything in it is touched: its files are someone else's.
 fn previous_vectors(dir: &Path) -> Result<Vec<String>> {
     let d = dir.display();
     let entries = match std::fs::read_dir(dir) {
@@ -170,8 +182,10 @@ fn previous_vectors(dir: &Path) -> Result<Vec<String>> {
                     let name = e["name"].as_str()?;
                     let plain =
                         !name.is_empty() && !name.starts_with('.') && !name.contains(['/', '\\']);
-                    (plain && e["about"].is_string() && e["exit"].is_u64())
-                        .then(|| name.to_string())
+                    (plain
+                        && e["about"].is_string()
+                        && (e["damage"].is_array() || e["exit"].is_u64()))
+                    .then(|| name.to_string())
                 })
                 .collect::<Option<Vec<String>>>()
         });
@@ -185,7 +199,7 @@ fn previous_vectors(dir: &Path) -> Result<Vec<String>> {
     };
     let ours = |n: &str| {
         [".gitattributes", "index.json", "commands.json"].contains(&n)
-            || [".txt", ".json"].iter().any(|ext| {
+            || VECTOR_FILES.iter().any(|ext| {
                 n.strip_suffix(ext)
                     .is_some_and(|stem| index.iter().any(|v| v == stem))
             })
@@ -195,6 +209,9 @@ fn previous_vectors(dir: &Path) -> Result<Vec<String>> {
     }
     Ok(index)
 }
+
+/// The endings of a vector's files, those earlier versions wrote among them.
+const VECTOR_FILES: [&str; 3] = [".txt", ".jsonl", ".json"];
 
 /// The end of every refusal of a folder.
 const REFUSE: &str = "dmap vectors writes only into a new or empty folder, or over its own earlier output (nothing written)";
@@ -227,7 +244,7 @@ pub fn run(args: &VectorsArgs) -> Result<()> {
     // Vectors no longer made go (those the old index names, nothing else),
     // once the new set is in place: the directory holds exactly the set.
     for name in old {
-        for file in [format!("{name}.txt"), format!("{name}.json")] {
+        for file in VECTOR_FILES.map(|ext| format!("{name}{ext}")) {
             if !files.iter().any(|(n, _)| *n == file) {
                 let _ = std::fs::remove_file(args.dir.join(file));
             }
