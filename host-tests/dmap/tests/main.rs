@@ -26,6 +26,7 @@ mod emulate;
 mod fixed_cli;
 mod halos_found;
 mod halos_parts;
+mod halos_pooled;
 mod listen_crosscheck;
 mod listen_input;
 mod listen_interrupt;

@@ -3,12 +3,14 @@
 //! three channels calibrated by the tail rule on reference parts, and each
 //! scan run through `cvm_core::Engine` and `cvm_core::Objects` exactly as
 //! the firmware runs them. The halo test (`tests/halos_found.rs`), the
-//! detection-curve experiment (`examples/curves.rs`) and the paper-sim
-//! bubble runs (`examples/paper_bubbles.rs`) share it.
+//! detection-curve experiment (`examples/curves.rs`), the paper-sim
+//! bubble runs (`examples/paper_bubbles.rs`) and the pooled decisions for
+//! one-position defects (`pooled`, `examples/pooled.rs`) share it.
 
 pub mod calib;
 pub mod parts;
 pub mod plot;
+pub mod pooled;
 pub mod run;
 pub mod thresholds;
 
