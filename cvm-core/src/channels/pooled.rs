@@ -45,9 +45,6 @@
 
 use super::power::ratio_q15;
 
-/// A pooled threshold that no value reaches: the decision is off.
-pub const POOLED_OFF: u32 = u32::MAX;
-
 /// Fraction bits of [`gain`].
 pub const GAIN_FRAC: u32 = 14;
 /// The most positions a footprint or a ring may have.

@@ -2,7 +2,6 @@
 //! decisions as soon as it is final, its row's summary built alongside,
 //! and a final row put out.
 
-use super::pooled::Row;
 use super::{Engine, PositionScore, RowView, strength};
 use crate::channels::flags;
 use crate::channels::magnitude::magnitude;
@@ -17,8 +16,7 @@ impl<const MAX_COLS: usize> Engine<'_, MAX_COLS> {
         let Some(p) = self.pending else { return };
         let rb = (self.cur ^ 1) & 1;
         let pb = (p % 2) as usize;
-        let from = self.decided[rb];
-        for c in from..self.cols {
+        for c in self.decided[rb]..self.cols {
             let meta = |b: usize| self.meta[b].get(c).copied().unwrap_or(flags::NO_DATA);
             let (own, above) = (meta(pb), meta(1 - pb));
             if own & flags::NO_DATA != 0 {
@@ -41,14 +39,6 @@ impl<const MAX_COLS: usize> Engine<'_, MAX_COLS> {
             }
         }
         self.decide_upto(rb, self.cols);
-        // With no row below, the pooled values of the positions decided
-        // here (a row decided as its beams came has them already).
-        if self.pooling() {
-            let rows = [Row::Buf(1 - pb), Row::Buf(pb), Row::None];
-            for c in from..self.cols {
-                self.pool(rb, rows, c);
-            }
-        }
     }
 
     /// Decides the positions of result buffer `rb` up to column `end`

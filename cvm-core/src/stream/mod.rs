@@ -35,14 +35,12 @@
 //! extra; neither shifts any later position.
 
 mod decide;
-mod pooled;
 mod results;
 mod window;
 
 pub use results::{Position, PositionScore, RowSummary, RowView, Totals, strength};
 
 use crate::channels::flags;
-use crate::channels::pooled::POOLED_OFF;
 use crate::channels::power::POWER_OFF;
 use crate::channels::spread::SPREAD_OFF;
 use crate::scorer::{Scorer, Scratch};
@@ -106,11 +104,9 @@ pub const fn near_words(config: &crate::Config) -> usize {
 }
 
 /// Bytes of engine state for `cols` columns: the two row buffers plus the
-/// per-column flags, powers and spreads of three rows (the third for the
-/// pooled decisions) and two rows of results.
+/// per-column flags, powers and spreads and two rows of results.
 pub const fn window_bytes(cols: usize, j1: usize, j2: usize) -> usize {
-    2 * row_words(cols, j1, j2) * 4
-        + cols * (3 + 12 + 6 + 2 * core::mem::size_of::<PositionScore>())
+    2 * row_words(cols, j1, j2) * 4 + cols * (2 + 8 + 4 + 2 * core::mem::size_of::<PositionScore>())
 }
 
 /// The streaming engine, for at most `MAX_COLS` columns.
@@ -124,11 +120,6 @@ pub struct Engine<'a, const MAX_COLS: usize> {
     threshold: u32,
     power_threshold: u32,
     spread_threshold: u32,
-    /// The pooled decisions' thresholds, loss (`Q15`) and raise (`Q16`)
-    /// ([`crate::channels::pooled`]; `POOLED_OFF`, the default: off).
-    pooled_thresholds: (u32, u32),
-    /// The row before the two in the buffers, for the pooled decisions.
-    older: pooled::Older<MAX_COLS>,
     bufs: [&'a mut [i32]; 2],
     /// Empty, or three maps: the current row's last three, column `c` in
     /// map `c % 3`, each also copied to its row buffer. The horizontal
@@ -216,8 +207,6 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
             threshold,
             power_threshold: POWER_OFF,
             spread_threshold: SPREAD_OFF,
-            pooled_thresholds: (POOLED_OFF, POOLED_OFF),
-            older: pooled::Older::new(),
             bufs: [row_a, row_b],
             near,
             meta: [[flags::NO_DATA; MAX_COLS]; 2],
@@ -287,20 +276,6 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
 
     pub fn spread_threshold(&self) -> u32 {
         self.spread_threshold
-    }
-
-    /// Sets the pooled decisions' thresholds: the power channel fires on
-    /// a loss (`Q15`) at or above `loss`, the spread channel on a raise
-    /// (`Q16`) at or above `raise` ([`crate::channels::pooled`];
-    /// `POOLED_OFF`, the default: that decision is off, and with both off
-    /// nothing is pooled). A raise needs the spreads, which are then
-    /// measured even with the spread channel off. Meant for between scans.
-    pub fn set_pooled_thresholds(&mut self, loss: u32, raise: u32) {
-        self.pooled_thresholds = (loss, raise);
-    }
-
-    pub fn pooled_thresholds(&self) -> (u32, u32) {
-        self.pooled_thresholds
     }
 
     pub fn scorer(&self) -> &Scorer {
@@ -391,7 +366,6 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
     /// Forgets the scan in progress without emitting anything.
     pub fn reset(&mut self) {
         self.meta = [[flags::NO_DATA; MAX_COLS]; 2];
-        self.older.meta = [flags::NO_DATA; MAX_COLS];
         self.current = None;
         self.next_col = 0;
         self.pending = None;
@@ -504,28 +478,6 @@ impl<'a, const MAX_COLS: usize> Engine<'a, MAX_COLS> {
         self.horizontal(b, self.cols - 1, None);
         if self.is_last(r) {
             self.decide_upto(self.cur, self.cols);
-        }
-        // The last column's pooled values: the right border.
-        if self.pooling() {
-            let last = self.cols - 1;
-            if let Some(p) = self.pending
-                && !self.is_last(p)
-            {
-                let rows = [
-                    pooled::Row::Older,
-                    pooled::Row::Buf(1 - b),
-                    pooled::Row::Buf(b),
-                ];
-                self.pool(self.cur ^ 1, rows, last);
-            }
-            if self.is_last(r) {
-                let rows = [
-                    pooled::Row::Buf(1 - b),
-                    pooled::Row::Buf(b),
-                    pooled::Row::None,
-                ];
-                self.pool(self.cur, rows, last);
-            }
         }
         // Nothing is held here: a held row goes out before the next row
         // starts and right after every other row's end.

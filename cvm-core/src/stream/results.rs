@@ -40,11 +40,6 @@ pub struct PositionScore {
     /// `floor(sqrt(s0² + s1²))`, `Q16`, at most
     /// [`crate::channels::spread::SPREAD_MAX`].
     pub smag: u32,
-    /// The largest pooled loss of power of the footprints ending here,
-    /// `Q15` scaled ([`crate::channels::pooled`]); 0 with pooling off.
-    pub pl: u16,
-    /// The largest pooled raise of spread, `Q16` scaled; 0 with pooling off.
-    pub pr: u32,
     /// [`flags`] bits, the decisions ([`flags::CVM_DEFECT`],
     /// [`flags::POWER_DEFECT`], [`flags::SPREAD_DEFECT`]) included.
     pub flags: u8,

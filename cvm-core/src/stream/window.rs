@@ -2,10 +2,8 @@
 //! position above it and the horizontal component of the one to its left
 //! (the module doc of [`super`]).
 
-use super::pooled::Row;
 use super::{Engine, PositionScore};
 use crate::channels::flags;
-use crate::channels::pooled::POOLED_OFF;
 use crate::channels::power::contrast;
 use crate::channels::spread::SPREAD_OFF;
 use crate::scorer::{FrameError, Prepared};
@@ -33,8 +31,7 @@ impl<const MAX_COLS: usize> Engine<'_, MAX_COLS> {
             .near
             .get_mut(near_start..near_start + self.words)
             .unwrap_or(&mut []);
-        // The pooled raise needs the spreads too.
-        let spread = self.spread_threshold != SPREAD_OFF || self.pooled_thresholds.1 != POOLED_OFF;
+        let spread = self.spread_threshold != SPREAD_OFF;
         let prepared = match (frame, self.bufs[b].get_mut(start..start + self.words)) {
             (Some(f), Some(slot)) => {
                 self.scorer
@@ -69,10 +66,6 @@ impl<const MAX_COLS: usize> Engine<'_, MAX_COLS> {
             self.vertical(b, c, up_ok, (own, fused, pw, sq));
         }
 
-        let pooling = self.pooling();
-        if pooling {
-            self.keep_older(b, c);
-        }
         if let Some(m) = self.meta[b].get_mut(c) {
             *m = own;
         }
@@ -88,12 +81,9 @@ impl<const MAX_COLS: usize> Engine<'_, MAX_COLS> {
                 ..PositionScore::default()
             };
         }
-        // (r-1, c) is final, and (r-1, c-1)'s window whole.
-        if let Some(p) = self.pending {
+        // (r-1, c) is final.
+        if self.pending.is_some() {
             self.decide_upto(prev_rb, c + 1);
-            if pooling && c >= 1 && !self.is_last(p) {
-                self.pool(prev_rb, [Row::Older, Row::Buf(1 - b), Row::Buf(b)], c - 1);
-            }
         }
         let last = self.is_last(r);
         if last && own & flags::NO_DATA == 0 {
@@ -120,9 +110,6 @@ impl<const MAX_COLS: usize> Engine<'_, MAX_COLS> {
             self.horizontal(b, c - 1, Some(c));
             if last {
                 self.decide_upto(self.cur, c);
-                if pooling {
-                    self.pool(self.cur, [Row::Buf(1 - b), Row::Buf(b), Row::None], c - 1);
-                }
             }
         }
         self.next_col = c + 1;

@@ -205,31 +205,7 @@ pub fn run_engine_near(
 fn run_engine_full(
     scorer: &Scorer,
     cols: usize,
-    thresholds: [u32; 3],
-    frames: &[(cvm_core::Position, Option<Vec<u16>>)],
-    with_near: bool,
-    rows: u32,
-) -> (Vec<(RowSummary, Vec<PositionScore>)>, Totals) {
-    let off = cvm_core::channels::pooled::POOLED_OFF;
-    run_engine_pooled(
-        scorer,
-        cols,
-        thresholds,
-        (off, off),
-        frames,
-        with_near,
-        rows,
-    )
-}
-
-/// One run of the engine with every channel's threshold and the pooled
-/// decisions' (`Engine::set_pooled_thresholds`), with or without a near
-/// buffer, told of `rows` rows (0: not told).
-pub fn run_engine_pooled(
-    scorer: &Scorer,
-    cols: usize,
     [threshold, power_threshold, spread_threshold]: [u32; 3],
-    (loss, raise): (u32, u32),
     frames: &[(cvm_core::Position, Option<Vec<u16>>)],
     with_near: bool,
     rows: u32,
@@ -249,7 +225,6 @@ pub fn run_engine_pooled(
     if spread_threshold != cvm_core::spread::SPREAD_OFF {
         engine.set_spread_threshold(spread_threshold);
     }
-    engine.set_pooled_thresholds(loss, raise);
     engine.set_rows(rows);
     let mut out_rows = Vec::new();
     let mut out = |v: &cvm_core::RowView| out_rows.push((v.summary, v.scores.to_vec()));

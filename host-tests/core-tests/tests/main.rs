@@ -16,7 +16,6 @@ mod overflow_proof;
 mod passes_asm;
 mod pipeline;
 mod pooled;
-mod pooled_engine;
 mod power;
 mod protocol;
 mod protocol_layout;
