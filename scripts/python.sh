@@ -19,12 +19,26 @@ if ! "$py" -c "import numpy, pytest, hypothesis" >/dev/null 2>&1 || [ ! -x "$ven
     "$py" -m pip install --quiet --disable-pip-version-check \
         maturin==1.16.0 numpy pytest hypothesis
 fi
-(cd host-tests && cargo build --release --quiet -p dmap)
+# The wheel is built in the host workspace's dev profile (PY_PROFILE,
+# `release` to choose), which is the test profile's (host-tests/Cargo.toml):
+# opt-level 2, debug assertions on. The `dmap` binary the tests compare it
+# with is the one `cargo test` builds for dmap's tests: after `cargo test`
+# (scripts/test.sh) it is not built again.
+profile="${PY_PROFILE:-dev}"
+target="${CARGO_TARGET_DIR:-$PWD/host-tests/target}"
+host=$(rustc -vV | sed -n 's/^host: //p')
+if [ "$profile" = dev ]; then
+    (cd host-tests && cargo test --workspace --no-run --quiet)
+    dmap="$target/$host/debug/dmap"
+else
+    (cd host-tests && cargo build --profile "$profile" --quiet -p dmap --bin dmap)
+    dmap="$target/$host/$profile/dmap"
+fi
 # pip builds the wheel with the environment's maturin (no download of a
 # build environment), in the host workspace's target folder.
-PATH="$PWD/$venv/bin:$PATH" "$py" -m pip install --quiet --disable-pip-version-check \
+PATH="$PWD/$venv/bin:$PATH" MATURIN_PEP517_ARGS="--profile $profile" \
+    "$py" -m pip install --quiet --disable-pip-version-check \
     --no-build-isolation --no-deps --force-reinstall ./host-tests/python
 [ "${PY_INSTALL_ONLY:-}" = 1 ] && exit 0
-host=$(rustc -vV | sed -n 's/^host: //p')
-DMAP="$PWD/host-tests/target/$host/release/dmap" \
+DMAP="$dmap" \
     "$py" -m pytest -q -p no:cacheprovider host-tests/python/tests "$@"

@@ -57,8 +57,8 @@ bash scripts/python.sh 2>&1 | tee "$pylog"
 step "panic-free per-beam path (link-time check)"
 bash scripts/nopanic.sh
 
-step "fuzz: every target for 20 s (the long runs: docs/reliability.md)"
-bash scripts/fuzz.sh 20
+step "fuzz: every target for 10 s (the long runs: docs/reliability.md)"
+bash scripts/fuzz.sh 10
 
 step "link-check and fuzz crates: lints"
 (cd nopanic && cargo clippy --release --target thumbv7em-none-eabihf -- -D warnings)

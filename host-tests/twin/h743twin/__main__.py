@@ -112,11 +112,13 @@ def main(argv=None):
                 m.start_profile()
             end = det.done_at + cycles_of_ms(args.settle_ms)
 
+            out = bytearray()  # the UART's bytes so far, added to as they come
+
             def done():
                 pump()
                 if m.core.cycles <= det.done_at:
                     return False
-                out = bytes(b for b, _ in m.uart)
+                out.extend(b for b, _ in m.uart[len(out):])
                 ends = out.count(b"\nE,") + (1 if out.startswith(b"E,") else 0)
                 return ends >= args.scans and out.endswith(b"\n") and not m.usart.shifting
             status = m.run(end, done, args.max_instructions)

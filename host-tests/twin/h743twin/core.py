@@ -9,6 +9,7 @@ M7's timing: no dual issue, no wait states, no cache misses.
 """
 
 import struct
+from itertools import compress
 
 from unicorn import (UC_ARCH_ARM, UC_ERR_EXCEPTION, UC_ERR_FETCH_UNMAPPED,
                      UC_ERR_INSN_INVALID, UC_ERR_READ_UNMAPPED, UC_ERR_WRITE_UNMAPPED,
@@ -21,6 +22,8 @@ from unicorn.arm_const import (UC_ARM_REG_BASEPRI, UC_ARM_REG_CONTROL,
                                UC_ARM_REG_R0, UC_ARM_REG_R1, UC_ARM_REG_R2,
                                UC_ARM_REG_R3, UC_ARM_REG_R12, UC_ARM_REG_S0,
                                UC_ARM_REG_SP, UC_ARM_REG_XPSR, UC_CPU_ARM_CORTEX_M7)
+
+from .pchook import add_noop_code_hook, del_noop_code_hook
 
 CLOCK_HZ = 400_000_000
 UNMAPPED = (UC_ERR_READ_UNMAPPED, UC_ERR_WRITE_UNMAPPED, UC_ERR_FETCH_UNMAPPED)
@@ -124,10 +127,13 @@ class Nvic:
 
     def next_irq(self):
         """The pending, enabled interrupt to take now, or None."""
+        # The lowest-numbered of the most urgent (interrupts pend seldom:
+        # only the pending ones are looked at).
         best = None
-        for irq in range(NUM_IRQS):
-            if self.pending[irq] and self.enabled[irq]:
-                if best is None or (self.prio[irq] >> 4) < (self.prio[best] >> 4):
+        enabled, prio = self.enabled, self.prio
+        for irq in compress(range(NUM_IRQS), self.pending):
+            if enabled[irq]:
+                if best is None or (prio[irq] >> 4) < (prio[best] >> 4):
                     best = irq
         if best is None:
             return None
@@ -418,36 +424,34 @@ class Core:
     # block, not the accessing instruction. The clock-enable delay counts
     # instructions between two accesses, so for PRECISE_CYCLES after each
     # reset (the start-up code, which enables the peripherals) a code hook
-    # records each instruction's address; then it goes (it slows the model
-    # about four times), and an enable is judged per block (`insn_pc`).
+    # covers every instruction; then it goes, and an enable is judged per
+    # block (`insn_pc`). A code hook makes Unicorn write each instruction's
+    # address to PC before it runs, so while the hook is there PC is the
+    # accessing instruction's address. That write is all the hook is for:
+    # its callback is a native function without effect (pchook.py), so
+    # no Python runs per instruction (a Python callback that recorded the
+    # address made the model about twice as slow over a short scan).
     PRECISE_CYCLES = 100 * CLOCK_HZ // 1000
     CODE_RANGE = (0x0000_0000, 0x080F_FFFF)  # ITCM and flash bank 1
-
-    def _on_insn(self, uc, addr, size, _):
-        self.exact_pc = addr
 
     def track_pc(self):
         """From a reset: the exact PC for the next PRECISE_CYCLES."""
         self.untrack_pc()
-        self.exact_pc = None
         self.precise_until = self.cycles + self.PRECISE_CYCLES
-        self.pc_hook = self.uc.hook_add(UC_HOOK_CODE, self._on_insn,
-                                        begin=self.CODE_RANGE[0], end=self.CODE_RANGE[1])
+        self.pc_hook = add_noop_code_hook(self.uc, *self.CODE_RANGE)
 
     def untrack_pc(self):
         if getattr(self, "pc_hook", None) is not None:
-            self.uc.hook_del(self.pc_hook)
+            del_noop_code_hook(self.uc, self.pc_hook)
             self.pc_hook = None
-            self.exact_pc = None
             try:  # retranslate without the hook's calls
                 self.uc.ctl_remove_cache(self.CODE_RANGE[0], self.CODE_RANGE[1] + 1)
             except Exception:  # noqa: BLE001 (older Unicorn: the calls stay, unused)
                 pass
 
     def insn_pc(self):
-        """The accessing instruction's address when known, else the block's."""
-        if getattr(self, "pc_hook", None) is not None and self.exact_pc is not None:
-            return self.exact_pc
+        """The accessing instruction's address while the code hook is
+        there, else the start of its block."""
         return self.uc.reg_read(UC_ARM_REG_PC)
 
     def take_fault(self, pc, cfsr, detail, bfar=None):
