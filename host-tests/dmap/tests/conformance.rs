@@ -10,24 +10,9 @@
 
 use crate::common;
 
-use common::{dmap, s};
+use common::{dmap, s, vectors_dir as dir, vectors_index as index};
 use serde_json::Value;
 use std::collections::BTreeSet;
-use std::path::PathBuf;
-
-fn dir() -> PathBuf {
-    PathBuf::from(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../docs/protocol/vectors"
-    ))
-}
-
-/// The entries of `index.json`.
-fn index() -> Vec<Value> {
-    let index: Value =
-        serde_json::from_slice(&std::fs::read(dir().join("index.json")).unwrap()).unwrap();
-    index.as_array().unwrap().clone()
-}
 
 /// A vector's input, as lines without their line ends (as the decodes
 /// count them: a last line without its newline is one).

@@ -9,23 +9,9 @@
 
 use crate::common;
 
-use common::{dmap, s};
+use common::{dmap, s, vectors_dir as dir, vectors_index as index};
 use serde_json::{Value, json};
 use std::collections::BTreeSet;
-use std::path::PathBuf;
-
-fn dir() -> PathBuf {
-    PathBuf::from(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../docs/protocol/vectors"
-    ))
-}
-
-fn index() -> Vec<Value> {
-    let index: Value =
-        serde_json::from_slice(&std::fs::read(dir().join("index.json")).unwrap()).unwrap();
-    index.as_array().unwrap().clone()
-}
 
 /// `dmap listen --json` on vector `name`: its document and exit status.
 fn listen(name: &str) -> (Value, Option<i32>) {

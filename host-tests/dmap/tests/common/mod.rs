@@ -232,3 +232,18 @@ pub fn demo_scan(dir: &Path) -> PathBuf {
     ]);
     scan
 }
+
+/// The repository's conformance vectors (docs/protocol/vectors).
+pub fn vectors_dir() -> PathBuf {
+    PathBuf::from(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../docs/protocol/vectors"
+    ))
+}
+
+/// The entries of the conformance vectors' `index.json`.
+pub fn vectors_index() -> Vec<serde_json::Value> {
+    let path = vectors_dir().join("index.json");
+    let index: serde_json::Value = serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap();
+    index.as_array().unwrap().clone()
+}
