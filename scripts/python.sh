@@ -28,7 +28,7 @@ profile="${PY_PROFILE:-dev}"
 target="${CARGO_TARGET_DIR:-$PWD/host-tests/target}"
 host=$(rustc -vV | sed -n 's/^host: //p')
 if [ "$profile" = dev ]; then
-    (cd host-tests && cargo test --workspace --no-run --quiet)
+    (cd host-tests && cargo test --workspace --exclude cvm-dmap-py --lib --bins --tests --no-run --quiet)
     dmap="$target/$host/debug/dmap"
 else
     (cd host-tests && cargo build --profile "$profile" --quiet -p dmap --bin dmap)

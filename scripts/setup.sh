@@ -29,7 +29,8 @@ if ! python3 -c "import venv, ensurepip" >/dev/null 2>&1; then
     DEBIAN_FRONTEND=noninteractive need_sudo apt-get install -y -qq python3-venv >/dev/null
 fi
 # The Python package's crate (host-tests/python, PyO3) links its Rust test
-# binary against libpython in `cargo test --workspace`: python3-dev has it.
+# binary against libpython when `cargo test --workspace` includes it (the
+# test command leaves it to pytest on the wheel): python3-dev has it.
 if ! command -v python3-config >/dev/null 2>&1; then
     echo "setup: installing python3-dev (libpython, for the Python package's crate tests)" >&2
     need_sudo apt-get update -qq

@@ -1,32 +1,51 @@
 //! Library side of the `dmap` host toolkit: every subcommand's logic lives in
 //! a module here so that tests can call it without spawning the binary.
+//!
+//! Without the default feature `tools`, the library is its readers and
+//! the fixed-point scorer only: the line decoder ([`listen`]), the `.npy`
+//! reader and writer ([`npy`]), [`fixed`] and the output rules ([`out`]).
+//! That is what the fuzz targets exercise, and they build it without the
+//! command line, the console's web server or the serial port.
 
-pub mod bench;
-pub mod calibrate;
-pub mod calibration_file;
-pub mod child;
-pub mod cli;
-pub mod cli_values;
-pub mod console;
-pub mod elf;
-pub mod emulate;
-pub mod eval;
 pub mod fixed;
 pub mod fmt;
-pub mod font;
-pub mod halos;
 pub mod listen;
 pub mod npy;
-pub mod objects;
-pub mod options;
 pub mod out;
-pub mod render;
-pub mod render_marks;
-pub mod repo;
-pub mod score;
-pub mod sensor;
-pub mod settings;
-pub mod simulate;
-pub mod stream;
-pub mod twin;
-pub mod vectors;
+
+/// The modules of the command line and what it drives (feature `tools`).
+macro_rules! tools {
+    ($($module:ident),* $(,)?) => {
+        $(
+            #[cfg(feature = "tools")]
+            pub mod $module;
+        )*
+    };
+}
+
+tools!(
+    bench,
+    calibrate,
+    calibration_file,
+    child,
+    cli,
+    cli_values,
+    console,
+    elf,
+    emulate,
+    eval,
+    font,
+    halos,
+    objects,
+    options,
+    render,
+    render_marks,
+    repo,
+    score,
+    sensor,
+    settings,
+    simulate,
+    stream,
+    twin,
+    vectors,
+);

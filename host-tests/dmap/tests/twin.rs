@@ -581,10 +581,7 @@ fn twin_firmware_with_a_compiled_in_calibration_file() {
     // The same target directory as `dmap twin`'s builds (their compiled
     // dependencies are reused), under the lock those builds take.
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
-    let target = root.join("target/twin");
-    std::fs::create_dir_all(target.join("elf")).unwrap();
-    let lock = std::fs::File::create(target.join("elf/.lock")).unwrap();
-    lock.lock().unwrap();
+    let (target, lock) = dmap::twin::lock_build_dir(&root).unwrap();
     let build = |spec: &str| {
         Command::new(env!("CARGO"))
             .current_dir(&root)

@@ -476,13 +476,16 @@ fn cut_every_operation(tag_s: &str, base: &Path) -> u64 {
         (Store::Loaded, Some(new))
     );
     let ops = c["flash_operations"].as_u64().unwrap();
-    let (mut olds, mut news) = (0, 0);
-    for n in 1..=ops {
-        let cut = tmp_in(tag_s, &format!("cut{n}.bin"));
+    // One cut per operation, each on its own copy of the bank and its own
+    // scan file, as many at once as the machine has cores: the longest
+    // test of the suite, it would otherwise run alone at the end.
+    let cut_at = |n: u64| -> bool {
+        let tag_n = format!("{tag_s}-cut{n}");
+        let cut = tmp_in(&tag_n, "bank.bin");
         std::fs::copy(base, &cut).unwrap();
         let n_s = n.to_string();
         let (_, c) = twin(
-            tag_s,
+            &tag_n,
             &[
                 "--requests",
                 s(&req),
@@ -494,18 +497,33 @@ fn cut_every_operation(tag_s: &str, base: &Path) -> u64 {
         );
         assert_eq!(c["status"], "power cut", "cut at {n}: {c}");
         let got = bank::read_record(&cut, &tag).unwrap();
-        let opts = if got == (Store::Loaded, Some(old)) {
-            olds += 1;
-            STORED_OPTS
+        let (is_old, opts) = if got == (Store::Loaded, Some(old)) {
+            (true, STORED_OPTS)
         } else if got == (Store::Loaded, Some(new)) {
-            news += 1;
-            NEW_OPTS
+            (false, NEW_OPTS)
         } else {
             panic!("cut at {n} of {ops}: {got:?}, neither the old settings nor the new");
         };
         // The reboot scans with them, every value from flash.
-        twin_scans_with(tag_s, &cut, &opts, Source::Flash, Store::Loaded);
-    }
+        twin_scans_with(&tag_n, &cut, &opts, Source::Flash, Store::Loaded);
+        is_old
+    };
+    let workers = std::thread::available_parallelism().map_or(1, |n| n.get()) as u64;
+    let olds: u64 = std::thread::scope(|scope| {
+        let cut_at = &cut_at;
+        let handles: Vec<_> = (0..workers)
+            .map(|w| {
+                scope.spawn(move || {
+                    (1 + w..=ops)
+                        .step_by(workers as usize)
+                        .filter(|&n| cut_at(n))
+                        .count() as u64
+                })
+            })
+            .collect();
+        handles.into_iter().map(|h| h.join().unwrap()).sum()
+    });
+    let news = ops - olds;
     // The new record counts once its last word is programmed, the save's
     // last operation: every cut leaves the old one.
     assert_eq!((olds, news), (ops, 0));

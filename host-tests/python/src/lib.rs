@@ -60,17 +60,3 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("MAX_COLS", dmap::settings::MAX_COLS)?;
     Ok(())
 }
-
-#[cfg(test)]
-mod tests {
-    use super::one_line;
-
-    #[test]
-    fn clap_messages_become_one_line() {
-        let text = "error: invalid value 'x' for '--kernels <KERNELS>'\n  [possible values: paper, square]\n\nFor more information, try '--help'.\n";
-        assert_eq!(
-            one_line(text),
-            "invalid value 'x' for '--kernels <KERNELS>' [possible values: paper, square]"
-        );
-    }
-}

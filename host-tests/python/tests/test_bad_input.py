@@ -65,6 +65,14 @@ def test_bad_options_are_dmaps_messages():
         cvm_dmap.stream(OK, raw=True)
 
 
+def test_a_clap_message_becomes_one_line_without_usage():
+    # dmap prints clap's message over several lines with a usage and a
+    # hint; the package raises its first lines joined, the rest dropped.
+    with pytest.raises(ValueError) as e:
+        cvm_dmap.score(OK, kernels="x")
+    assert str(e.value) == "invalid value 'x' for '--kernels <KERNELS>' [possible values: paper, square]"
+
+
 def test_a_damaged_stream_raises_with_the_decode(files):
     lines = cvm_dmap.stream(np.load(files / "part.npy"))
     damaged = lines.replace(b"R,", b"R;", 1)

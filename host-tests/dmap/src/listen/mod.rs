@@ -10,23 +10,28 @@
 //! (`reader`) and what ends it on Ctrl-C (`interrupt`), the two reports
 //! (`text`, `json`), and the command (`args`, `run`).
 
+#[cfg(feature = "tools")]
 mod args;
 mod checks;
 mod crosscheck;
 mod decoder;
 mod handlers;
+#[cfg(feature = "tools")]
 mod interrupt;
 mod json;
 mod linechecks;
 mod reader;
+#[cfg(feature = "tools")]
 mod run;
 mod scan;
 mod text;
 
+#[cfg(feature = "tools")]
 pub use args::ListenArgs;
 pub use decoder::{DEFAULT_MAX_SCANS, Decoder, MAX_DEFECTS, MAX_ERRORS, MAX_KEPT, MAX_SCANS};
 pub use json::{object_json, scan_json, summary_json, totals_json};
 pub use reader::{LINE_BUFFER, NextLine, decode, decode_with, next_line};
+#[cfg(feature = "tools")]
 pub use run::run;
 pub use scan::{
     Defect, Kind, LineError, MAX_IMAGE_POSITIONS, MAX_PROBLEMS, ObjectSize, ScanResult,

@@ -4,6 +4,7 @@
 //! ended by itself.
 
 use super::decoder::{DEFAULT_MAX_SCANS, Decoder};
+#[cfg(feature = "tools")]
 use super::interrupt::Interruptible;
 use anyhow::{Context, Result};
 use cvm_core::protocol;
@@ -82,6 +83,7 @@ pub fn decode_with(reader: impl Read, stop_after: usize, max_scans: usize) -> Re
 
 /// [`decode_with`] on a stream that SIGINT or SIGTERM may end: the scans
 /// complete by then are kept, the one under way is reported cut.
+#[cfg(feature = "tools")]
 pub fn decode_interruptible<R: Read>(
     reader: Interruptible<R>,
     stop_after: usize,

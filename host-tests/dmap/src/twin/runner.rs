@@ -11,7 +11,10 @@
 //!   normalisation, threshold, score lines and defect lines per row.
 //! * The ELF is built with `cargo build --release` into `target/twin` and
 //!   cached per configuration in `target/twin/elf/<hash>.elf`; a cached ELF
-//!   is reused while it is newer than every firmware source. `--elf` skips
+//!   is reused while it is newer than every firmware source. A new
+//!   `target/twin` starts as a copy of the product build's dependencies
+//!   ([`seed_from_product_build`]), so only the firmware crate compiles
+//!   per configuration. `--elf` skips
 //!   the build; the ELF's `.cvm_config` section (written by build.rs) must
 //!   then agree with the run's configuration field by field
 //!   ([`crate::twin::checks::check_built_for`]), and a damaged ELF is refused
@@ -242,13 +245,8 @@ pub fn build_elf(config: &str) -> Result<PathBuf> {
 /// copying each other's build. The build ends with `dmap`
 /// ([`crate::child::run_build`]).
 pub fn build_elf_in(root: &Path, config: &str) -> Result<PathBuf> {
-    let target_dir = root.join("target/twin");
+    let (target_dir, _lock) = lock_build_dir(root)?;
     let cache = target_dir.join("elf");
-    std::fs::create_dir_all(&cache).with_context(|| format!("creating {}", cache.display()))?;
-    let lock = std::fs::File::create(cache.join(".lock"))
-        .with_context(|| format!("creating {}", cache.join(".lock").display()))?;
-    lock.lock()
-        .with_context(|| format!("locking {}", cache.join(".lock").display()))?;
     let name = format!("{:016x}", config_hash(config));
     let elf = cache.join(format!("{name}.elf"));
     let built_at = std::fs::metadata(&elf).and_then(|m| m.modified()).ok();
@@ -290,6 +288,55 @@ pub fn build_elf_in(root: &Path, config: &str) -> Result<PathBuf> {
     // The configuration beside its ELF, for whoever looks in the cache.
     let _ = std::fs::write(cache.join(format!("{name}.cfg")), format!("{config}\n"));
     Ok(elf)
+}
+
+/// The target folder of the chip model's firmware builds in the
+/// repository `root`, `target/twin`, with the lock (`elf/.lock`) that
+/// keeps concurrent builds from copying each other's ELF, held until the
+/// returned file is dropped; seeded on first use
+/// ([`seed_from_product_build`]).
+pub fn lock_build_dir(root: &Path) -> Result<(PathBuf, std::fs::File)> {
+    let target_dir = root.join("target/twin");
+    let cache = target_dir.join("elf");
+    std::fs::create_dir_all(&cache).with_context(|| format!("creating {}", cache.display()))?;
+    let lock = std::fs::File::create(cache.join(".lock"))
+        .with_context(|| format!("creating {}", cache.join(".lock").display()))?;
+    lock.lock()
+        .with_context(|| format!("locking {}", cache.join(".lock").display()))?;
+    seed_from_product_build(root, &target_dir);
+    Ok((target_dir, lock))
+}
+
+/// Fills an empty `target_dir` with the dependencies `cargo build
+/// --release` compiled in the repository's own `target`: the same crates
+/// in the same profile, only the firmware crate's `build.rs` reads
+/// `CVM_H743_SCAN`. Cargo's fingerprints decide what is still fresh
+/// (they hold no absolute path of the folder they were made in; `cp -a`
+/// keeps the modification times they compare), so a stale or partial
+/// copy costs a rebuild of what is stale, never a wrong ELF. The copy is
+/// a convenience: on any failure the build simply starts cold.
+fn seed_from_product_build(root: &Path, target_dir: &Path) {
+    let product = root.join("target");
+    let arch = "thumbv7em-none-eabihf";
+    if target_dir.join(arch).exists() || !product.join(arch).join("release").is_dir() {
+        return;
+    }
+    for (from, into) in [
+        // The host side: build scripts and proc macros.
+        (product.join("release"), target_dir.to_path_buf()),
+        (product.join(arch).join("release"), target_dir.join(arch)),
+    ] {
+        if from.is_dir() && !into.join("release").exists() && std::fs::create_dir_all(&into).is_ok()
+        {
+            let _ = Command::new("cp")
+                .arg("-a")
+                .arg(&from)
+                .arg(&into)
+                .stdout(Stdio::null())
+                .stderr(Stdio::null())
+                .status();
+        }
+    }
 }
 
 /// Passes the model's standard error through as it comes, except its last
