@@ -50,9 +50,10 @@ log=$(mktemp)
 trap 'rm -f "$log"' EXIT
 # The Python package is tested by pytest on its wheel (next step), which
 # compiles it with maturin's features: left out here, pyo3 compiles once.
-# Examples are not built here (the lints above check them) and the host
-# crates have no doc tests: --lib --bins --tests.
-(cd host-tests && cargo test --workspace --exclude cvm-dmap-py --lib --bins --tests 2>&1) | tee "$log"
+# Examples are not built here (the lints above check them): --lib --bins
+# --tests, then the doc tests on their own (cargo takes --doc alone).
+(cd host-tests && cargo test --workspace --exclude cvm-dmap-py --lib --bins --tests 2>&1 &&
+    cargo test --workspace --exclude cvm-dmap-py --doc 2>&1) | tee "$log"
 
 step "Python package: wheel built and installed in a venv, pytest against dmap"
 pylog=$(mktemp)

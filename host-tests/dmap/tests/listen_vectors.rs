@@ -296,12 +296,9 @@ fn listen_reports_what_the_lines_of_a_whole_stream_carry() {
 #[test]
 fn listen_names_the_field_a_one_field_vector_changes() {
     let mut checked = 0;
-    for e in index() {
-        let Some(change) = e["changes"].as_str() else {
-            continue;
-        };
-        let name = e["name"].as_str().unwrap();
-        let (_, field) = change.split_once('.').unwrap();
+    for v in common::one_field_vectors() {
+        let (name, field) = (v.name.as_str(), v.field.as_str());
+        let change = format!("{}.{field}", v.kind);
         let (doc, _) = listen(name);
         let said: Vec<String> = ["line_errors", "problems"]
             .iter()

@@ -247,3 +247,29 @@ pub fn vectors_index() -> Vec<serde_json::Value> {
     let index: serde_json::Value = serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap();
     index.as_array().unwrap().clone()
 }
+
+/// A vector of `index.json` that changes one field of its base stream
+/// (its `changes`, `TYPE.name`).
+pub struct OneField {
+    pub name: String,
+    pub base: String,
+    /// The line type's letter, `TYPE`.
+    pub kind: String,
+    pub field: String,
+}
+
+/// Every one-field vector of the index, in its order.
+pub fn one_field_vectors() -> Vec<OneField> {
+    vectors_index()
+        .iter()
+        .filter_map(|e| {
+            let (kind, field) = e["changes"].as_str()?.split_once('.').unwrap();
+            Some(OneField {
+                name: e["name"].as_str().unwrap().to_string(),
+                base: e["base"].as_str().unwrap().to_string(),
+                kind: kind.to_string(),
+                field: field.to_string(),
+            })
+        })
+        .collect()
+}
